@@ -1,0 +1,71 @@
+"""Angles: the one place where wrapping and circular means are defined.
+
+Convention: every angle slamkit returns lies in ``[-pi, pi)``. Every other module calls
+:func:`wrap_angle` instead of writing its own modulo.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from slamkit._validation import FloatArray, as_array
+from slamkit.errors import InputError
+
+__all__ = ["angle_diff", "circular_mean", "pose_mean", "wrap_angle"]
+
+_TWO_PI = 2.0 * np.pi
+
+
+def wrap_angle(angle: ArrayLike) -> FloatArray:
+    """Wrap angles (radians) to ``[-pi, pi)``; works on scalars and arrays of any shape."""
+    a = np.asarray(angle, dtype=np.float64)
+    # (a + pi) mod 2pi lies in [0, 2pi); floating-point mod can return exactly 2pi for tiny
+    # negative inputs, which would map to +pi, so fold that case back to -pi.
+    wrapped = np.mod(a + np.pi, _TWO_PI) - np.pi
+    return np.where(wrapped >= np.pi, wrapped - _TWO_PI, wrapped)
+
+
+def angle_diff(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """The signed difference ``a - b`` wrapped to ``[-pi, pi)``."""
+    return wrap_angle(np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64))
+
+
+def circular_mean(
+    angles: ArrayLike, weights: ArrayLike | None = None, axis: int = -1
+) -> FloatArray:
+    """Mean of angles through their unit vectors: ``atan2(sum w sin, sum w cos)``.
+
+    350 deg and 10 deg average to 0 deg, not 180 deg. ``weights`` (non-negative, same shape as
+    ``angles``) need not be normalised.
+    """
+    a = as_array(angles, "angles")
+    if weights is None:
+        s = np.sum(np.sin(a), axis=axis)
+        c = np.sum(np.cos(a), axis=axis)
+    else:
+        w = as_array(weights, "weights")
+        if w.shape != a.shape:
+            w = np.broadcast_to(w, a.shape)
+        s = np.sum(w * np.sin(a), axis=axis)
+        c = np.sum(w * np.cos(a), axis=axis)
+    return wrap_angle(np.arctan2(s, c))
+
+
+def pose_mean(poses: ArrayLike, weights: ArrayLike | None = None) -> FloatArray:
+    """Mean of SE(2) poses ``(N, 3)`` as ``(x, y, theta)``: positions averaged arithmetically,
+    headings through their unit vectors. Optional non-negative ``weights`` of shape ``(N,)``."""
+    p = as_array(poses, "poses", (None, 3))
+    if p.shape[0] == 0:
+        raise InputError("poses: expected at least one pose, got none")
+    if weights is None:
+        xy = p[:, :2].mean(axis=0)
+        theta = circular_mean(p[:, 2])
+    else:
+        w = as_array(weights, "weights", (p.shape[0],))
+        total = w.sum()
+        if not total > 0 or np.any(w < 0):
+            raise InputError("weights: expected non-negative weights with a positive sum")
+        xy = (w[:, None] * p[:, :2]).sum(axis=0) / total
+        theta = circular_mean(p[:, 2], w)
+    return np.array([xy[0], xy[1], float(theta)])
