@@ -19,7 +19,7 @@ FloatArray = NDArray[np.float64]
 __all__ = ["FloatArray", "as_array", "as_covariance", "as_positive", "describe_shape"]
 
 
-def describe_shape(shape: Sequence[int | None | type(Ellipsis)]) -> str:  # type: ignore[valid-type]
+def describe_shape(shape: Sequence[int | type(Ellipsis) | None]) -> str:  # type: ignore[valid-type]
     parts = ["..." if s is Ellipsis else ("n" if s is None else str(s)) for s in shape]
     return "(" + ", ".join(parts) + ("," if len(parts) == 1 else "") + ")"
 

@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike
 from slamkit._validation import FloatArray
 from slamkit.geometry.angles import wrap_angle
 
-__all__ = ["between", "compose", "inverse", "transform_points", "inverse_transform_points"]
+__all__ = ["between", "compose", "inverse", "inverse_transform_points", "transform_points"]
 
 
 def _arr(x: ArrayLike) -> FloatArray:
@@ -48,9 +48,7 @@ def between(T_w_a: ArrayLike, T_w_b: ArrayLike) -> FloatArray:
     a, b = _arr(T_w_a), _arr(T_w_b)
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
-    return np.stack(
-        [c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[..., 2] - a[..., 2])], axis=-1
-    )
+    return np.stack([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[..., 2] - a[..., 2])], axis=-1)
 
 
 def transform_points(T_a_b: ArrayLike, p_b: ArrayLike) -> FloatArray:

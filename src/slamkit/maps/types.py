@@ -129,8 +129,10 @@ class OccupancyGrid:
         """A grid covering the box ``[xmin, xmax] × [ymin, ymax]`` filled with ``value``."""
         res = as_positive(resolution, "resolution")
         if not (xmax > xmin and ymax > ymin):
-            raise InputError(f"grid bounds: expected xmax > xmin and ymax > ymin, got "
-                             f"({xmin}, {ymin}, {xmax}, {ymax})")
+            raise InputError(
+                f"grid bounds: expected xmax > xmin and ymax > ymin, got "
+                f"({xmin}, {ymin}, {xmax}, {ymax})"
+            )
         cols = int(np.ceil((xmax - xmin) / res))
         rows = int(np.ceil((ymax - ymin) / res))
         return cls(np.full((rows, cols), float(value)), res, np.array([xmin, ymin], float))

@@ -1,0 +1,79 @@
+"""``run_job``: data set → estimator → result → metrics → output folder (with plots)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from slamkit.config import config_to_dict
+from slamkit.datasets import load_dataset
+from slamkit.io import atomic_folder, write_json, write_tum
+from slamkit.pipeline import Progress, Result, get_estimator_entry, run
+from slamkit.pipeline.evaluate import evaluate
+
+__all__ = ["RunReport", "RunRequest", "run_job"]
+
+
+@dataclass(frozen=True)
+class RunRequest:
+    """Everything one run needs. ``estimator_config`` and ``dataset_options`` are plain
+    mappings (from a config file's ``[estimator]`` and ``[dataset]`` tables)."""
+
+    estimator: str
+    dataset: str
+    out_dir: Path
+    seed: int = 0
+    estimator_config: Mapping[str, Any] = field(default_factory=dict)
+    dataset_options: Mapping[str, Any] = field(default_factory=dict)
+    data_root: Path | None = None
+    plots: bool = True
+    overwrite: bool = False
+
+
+@dataclass(frozen=True)
+class RunReport:
+    """What a run wrote and measured."""
+
+    out_dir: Path
+    files: tuple[str, ...]
+    metrics: dict[str, Any]
+    result: Result
+
+
+def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
+    """Load the data set, run the estimator, evaluate, and write into ``request.out_dir``:
+    ``trajectory.tum``, ``metrics.json``, ``config.json`` (the resolved configuration) and
+    PNG plots. The folder is written completely or not at all."""
+    entry = get_estimator_entry(request.estimator)
+    cfg = entry.make_config(request.estimator_config)  # fail on bad config before loading
+    dataset = load_dataset(
+        request.dataset,
+        seed=request.seed,
+        options=request.dataset_options,
+        data_root=request.data_root,
+    )
+    result = run(entry, dataset, config=cfg, seed=request.seed, progress=progress)
+    evaluation = evaluate(result, dataset)
+    figures = {}
+    if request.plots:
+        from slamkit.viz.report import run_figures  # plotting only when asked for
+
+        figures = run_figures(result, dataset, evaluation)
+    resolved = {
+        "estimator": {"name": entry.name, **config_to_dict(cfg)},
+        "dataset": {"name": dataset.name, **dataset.metadata.get("config", {})},
+        "seed": request.seed,
+    }
+    with atomic_folder(request.out_dir, overwrite=request.overwrite) as tmp:
+        write_tum(tmp / "trajectory.tum", result.times, result.poses)
+        write_json(tmp / "metrics.json", evaluation.metrics)
+        write_json(tmp / "config.json", resolved)
+        if figures:
+            from slamkit.viz import save_figure
+
+            for name, fig in figures.items():
+                save_figure(fig, tmp / name)
+        files = tuple(sorted(p.name for p in tmp.iterdir()))
+    return RunReport(Path(request.out_dir), files, evaluation.metrics, result)

@@ -1,0 +1,245 @@
+"""``slamkit``: run estimators on data sets, list data sets, run the demo.
+
+Every command parses its options, calls one library function and renders what it returns.
+Known errors (:class:`~slamkit.errors.SlamkitError`) become one red line and exit code 1.
+Heavy imports happen inside the commands so ``slamkit --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Annotated, Any, ParamSpec, TypeVar
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from slamkit.errors import SlamkitError
+
+P = ParamSpec("P")
+R = TypeVar("R")
+
+app = typer.Typer(
+    name="slamkit",
+    help="Probabilistic robot localization, mapping and SLAM.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+data_app = typer.Typer(help="Data sets: simulated scenarios and real-data loaders.")
+app.add_typer(data_app, name="data")
+
+console = Console()
+err_console = Console(stderr=True)
+
+
+def _known_errors(fn: Callable[P, R]) -> Callable[P, R]:
+    """Turn slamkit's own errors into one line on stderr and exit code 1."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
+        try:
+            return fn(*args, **kwargs)
+        except SlamkitError as exc:
+            err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+            raise typer.Exit(1) from None
+
+    return wrapper
+
+
+@contextmanager
+def _progress_bar(label: str) -> Iterator[Callable[[int, int], None]]:
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total} events"),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=True,
+        disable=not err_console.is_terminal,
+    ) as bar:
+        task = bar.add_task(label, total=None)
+
+        def update(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        yield update
+
+
+def _split_config(path: Path | None) -> tuple[dict[str, Any], dict[str, Any], int | None]:
+    """``[estimator]``, ``[dataset]`` tables and an optional top-level ``seed``."""
+    if path is None:
+        return {}, {}, None
+    from slamkit.config import load_config_file
+    from slamkit.errors import ConfigError
+
+    raw = load_config_file(path)
+    unknown = sorted(set(raw) - {"estimator", "dataset", "seed"})
+    if unknown:
+        raise ConfigError(
+            f"{path}: unknown section(s) {', '.join(unknown)}; expected estimator, dataset, seed"
+        )
+    est, ds, seed = raw.get("estimator", {}), raw.get("dataset", {}), raw.get("seed")
+    est = {k: v for k, v in est.items() if k != "name"}
+    ds = {k: v for k, v in ds.items() if k != "name"}
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
+        raise ConfigError(f"{path}: seed must be an integer, got {seed!r}")
+    return est, ds, seed
+
+
+def _render_metrics(metrics: dict[str, Any]) -> Table:
+    table = Table(show_header=True, header_style="bold")
+    table.add_column("metric")
+    table.add_column("value", justify="right")
+
+    def add(name: str, value: float | None, fmt: str) -> None:
+        if value is not None:
+            table.add_row(name, format(value, fmt))
+
+    ate = metrics.get("ate", {})
+    add("ATE RMSE, SE(2)-aligned [m]", ate.get("rmse"), ".3f")
+    add("ATE RMSE, unaligned [m]", metrics.get("ate_unaligned", {}).get("rmse"), ".3f")
+    add("heading RMSE, unaligned [deg]", _deg(metrics.get("ate_unaligned", {})), ".2f")
+    add("final position error [m]", metrics.get("final_position_error"), ".3f")
+    add("mean NEES (3 dof)", metrics.get("nees", {}).get("mean"), ".2f")
+    lm = metrics.get("landmarks", {})
+    add("landmark RMSE [m]", lm.get("rmse"), ".3f")
+    add("run time [s]", metrics.get("runtime", {}).get("total_seconds"), ".3f")
+    return table
+
+
+def _deg(ate: dict[str, Any]) -> float | None:
+    import math
+
+    v = ate.get("heading_rmse")
+    return None if v is None else math.degrees(v)
+
+
+def _run(
+    estimator: str,
+    data: str,
+    out: Path,
+    *,
+    config: Path | None,
+    seed: int | None,
+    data_root: Path | None,
+    plots: bool,
+    overwrite: bool,
+) -> None:
+    from slamkit.app import RunRequest, run_job
+
+    est_cfg, ds_opts, cfg_seed = _split_config(config)
+    request = RunRequest(
+        estimator=estimator,
+        dataset=data,
+        out_dir=out,
+        seed=seed if seed is not None else (cfg_seed if cfg_seed is not None else 0),
+        estimator_config=est_cfg,
+        dataset_options=ds_opts,
+        data_root=data_root,
+        plots=plots,
+        overwrite=overwrite,
+    )
+    with _progress_bar(f"{estimator} on {data}") as progress:
+        report = run_job(request, progress)
+    console.print(_render_metrics(report.metrics))
+    console.print(f"wrote {', '.join(report.files)} to [bold]{report.out_dir}[/]")
+
+
+@app.command("run")
+@_known_errors
+def run_command(
+    estimator: Annotated[str, typer.Argument(help="Estimator name (see `slamkit estimators`).")],
+    data: Annotated[str, typer.Option("--data", "-d", help="Data set name.")] = "five-features",
+    config: Annotated[
+        Path | None,
+        typer.Option(help="TOML/JSON file with [estimator] and [dataset] tables and a seed."),
+    ] = None,
+    seed: Annotated[int | None, typer.Option(help="Seed of the simulator and estimator.")] = None,
+    out: Annotated[
+        Path | None, typer.Option(help="Output folder (default results/ESTIMATOR-DATA).")
+    ] = None,
+    data_root: Annotated[
+        Path | None, typer.Option(help="Folder of the real data sets (else $SLAMKIT_DATA).")
+    ] = None,
+    plots: Annotated[bool, typer.Option(help="Write PNG plots.")] = True,
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
+) -> None:
+    """Run ESTIMATOR on a data set; write trajectory, metrics, config and plots."""
+    target = out if out is not None else Path("results") / f"{estimator}-{data}"
+    _run(
+        estimator,
+        data,
+        target,
+        config=config,
+        seed=seed,
+        data_root=data_root,
+        plots=plots,
+        overwrite=overwrite,
+    )
+
+
+@app.command("demo")
+@_known_errors
+def demo_command(
+    out: Annotated[Path, typer.Option(help="Output folder.")] = Path("results/demo"),
+    seed: Annotated[int, typer.Option(help="Seed of the simulated world.")] = 0,
+) -> None:
+    """Run the main job on the built-in simulated world and say where the results are."""
+    from slamkit.app.demo import DEMO_DATASET, DEMO_ESTIMATOR
+
+    console.print(
+        f"slamkit demo: [bold]{DEMO_ESTIMATOR}[/] on the simulated [bold]{DEMO_DATASET}[/]"
+    )
+    _run(
+        DEMO_ESTIMATOR,
+        DEMO_DATASET,
+        out,
+        config=None,
+        seed=seed,
+        data_root=None,
+        plots=True,
+        overwrite=True,
+    )
+
+
+@app.command("estimators")
+def estimators_command() -> None:
+    """List the registered estimators."""
+    from slamkit.pipeline import list_estimators
+
+    table = Table("name", "needs", "description", header_style="bold")
+    for e in list_estimators():
+        table.add_row(e.name, ", ".join(e.requires), e.description)
+    console.print(table)
+
+
+@data_app.command("list")
+@_known_errors
+def data_list_command(
+    data_root: Annotated[
+        Path | None, typer.Option(help="Folder of the real data sets (else $SLAMKIT_DATA).")
+    ] = None,
+) -> None:
+    """List the registered data sets and whether each is available here."""
+    from slamkit.datasets import dataset_available, list_datasets
+
+    table = Table("name", "kind", "available", "description", header_style="bold")
+    for e in list_datasets():
+        ok = dataset_available(e, data_root)
+        table.add_row(e.name, e.kind, "yes" if ok else "[red]no[/]", e.description)
+    console.print(table)
+
+
+def main() -> None:
+    """Entry point of the ``slamkit`` console script."""
+    app()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

@@ -1,0 +1,332 @@
+"""The data model every loader and every simulated scenario produces.
+
+A :class:`Dataset` is a time-ordered stream of typed events plus the metadata an estimator
+needs (motion model and its noise, sensor descriptions, the prior it may use) and optional
+ground truth for evaluation:
+
+======================  ==========================================================
+event                    meaning
+======================  ==========================================================
+:class:`Control`         control ``u`` applied over ``(t - dt, t]`` (e.g. v, ω)
+:class:`Odometry`        the robot's pose in the odometry frame at ``t``
+:class:`LandmarkReadings`  readings ``z (K, m)`` of point landmarks at ``t``, with
+                         identities ``ids (K,)`` or ``-1`` where unknown
+:class:`LaserScan`       ranges ``(B,)`` at ``t``; ``max_range`` means no return
+======================  ==========================================================
+
+Conventions (also in ``docs/architecture.md``): times in seconds, lengths in metres, angles in
+radians wrapped to ``[-pi, pi)``; poses ``(x, y, theta)``; landmark readings ordered
+``(range, bearing)`` (a single column for range-only or bearing-only sensors). Loaders convert
+units and conventions at load time so estimators never see a data set's own quirks.
+
+Events are plain frozen values; the :class:`Dataset` validates the whole stream once (order,
+shapes, finiteness) so estimators can trust it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any, Literal, TypeAlias
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slamkit._validation import FloatArray, as_array, as_covariance, as_positive
+from slamkit.errors import InputError, ShapeError
+from slamkit.maps import LandmarkMap, OccupancyGrid, SegmentMap
+from slamkit.models import (
+    BearingOnly,
+    LandmarkModel,
+    MotionModel,
+    OdometryModel,
+    RangeBearing,
+    RangeOnly,
+)
+
+__all__ = [
+    "Control",
+    "Dataset",
+    "Event",
+    "GroundTruth",
+    "LandmarkReadings",
+    "LandmarkSensorSpec",
+    "LaserScan",
+    "LaserSpec",
+    "MotionSpec",
+    "Odometry",
+    "group_by_time",
+]
+
+UNKNOWN_ID = -1
+
+
+@dataclass(frozen=True, slots=True)
+class Control:
+    """Control ``u (k,)`` applied over the interval ``(t - dt, t]``."""
+
+    t: float
+    u: FloatArray
+    dt: float
+
+
+@dataclass(frozen=True, slots=True)
+class Odometry:
+    """An odometry reading: the robot pose ``(3,)`` in the odometry frame at ``t``."""
+
+    t: float
+    pose: FloatArray
+
+
+@dataclass(frozen=True, slots=True)
+class LandmarkReadings:
+    """Readings ``z (K, m)`` of point landmarks at ``t``; ``ids (K,)``, ``-1`` = unknown."""
+
+    t: float
+    z: FloatArray
+    ids: NDArray[np.int64]
+
+
+@dataclass(frozen=True, slots=True)
+class LaserScan:
+    """One scan: ``ranges (B,)`` at the beam angles of the dataset's :class:`LaserSpec`."""
+
+    t: float
+    ranges: FloatArray
+
+
+Event: TypeAlias = Control | Odometry | LandmarkReadings | LaserScan
+
+
+@dataclass(frozen=True)
+class MotionSpec:
+    """How the robot moves and how the dataset reports it.
+
+    ``source`` is ``"control"`` when the stream carries :class:`Control` events for ``model``
+    and ``"odometry"`` when it carries :class:`Odometry` poses (then ``model`` is the
+    :class:`~slamkit.models.OdometryModel` and ``noise_cov`` the covariance of
+    ``(rot1, trans, rot2)``). ``noise_cov (k, k)`` is the nominal control noise.
+    """
+
+    model: MotionModel
+    noise_cov: FloatArray
+    source: Literal["control", "odometry"] = "control"
+
+    def __post_init__(self) -> None:
+        k = self.model.control_dim
+        cov = as_covariance(self.noise_cov, "motion noise_cov", k, semidefinite=True)
+        object.__setattr__(self, "noise_cov", cov)
+        if self.source == "odometry" and not isinstance(self.model, OdometryModel):
+            raise InputError("MotionSpec: source 'odometry' needs model OdometryModel()")
+
+
+LandmarkKind = Literal["range-bearing", "range", "bearing"]
+
+
+@dataclass(frozen=True)
+class LandmarkSensorSpec:
+    """A point-landmark sensor: what it measures, its noise and its limits."""
+
+    kind: LandmarkKind
+    noise_cov: FloatArray
+    max_range: float = float("inf")
+    fov: float = 2.0 * np.pi
+    identities: bool = True
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("range-bearing", "range", "bearing"):
+            raise InputError(
+                f"landmark sensor kind: expected 'range-bearing', 'range' or 'bearing', "
+                f"got {self.kind!r}"
+            )
+        cov = as_covariance(self.noise_cov, "landmark noise_cov", self.dim)
+        object.__setattr__(self, "noise_cov", cov)
+        if not float(self.max_range) > 0:  # +inf (no range limit) is allowed
+            raise InputError(f"max_range: expected a number > 0, got {self.max_range!r}")
+        object.__setattr__(self, "max_range", float(self.max_range))
+        object.__setattr__(self, "fov", as_positive(self.fov, "fov"))
+
+    @property
+    def dim(self) -> int:
+        return 2 if self.kind == "range-bearing" else 1
+
+    def model(self) -> LandmarkModel:
+        """The measurement model h(pose, landmark) of this sensor."""
+        if self.kind == "range-bearing":
+            return RangeBearing()
+        return RangeOnly() if self.kind == "range" else BearingOnly()
+
+
+@dataclass(frozen=True)
+class LaserSpec:
+    """A 2D laser scanner: beam angles ``(B,)`` in the robot frame, max range, noise."""
+
+    beam_angles: FloatArray
+    max_range: float
+    range_sigma: float = 0.0
+
+    def __post_init__(self) -> None:
+        angles = as_array(self.beam_angles, "beam_angles", (None,))
+        if angles.size == 0:
+            raise ShapeError("beam_angles: expected at least one beam, got none")
+        object.__setattr__(self, "beam_angles", angles)
+        object.__setattr__(self, "max_range", as_positive(self.max_range, "max_range"))
+        object.__setattr__(
+            self, "range_sigma", as_positive(self.range_sigma, "range_sigma", allow_zero=True)
+        )
+
+    @property
+    def n_beams(self) -> int:
+        return int(self.beam_angles.size)
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """What really happened, where known: trajectory, landmarks, walls, occupancy."""
+
+    times: FloatArray | None = None
+    poses: FloatArray | None = None
+    landmarks: LandmarkMap | None = None
+    walls: SegmentMap | None = None
+    occupancy: OccupancyGrid | None = None
+
+    def __post_init__(self) -> None:
+        if (self.times is None) != (self.poses is None):
+            raise InputError("ground truth: times and poses go together")
+        if self.times is not None and self.poses is not None:
+            times = as_array(self.times, "truth times", (None,))
+            poses = as_array(self.poses, "truth poses", (times.size, 3))
+            if np.any(np.diff(times) < 0):
+                raise InputError("truth times: expected non-decreasing times")
+            object.__setattr__(self, "times", times)
+            object.__setattr__(self, "poses", poses)
+
+    @property
+    def has_trajectory(self) -> bool:
+        return self.poses is not None
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """A time-ordered event stream with its metadata and optional ground truth.
+
+    ``initial_pose``/``initial_cov`` is the prior an estimator may start from (absent for
+    global localization and for data sets whose start is unknown). ``known_landmarks`` and
+    ``known_grid`` are maps a *localization* estimator may use; SLAM estimators ignore them.
+    ``truth`` is for evaluation only: estimators must not read it.
+    """
+
+    name: str
+    events: tuple[Event, ...]
+    motion: MotionSpec | None = None
+    landmark_sensor: LandmarkSensorSpec | None = None
+    laser: LaserSpec | None = None
+    initial_pose: FloatArray | None = None
+    initial_cov: FloatArray | None = None
+    known_landmarks: LandmarkMap | None = None
+    known_grid: OccupancyGrid | None = None
+    truth: GroundTruth = field(default_factory=GroundTruth)
+    description: str = ""
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.initial_pose is not None:
+            object.__setattr__(
+                self, "initial_pose", as_array(self.initial_pose, "initial_pose", (3,))
+            )
+        if self.initial_cov is not None:
+            cov = as_covariance(self.initial_cov, "initial_cov", 3, semidefinite=True)
+            object.__setattr__(self, "initial_cov", cov)
+        object.__setattr__(self, "events", tuple(self.events))
+        self._validate_events()
+
+    def _validate_events(self) -> None:
+        last = -np.inf
+        k = self.motion.model.control_dim if self.motion is not None else None
+        m = self.landmark_sensor.dim if self.landmark_sensor is not None else None
+        b = self.laser.n_beams if self.laser is not None else None
+        for i, ev in enumerate(self.events):
+            where = f"event {i} ({type(ev).__name__} at t={ev.t})"
+            if not np.isfinite(ev.t) or ev.t < last:
+                raise InputError(f"{where}: expected finite, non-decreasing times")
+            last = ev.t
+            if isinstance(ev, Control):
+                if k is None or self.motion is None or self.motion.source != "control":
+                    raise InputError(f"{where}: a Control event needs a control MotionSpec")
+                as_array(ev.u, f"{where} u", (k,))
+                as_positive(ev.dt, f"{where} dt", allow_zero=True)
+            elif isinstance(ev, Odometry):
+                if self.motion is None or self.motion.source != "odometry":
+                    raise InputError(f"{where}: an Odometry event needs an odometry MotionSpec")
+                as_array(ev.pose, f"{where} pose", (3,))
+            elif isinstance(ev, LandmarkReadings):
+                if m is None:
+                    raise InputError(f"{where}: landmark readings need a LandmarkSensorSpec")
+                z = as_array(ev.z, f"{where} z", (None, m))
+                if np.asarray(ev.ids).shape != (z.shape[0],):
+                    raise ShapeError(f"{where}: expected {z.shape[0]} ids")
+            elif isinstance(ev, LaserScan):
+                if b is None:
+                    raise InputError(f"{where}: a laser scan needs a LaserSpec")
+                as_array(ev.ranges, f"{where} ranges", (b,))
+            else:
+                raise InputError(f"{where}: unknown event type")
+
+    # -- convenience views -------------------------------------------------------------
+
+    def __len__(self) -> int:
+        return len(self.events)
+
+    @property
+    def start_time(self) -> float:
+        """The time of the first event (or of the first true pose, if earlier)."""
+        starts = [self.events[0].t] if self.events else []
+        if self.truth.times is not None and self.truth.times.size:
+            starts.append(float(self.truth.times[0]))
+        return float(min(starts)) if starts else 0.0
+
+    @property
+    def end_time(self) -> float:
+        return float(self.events[-1].t) if self.events else self.start_time
+
+    def counts(self) -> dict[str, int]:
+        """How many events of each type the stream holds."""
+        out: dict[str, int] = {}
+        for ev in self.events:
+            out[type(ev).__name__] = out.get(type(ev).__name__, 0) + 1
+        return out
+
+    def of_type(self, kind: type[Event]) -> Iterator[Event]:
+        return (ev for ev in self.events if isinstance(ev, kind))
+
+    def summary(self) -> dict[str, Any]:
+        """A JSON-able description (for ``slamkit data list`` and result folders)."""
+        return {
+            "name": self.name,
+            "description": self.description,
+            "events": self.counts(),
+            "duration_s": self.end_time - self.start_time,
+            "motion": None if self.motion is None else type(self.motion.model).__name__,
+            "landmark_sensor": None if self.landmark_sensor is None else self.landmark_sensor.kind,
+            "laser_beams": None if self.laser is None else self.laser.n_beams,
+            "ground_truth": {
+                "trajectory": self.truth.has_trajectory,
+                "landmarks": self.truth.landmarks is not None,
+                "walls": self.truth.walls is not None,
+                "occupancy": self.truth.occupancy is not None,
+            },
+            **self.metadata,
+        }
+
+
+def group_by_time(events: tuple[Event, ...]) -> Iterator[tuple[float, tuple[Event, ...]]]:
+    """Yield ``(t, events at t)`` for consecutive runs of equal time stamps."""
+    n = len(events)
+    i = 0
+    while i < n:
+        t = events[i].t
+        j = i + 1
+        while j < n and events[j].t == t:
+            j += 1
+        yield t, events[i:j]
+        i = j

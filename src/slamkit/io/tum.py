@@ -1,0 +1,60 @@
+"""TUM trajectory text files: ``timestamp tx ty tz qx qy qz qw`` per line.
+
+SE(2) poses are written as planar SE(3) poses (z = 0, rotation about z), which is what the
+TUM/evo tools read. Reading projects back onto the plane (the yaw of the quaternion).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from slamkit._validation import FloatArray, as_array
+from slamkit.errors import DatasetFormatError, ShapeError
+from slamkit.geometry import wrap_angle
+
+__all__ = ["format_tum", "read_tum", "write_tum"]
+
+
+def format_tum(times: ArrayLike, poses: ArrayLike) -> str:
+    """The text of a TUM file for ``times (N,)`` and SE(2) ``poses (N, 3)``."""
+    t = as_array(times, "times", (None,))
+    p = as_array(poses, "poses", (t.size, 3))
+    half = 0.5 * p[:, 2]
+    cols = np.column_stack(
+        [t, p[:, 0], p[:, 1], np.zeros_like(t), np.zeros_like(t), np.zeros_like(t),
+         np.sin(half), np.cos(half)]
+    )  # fmt: skip
+    lines = ["# timestamp tx ty tz qx qy qz qw"]
+    lines += [" ".join(f"{v:.9g}" for v in row) for row in cols]
+    return "\n".join(lines) + "\n"
+
+
+def write_tum(path: str | Path, times: ArrayLike, poses: ArrayLike) -> None:
+    """Write a TUM trajectory file (see :func:`format_tum`)."""
+    Path(path).write_text(format_tum(times, poses), encoding="utf-8")
+
+
+def read_tum(path: str | Path) -> tuple[FloatArray, FloatArray]:
+    """Read a TUM file into ``times (N,)`` and SE(2) poses ``(N, 3)`` (x, y, yaw)."""
+    p = Path(path)
+    rows: list[list[float]] = []
+    for lineno, line in enumerate(p.read_text(encoding="utf-8").splitlines(), start=1):
+        text = line.strip()
+        if not text or text.startswith("#"):
+            continue
+        parts = text.replace(",", " ").split()
+        if len(parts) != 8:
+            raise DatasetFormatError(f"expected 8 numbers, got {len(parts)}", p, lineno)
+        try:
+            rows.append([float(v) for v in parts])
+        except ValueError as exc:
+            raise DatasetFormatError(f"not a number: {exc}", p, lineno) from None
+    if not rows:
+        raise ShapeError(f"{p}: no poses in the file")
+    a = np.asarray(rows)
+    qx, qy, qz, qw = a[:, 4], a[:, 5], a[:, 6], a[:, 7]
+    yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    return a[:, 0], np.column_stack([a[:, 1], a[:, 2], wrap_angle(yaw)])

@@ -1,0 +1,65 @@
+"""Dead reckoning: integrate the motion model from the start, propagating the covariance.
+
+No measurement is used, so the covariance grows without bound (``C ← A C Aᵀ + B Q Bᵀ``). It is
+the baseline every filter must beat, and the simplest example of the :class:`Estimator`
+protocol (see :mod:`slamkit.pipeline.estimator`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from slamkit.datasets.stream import Control, Dataset, Event, Odometry
+from slamkit.errors import ConfigError, InputError
+from slamkit.localization.belief import GaussianBelief, predict
+from slamkit.models import odometry_control
+from slamkit.pipeline.estimator import EstimatorOutput, PoseEstimate
+
+__all__ = ["DeadReckoning", "DeadReckoningConfig"]
+
+
+@dataclass(frozen=True)
+class DeadReckoningConfig:
+    """Settings of :class:`DeadReckoning`."""
+
+    noise_scale: float = 1.0
+    """Multiplies the data set's nominal control-noise covariance (1 = trust it as given)."""
+
+    def __post_init__(self) -> None:
+        if not self.noise_scale >= 0:
+            raise ConfigError(f"noise_scale: expected a number >= 0, got {self.noise_scale}")
+
+
+class DeadReckoning:
+    """Integrates :class:`Control` or :class:`Odometry` events; ignores everything else."""
+
+    def __init__(
+        self, dataset: Dataset, config: DeadReckoningConfig, rng: np.random.Generator
+    ) -> None:
+        if dataset.motion is None:
+            raise InputError(f"dead reckoning needs a motion model; {dataset.name} has none")
+        self._motion = dataset.motion
+        self._Q = config.noise_scale * dataset.motion.noise_cov
+        start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
+        self._belief = GaussianBelief.from_pose(start, dataset.initial_cov)
+        self._last_odometry: np.ndarray | None = None
+        self._steps = 0
+
+    def handle(self, event: Event) -> None:
+        if isinstance(event, Control):
+            self._belief = predict(self._belief, event.u, event.dt, self._motion.model, self._Q)
+            self._steps += 1
+        elif isinstance(event, Odometry):
+            if self._last_odometry is not None:
+                u = odometry_control(self._last_odometry, event.pose)
+                self._belief = predict(self._belief, u, 0.0, self._motion.model, self._Q)
+                self._steps += 1
+            self._last_odometry = event.pose
+
+    def estimate(self) -> PoseEstimate:
+        return PoseEstimate(self._belief.pose, self._belief.pose_cov)
+
+    def finish(self) -> EstimatorOutput:
+        return EstimatorOutput(diagnostics={"motion_steps": self._steps})

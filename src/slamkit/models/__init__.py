@@ -1,0 +1,43 @@
+"""Motion, landmark-measurement and laser models with analytic Jacobians."""
+
+from slamkit.models.laser import LaserScanner, cast_rays_grid, cast_rays_segments
+from slamkit.models.measurement import (
+    MIN_RANGE,
+    BearingOnly,
+    LandmarkModel,
+    RangeBearing,
+    RangeOnly,
+    landmark_initial_covariance,
+)
+from slamkit.models.motion import (
+    Ackermann,
+    DifferentialDrive,
+    MotionModel,
+    OdometryModel,
+    UnicycleArc,
+    UnicycleEuler,
+    odometry_control,
+    odometry_noise_cov,
+    propagate_gaussian,
+)
+
+__all__ = [
+    "MIN_RANGE",
+    "Ackermann",
+    "BearingOnly",
+    "DifferentialDrive",
+    "LandmarkModel",
+    "LaserScanner",
+    "MotionModel",
+    "OdometryModel",
+    "RangeBearing",
+    "RangeOnly",
+    "UnicycleArc",
+    "UnicycleEuler",
+    "cast_rays_grid",
+    "cast_rays_segments",
+    "landmark_initial_covariance",
+    "odometry_control",
+    "odometry_noise_cov",
+    "propagate_gaussian",
+]

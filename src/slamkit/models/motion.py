@@ -1,0 +1,626 @@
+"""Motion models ``x_t = g(x_{t-1}, u_t, dt)`` for planar robots, with analytic Jacobians.
+
+Conventions shared by every model here:
+
+* A pose ``x`` is an array ``(..., 3)`` holding ``(x, y, theta)`` in metres and radians; the
+  returned heading is always wrapped to ``[-pi, pi)`` by :func:`slamkit.geometry.wrap_angle`.
+* A control ``u`` is an array ``(..., k)`` whose meaning each model names in
+  ``control_names``. Leading (batch) axes of ``x`` and ``u`` broadcast against each other, so a
+  particle set ``(P, 3)`` moves under one control ``(k,)`` in a single call.
+* ``dt`` is the duration of the step in seconds (a float ``>= 0``); the control is held
+  constant over the step.
+* ``jacobians`` returns ``G = dg/dx`` of shape ``(..., 3, 3)`` and ``V = dg/du`` of shape
+  ``(..., 3, k)``, evaluated at the given ``(x, u)``.
+* ``sample`` perturbs the *control*: it returns ``g(x, u + eps, dt)`` with
+  ``eps ~ N(0, control_cov)`` drawn independently for every batch element, which is the
+  noise model that :func:`propagate_gaussian` linearises (``G C Gᵀ + V Q Vᵀ``).
+
+Inputs are never modified; every function returns new arrays.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from slamkit._validation import FloatArray, as_array, as_covariance, as_positive
+from slamkit.errors import GeometryError, InputError, ShapeError
+from slamkit.geometry.angles import wrap_angle
+
+__all__ = [
+    "Ackermann",
+    "DifferentialDrive",
+    "MotionModel",
+    "OdometryModel",
+    "UnicycleArc",
+    "UnicycleEuler",
+    "odometry_control",
+    "odometry_noise_cov",
+    "propagate_gaussian",
+]
+
+
+@runtime_checkable
+class MotionModel(Protocol):
+    """What filters, the simulator and dead reckoning need from a motion model.
+
+    ``control_dim`` is ``k``, the length of a control vector; ``control_names`` names its
+    components in order.
+    """
+
+    @property
+    def control_dim(self) -> int: ...
+
+    @property
+    def control_names(self) -> tuple[str, ...]: ...
+
+    def apply(self, x: ArrayLike, u: ArrayLike, dt: float) -> FloatArray:
+        """``g(x, u, dt)``: the poses ``(..., 3)`` after one step, heading wrapped."""
+        ...
+
+    def jacobians(self, x: ArrayLike, u: ArrayLike, dt: float) -> tuple[FloatArray, FloatArray]:
+        """``(G, V)`` with ``G = dg/dx`` ``(..., 3, 3)`` and ``V = dg/du`` ``(..., 3, k)``."""
+        ...
+
+    def sample(
+        self,
+        x: ArrayLike,
+        u: ArrayLike,
+        dt: float,
+        control_cov: ArrayLike,
+        rng: np.random.Generator,
+    ) -> FloatArray:
+        """``g(x, u + eps, dt)`` with ``eps ~ N(0, control_cov)`` per batch element."""
+        ...
+
+
+# --------------------------------------------------------------------------------------------
+# Shared plumbing
+# --------------------------------------------------------------------------------------------
+
+
+def _as_dt(dt: float) -> float:
+    return as_positive(dt, "dt", allow_zero=True)
+
+
+def _prepare(x: ArrayLike, u: ArrayLike, k: int) -> tuple[FloatArray, FloatArray]:
+    """Validate a pose and a control and broadcast their batch axes against each other."""
+    xa = as_array(x, "pose x", (..., 3))
+    ua = as_array(u, "control u", (..., k))
+    try:
+        batch = np.broadcast_shapes(xa.shape[:-1], ua.shape[:-1])
+    except ValueError as exc:
+        raise ShapeError(
+            f"pose x {xa.shape} and control u {ua.shape}: batch axes do not broadcast"
+        ) from exc
+    return np.broadcast_to(xa, (*batch, 3)), np.broadcast_to(ua, (*batch, k))
+
+
+def _gaussian_draws(
+    cov: FloatArray, batch: tuple[int, ...], rng: np.random.Generator
+) -> FloatArray:
+    """Draws ``(..., k)`` from ``N(0, cov)`` for a (batch of) PSD ``cov (..., k, k)``.
+
+    A symmetric square root from ``eigh`` (negative round-off eigenvalues clipped to zero)
+    works for singular covariances too, where a Cholesky factor would fail.
+    """
+    k = cov.shape[-1]
+    eigval, eigvec = np.linalg.eigh(cov)
+    root = eigvec * np.sqrt(np.clip(eigval, 0.0, None))[..., None, :]
+    shape = np.broadcast_shapes(batch, cov.shape[:-2])
+    z = rng.standard_normal((*shape, k))
+    return np.einsum("...ij,...j->...i", root, z)
+
+
+class _MotionBase:
+    """Validation, broadcasting and sampling shared by the concrete models.
+
+    Subclasses implement ``_g`` and ``_jac`` on validated, broadcast arrays.
+    """
+
+    control_dim: ClassVar[int]
+    control_names: ClassVar[tuple[str, ...]]
+
+    def _g(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
+        raise NotImplementedError
+
+    def _jac(self, x: FloatArray, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
+        raise NotImplementedError
+
+    def apply(self, x: ArrayLike, u: ArrayLike, dt: float) -> FloatArray:
+        """``g(x, u, dt)``: poses ``(..., 3)`` after one step, heading in ``[-pi, pi)``."""
+        xa, ua = _prepare(x, u, self.control_dim)
+        return self._g(xa, ua, _as_dt(dt))
+
+    def jacobians(self, x: ArrayLike, u: ArrayLike, dt: float) -> tuple[FloatArray, FloatArray]:
+        """``(G, V)``: ``G = dg/dx`` ``(..., 3, 3)`` and ``V = dg/du`` ``(..., 3, k)``."""
+        xa, ua = _prepare(x, u, self.control_dim)
+        return self._jac(xa, ua, _as_dt(dt))
+
+    def sample(
+        self,
+        x: ArrayLike,
+        u: ArrayLike,
+        dt: float,
+        control_cov: ArrayLike,
+        rng: np.random.Generator,
+    ) -> FloatArray:
+        """``g(x, u + eps, dt)`` with ``eps ~ N(0, control_cov)`` drawn per batch element.
+
+        ``control_cov`` is ``(k, k)`` (or a batch ``(..., k, k)`` broadcasting against the
+        poses), symmetric positive semi-definite; zero entries mean a noise-free component.
+        """
+        k = self.control_dim
+        xa, ua = _prepare(x, u, k)
+        dt = _as_dt(dt)
+        q = as_covariance(control_cov, "control_cov", k, semidefinite=True)
+        eps = _gaussian_draws(q, xa.shape[:-1], rng)
+        batch = eps.shape[:-1]
+        xa = np.broadcast_to(xa, (*batch, 3))
+        return self._g(xa, ua + eps, dt)
+
+
+# --------------------------------------------------------------------------------------------
+# Kinematic kernels on (v, omega), shared by the unicycle and differential-drive models
+# --------------------------------------------------------------------------------------------
+
+
+def _euler_g(x: FloatArray, v: FloatArray, w: FloatArray, dt: float) -> FloatArray:
+    # x' = x + v cos(theta) dt,  y' = y + v sin(theta) dt,  theta' = theta + omega dt
+    th = x[..., 2]
+    return np.stack(
+        [
+            x[..., 0] + v * np.cos(th) * dt,
+            x[..., 1] + v * np.sin(th) * dt,
+            wrap_angle(th + w * dt),
+        ],
+        axis=-1,
+    )
+
+
+def _euler_jac(
+    x: FloatArray, v: FloatArray, w: FloatArray, dt: float
+) -> tuple[FloatArray, FloatArray]:
+    """``G`` (..., 3, 3) and ``V_vw = d g / d(v, omega)`` (..., 3, 2) of the Euler step."""
+    th = x[..., 2]
+    c, s = np.cos(th), np.sin(th)
+    batch = th.shape
+    G = np.zeros((*batch, 3, 3))
+    G[..., 0, 0] = G[..., 1, 1] = G[..., 2, 2] = 1.0
+    G[..., 0, 2] = -v * s * dt  # d x' / d theta
+    G[..., 1, 2] = v * c * dt  # d y' / d theta
+    V = np.zeros((*batch, 3, 2))
+    V[..., 0, 0] = c * dt
+    V[..., 1, 0] = s * dt
+    V[..., 2, 1] = dt
+    return G, V
+
+
+# Below this |phi| = |omega dt| the arc kernels use Taylor series: the closed forms divide by
+# phi (and phi²) and lose all precision, then become 0/0 at phi = 0. The truncation error of
+# the series at the switch is below 1e-17 relative.
+_ARC_SERIES_BELOW = 1e-3
+
+
+def _sinc_half(phi: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``s(phi) = sin(phi/2) / (phi/2)`` and its derivative ``s'(phi)``, finite at 0."""
+    small = np.abs(phi) < _ARC_SERIES_BELOW
+    h = np.where(small, 1.0, phi / 2.0)  # safe divisor on the series branch
+    s_closed = np.sin(h) / h
+    # s'(phi) = (h cos h - sin h) / (2 h²) with h = phi / 2
+    ds_closed = (h * np.cos(h) - np.sin(h)) / (2.0 * h * h)
+    p2 = phi * phi
+    # sin(h)/h = 1 - h²/6 + h⁴/120 - ...  with h = phi/2
+    s_series = 1.0 - p2 / 24.0 + p2 * p2 / 1920.0
+    ds_series = -phi / 12.0 + phi * p2 / 480.0
+    return np.where(small, s_series, s_closed), np.where(small, ds_series, ds_closed)
+
+
+def _arc_g(x: FloatArray, v: FloatArray, w: FloatArray, dt: float) -> FloatArray:
+    # Exact integration of constant (v, omega) over dt, phi = omega dt:
+    #   x' = x + (v/omega) (sin(theta + phi) - sin theta) = x + v dt s(phi) cos(theta + phi/2)
+    #   y' = y + (v/omega) (cos theta - cos(theta + phi)) = y + v dt s(phi) sin(theta + phi/2)
+    # using sin a - sin b = 2 cos((a+b)/2) sin((a-b)/2) (and the cosine analogue); the
+    # right-hand forms stay finite as omega -> 0, where they become the straight line.
+    th = x[..., 2]
+    phi = w * dt
+    s, _ = _sinc_half(phi)
+    mid = th + phi / 2.0
+    chord = v * dt * s
+    return np.stack(
+        [x[..., 0] + chord * np.cos(mid), x[..., 1] + chord * np.sin(mid), wrap_angle(th + phi)],
+        axis=-1,
+    )
+
+
+def _arc_jac(
+    x: FloatArray, v: FloatArray, w: FloatArray, dt: float
+) -> tuple[FloatArray, FloatArray]:
+    """``G`` and ``V_vw = d g / d(v, omega)`` of the exact arc step (finite at omega = 0)."""
+    th = x[..., 2]
+    phi = w * dt
+    s, ds = _sinc_half(phi)
+    mid = th + phi / 2.0
+    c, sn = np.cos(mid), np.sin(mid)
+    batch = th.shape
+    G = np.zeros((*batch, 3, 3))
+    G[..., 0, 0] = G[..., 1, 1] = G[..., 2, 2] = 1.0
+    G[..., 0, 2] = -v * dt * s * sn
+    G[..., 1, 2] = v * dt * s * c
+    V = np.zeros((*batch, 3, 2))
+    V[..., 0, 0] = dt * s * c
+    V[..., 1, 0] = dt * s * sn
+    # d/d omega of v dt s(omega dt) cos(theta + omega dt / 2)
+    #   = v dt² (s'(phi) cos(mid) - s(phi) sin(mid) / 2), and the sine analogue
+    V[..., 0, 1] = v * dt * dt * (ds * c - 0.5 * s * sn)
+    V[..., 1, 1] = v * dt * dt * (ds * sn + 0.5 * s * c)
+    V[..., 2, 1] = dt
+    return G, V
+
+
+# --------------------------------------------------------------------------------------------
+# Velocity models
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class UnicycleEuler(_MotionBase):
+    """Velocity model with controls ``(v, omega)`` (m/s, rad/s), one Euler step.
+
+    ``x' = x + v cos(theta) dt``, ``y' = y + v sin(theta) dt``, ``theta' = theta + omega dt``
+    where ``theta`` is the heading at the *start* of the step (``dt`` multiplies the rate; it
+    is not inside the cosine). Accurate when ``omega dt`` is small; :class:`UnicycleArc` is
+    exact for constant controls.
+    """
+
+    control_dim: ClassVar[int] = 2
+    control_names: ClassVar[tuple[str, ...]] = ("v", "omega")
+
+    def _g(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
+        return _euler_g(x, u[..., 0], u[..., 1], dt)
+
+    def _jac(self, x: FloatArray, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
+        return _euler_jac(x, u[..., 0], u[..., 1], dt)
+
+
+@dataclass(frozen=True)
+class UnicycleArc(_MotionBase):
+    """Velocity model with controls ``(v, omega)`` (m/s, rad/s), integrated exactly.
+
+    With constant ``(v, omega)`` the robot drives a circular arc of radius ``v / omega``:
+    ``x' = x + (v/omega)(sin(theta + omega dt) - sin theta)``,
+    ``y' = y + (v/omega)(cos theta - cos(theta + omega dt))``, ``theta' = theta + omega dt``.
+    It is evaluated in the equivalent chord form ``v dt s(omega dt) (cos, sin)(theta +
+    omega dt / 2)`` with ``s(phi) = sin(phi/2)/(phi/2)``, and a Taylor series of ``s`` for
+    ``|omega dt| < 1e-3``, so pose and Jacobians are finite and accurate down to
+    ``omega = 0`` (a straight line).
+    """
+
+    control_dim: ClassVar[int] = 2
+    control_names: ClassVar[tuple[str, ...]] = ("v", "omega")
+
+    def _g(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
+        return _arc_g(x, u[..., 0], u[..., 1], dt)
+
+    def _jac(self, x: FloatArray, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
+        return _arc_jac(x, u[..., 0], u[..., 1], dt)
+
+
+@dataclass(frozen=True)
+class DifferentialDrive(_MotionBase):
+    """Two-wheel (tank) drive with controls ``(v_left, v_right)``: wheel ground speeds, m/s.
+
+    Both wheels drive forward for positive speeds. The body velocities are
+    ``v = (v_left + v_right) / 2`` and ``omega = (v_right - v_left) / wheel_distance``
+    (counter-clockwise positive: a faster right wheel turns left), followed by the Euler step
+    of :class:`UnicycleEuler` or, with ``exact=True``, the arc of :class:`UnicycleArc`. The
+    control Jacobian is ``V = V_(v, omega) @ [[1/2, 1/2], [-1/d, 1/d]]`` (chain rule).
+
+    ``wheel_distance`` ``d`` is the distance between the wheel contact points (m, > 0).
+    """
+
+    wheel_distance: float
+    exact: bool = False
+
+    control_dim: ClassVar[int] = 2
+    control_names: ClassVar[tuple[str, ...]] = ("v_left", "v_right")
+
+    def __post_init__(self) -> None:
+        object.__setattr__(
+            self, "wheel_distance", as_positive(self.wheel_distance, "wheel_distance")
+        )
+        object.__setattr__(self, "exact", bool(self.exact))
+
+    def body_velocity(self, u: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """``(v, omega)`` from wheel speeds ``u (..., 2)`` = ``(v_left, v_right)``."""
+        ua = as_array(u, "control u", (..., 2))
+        return self._vw(ua)
+
+    def _vw(self, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+        vl, vr = u[..., 0], u[..., 1]
+        return 0.5 * (vl + vr), (vr - vl) / self.wheel_distance
+
+    def _g(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
+        v, w = self._vw(u)
+        return (_arc_g if self.exact else _euler_g)(x, v, w, dt)
+
+    def _jac(self, x: FloatArray, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
+        v, w = self._vw(u)
+        G, V_vw = (_arc_jac if self.exact else _euler_jac)(x, v, w, dt)
+        inv_d = 1.0 / self.wheel_distance
+        # d(v, omega) / d(v_left, v_right)
+        J = np.array([[0.5, 0.5], [-inv_d, inv_d]])
+        return G, V_vw @ J
+
+
+# --------------------------------------------------------------------------------------------
+# Odometry model
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class OdometryModel(_MotionBase):
+    """The odometry motion model of *Probabilistic Robotics* (ch. 5.4).
+
+    The control ``u = (rot1, trans, rot2)`` describes the motion between two odometry
+    readings as: turn by ``rot1`` (rad), drive ``trans`` (m) straight ahead, turn by ``rot2``
+    (rad). Compute it with :func:`odometry_control`. Then
+    ``x' = x + trans cos(theta + rot1)``, ``y' = y + trans sin(theta + rot1)``,
+    ``theta' = theta + rot1 + rot2``. ``dt`` is accepted for the common interface and
+    ignored.
+
+    Noise: ``control_cov`` in :meth:`sample` and :func:`propagate_gaussian` is the
+    covariance of ``(rot1, trans, rot2)`` (rad², m², rad²); :func:`odometry_noise_cov` builds
+    the motion-dependent diagonal of the book's ``alpha1..alpha4`` parameters.
+    """
+
+    control_dim: ClassVar[int] = 3
+    control_names: ClassVar[tuple[str, ...]] = ("rot1", "trans", "rot2")
+
+    def apply(self, x: ArrayLike, u: ArrayLike, dt: float = 0.0) -> FloatArray:
+        """``g(x, u)``: the pose after ``(rot1, trans, rot2)``; ``dt`` is ignored."""
+        xa, ua = _prepare(x, u, 3)
+        return self._g(xa, ua, 0.0)
+
+    def jacobians(
+        self, x: ArrayLike, u: ArrayLike, dt: float = 0.0
+    ) -> tuple[FloatArray, FloatArray]:
+        """``(G (..., 3, 3), V (..., 3, 3))``; ``dt`` is ignored."""
+        xa, ua = _prepare(x, u, 3)
+        return self._jac(xa, ua, 0.0)
+
+    def sample(
+        self,
+        x: ArrayLike,
+        u: ArrayLike,
+        dt: float,
+        control_cov: ArrayLike,
+        rng: np.random.Generator,
+    ) -> FloatArray:
+        """``g(x, u + eps)`` with ``eps ~ N(0, control_cov)``; ``dt`` is ignored."""
+        return super().sample(x, u, 0.0, control_cov, rng)
+
+    def _g(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
+        rot1, trans, rot2 = u[..., 0], u[..., 1], u[..., 2]
+        th = x[..., 2]
+        heading = th + rot1
+        return np.stack(
+            [
+                x[..., 0] + trans * np.cos(heading),
+                x[..., 1] + trans * np.sin(heading),
+                wrap_angle(heading + rot2),
+            ],
+            axis=-1,
+        )
+
+    def _jac(self, x: FloatArray, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
+        rot1, trans = u[..., 0], u[..., 1]
+        heading = x[..., 2] + rot1
+        c, s = np.cos(heading), np.sin(heading)
+        batch = heading.shape
+        G = np.zeros((*batch, 3, 3))
+        G[..., 0, 0] = G[..., 1, 1] = G[..., 2, 2] = 1.0
+        G[..., 0, 2] = -trans * s
+        G[..., 1, 2] = trans * c
+        V = np.zeros((*batch, 3, 3))
+        V[..., 0, 0] = -trans * s  # d x' / d rot1
+        V[..., 1, 0] = trans * c
+        V[..., 0, 1] = c  # d x' / d trans
+        V[..., 1, 1] = s
+        V[..., 2, 0] = 1.0
+        V[..., 2, 2] = 1.0
+        return G, V
+
+
+def odometry_control(
+    odom_prev: ArrayLike, odom_curr: ArrayLike, *, min_translation: float = 1e-9
+) -> FloatArray:
+    """``(rot1, trans, rot2)`` ``(..., 3)`` taking odometry pose ``odom_prev`` to ``odom_curr``.
+
+    ``trans = |p_curr - p_prev|``, ``rot1 = atan2(dy, dx) - theta_prev`` and
+    ``rot2 = theta_curr - theta_prev - rot1`` (angles wrapped). When ``trans`` is below
+    ``min_translation`` (m) the direction of travel is undefined: then ``rot1 = 0`` and
+    ``rot2`` is the whole rotation. Both arguments are ``(..., 3)`` and broadcast.
+    Applying :class:`OdometryModel` to the result moves ``odom_prev`` onto ``odom_curr``
+    (exactly up to rounding when ``trans >= min_translation``).
+    """
+    a = as_array(odom_prev, "odom_prev", (..., 3))
+    b = as_array(odom_curr, "odom_curr", (..., 3))
+    min_t = as_positive(min_translation, "min_translation", allow_zero=True)
+    dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
+    trans = np.hypot(dx, dy)
+    moved = trans >= min_t
+    rot1 = np.where(moved, wrap_angle(np.arctan2(dy, dx) - a[..., 2]), 0.0)
+    rot2 = wrap_angle(b[..., 2] - a[..., 2] - rot1)
+    return np.stack(np.broadcast_arrays(rot1, trans, rot2), axis=-1)
+
+
+def odometry_noise_cov(u: ArrayLike, alphas: ArrayLike) -> FloatArray:
+    """Motion-dependent covariance ``(..., 3, 3)`` of ``(rot1, trans, rot2)``.
+
+    The diagonal model of *Probabilistic Robotics* (table 5.6) with ``alphas =
+    (a1, a2, a3, a4) >= 0``: ``var(rot1) = a1 rot1² + a2 trans²``,
+    ``var(trans) = a3 trans² + a4 (rot1² + rot2²)``, ``var(rot2) = a1 rot2² + a2 trans²``.
+    Units: ``a1`` and ``a3`` are dimensionless, ``a2`` is rad²/m² and ``a4`` m²/rad².
+    Pass the result as ``control_cov`` (it broadcasts against the batch of ``u``).
+    """
+    ua = as_array(u, "control u", (..., 3))
+    al = as_array(alphas, "alphas", (4,))
+    if np.any(al < 0):
+        raise InputError(f"alphas: expected four values >= 0, got {al.tolist()}")
+    r1, t, r2 = ua[..., 0] ** 2, ua[..., 1] ** 2, ua[..., 2] ** 2
+    cov = np.zeros((*ua.shape[:-1], 3, 3))
+    cov[..., 0, 0] = al[0] * r1 + al[1] * t
+    cov[..., 1, 1] = al[2] * t + al[3] * (r1 + r2)
+    cov[..., 2, 2] = al[0] * r2 + al[1] * t
+    return cov
+
+
+# --------------------------------------------------------------------------------------------
+# Ackermann (car-like) model
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Ackermann(_MotionBase):
+    """Car-like vehicle with controls ``(speed, steering)`` (m/s, rad), one Euler step.
+
+    Geometry (all in metres, in the vehicle frame whose origin is the centre of the rear axle,
+    x forward, y to the left):
+
+    * ``wheelbase`` ``L``: distance from the rear axle to the front axle (> 0).
+    * ``sensor_offset = (a, b)``: the tracked point (e.g. the laser) sits ``a`` ahead of and
+      ``b`` to the **left** of the rear-axle centre (``b > 0`` = left, ``b < 0`` = right).
+      The state ``x`` is the pose of this point with the vehicle's heading; with the default
+      ``(0, 0)`` it is the rear-axle centre.
+    * ``encoder_offset`` ``H``: the measured ``speed`` is that of a rear wheel ``H`` to the
+      **left** of the centre line (``H < 0`` for a right wheel; 0 = the axle centre).
+
+    ``steering`` ``alpha`` is the (bicycle-model) front steering angle, positive = turning
+    left. Kinematics, with ``phi`` the heading and ``v_c`` the speed of the rear-axle centre:
+
+    * yaw rate ``omega = v_c tan(alpha) / L``;
+    * the encoder wheel moves at ``v_c - omega H = v_c (1 - tan(alpha) H / L)``, hence
+      ``v_c = speed / (1 - tan(alpha) H / L)``;
+    * the point ``(a, b)`` moves with ``v_c (cos phi, sin phi) + omega × r`` where
+      ``r = R(phi) (a, b)``:
+      ``x_dot = v_c cos phi - omega (a sin phi + b cos phi)``,
+      ``y_dot = v_c sin phi + omega (a cos phi - b sin phi)``, ``phi_dot = omega``;
+    * Euler step: ``x' = x + x_dot dt`` etc., rates evaluated at the start of the step.
+
+    For Victoria Park (Guivant & Nebot's truck; ``speed`` from the left rear wheel) use
+    ``Ackermann(2.83, (a, 0.5), 0.76)`` with ``a`` the laser's forward offset from the rear
+    axle given in the dataset notes. Steering with ``|alpha| >= pi/2`` or that puts the
+    encoder wheel on the instantaneous centre of rotation raises :class:`GeometryError`.
+    """
+
+    wheelbase: float
+    sensor_offset: tuple[float, float] = (0.0, 0.0)
+    encoder_offset: float = 0.0
+
+    control_dim: ClassVar[int] = 2
+    control_names: ClassVar[tuple[str, ...]] = ("speed", "steering")
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "wheelbase", as_positive(self.wheelbase, "wheelbase"))
+        off = as_array(self.sensor_offset, "sensor_offset", (2,))
+        object.__setattr__(self, "sensor_offset", (float(off[0]), float(off[1])))
+        enc = as_array(self.encoder_offset, "encoder_offset", ())
+        object.__setattr__(self, "encoder_offset", float(enc))
+
+    def _rates(
+        self, u: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        """``v_c, omega`` and the factors ``tan(alpha), sec²(alpha), D = 1 - tan H / L``."""
+        speed, alpha = u[..., 0], u[..., 1]
+        cos_a = np.cos(alpha)
+        if np.any(np.abs(alpha) >= np.pi / 2):
+            raise GeometryError("steering: expected |alpha| < pi/2 (the yaw rate is unbounded)")
+        tan_a = np.tan(alpha)
+        L, H = self.wheelbase, self.encoder_offset
+        D = 1.0 - tan_a * H / L
+        if np.any(D < 1e-9):
+            raise GeometryError(
+                "steering: the encoder wheel lies at or beyond the instantaneous centre of "
+                "rotation (1 - tan(alpha) H / L <= 0); its speed does not determine the motion"
+            )
+        v_c = speed / D
+        return v_c, v_c * tan_a / L, tan_a, 1.0 / (cos_a * cos_a), D
+
+    def _g(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
+        v_c, w, _, _, _ = self._rates(u)
+        a, b = self.sensor_offset
+        phi = x[..., 2]
+        c, s = np.cos(phi), np.sin(phi)
+        return np.stack(
+            [
+                x[..., 0] + dt * (v_c * c - w * (a * s + b * c)),
+                x[..., 1] + dt * (v_c * s + w * (a * c - b * s)),
+                wrap_angle(phi + w * dt),
+            ],
+            axis=-1,
+        )
+
+    def _jac(self, x: FloatArray, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
+        v_c, w, tan_a, sec2, D = self._rates(u)
+        speed = u[..., 0]
+        a, b = self.sensor_offset
+        L, H = self.wheelbase, self.encoder_offset
+        phi = x[..., 2]
+        c, s = np.cos(phi), np.sin(phi)
+        batch = phi.shape
+        G = np.zeros((*batch, 3, 3))
+        G[..., 0, 0] = G[..., 1, 1] = G[..., 2, 2] = 1.0
+        G[..., 0, 2] = dt * (-v_c * s - w * (a * c - b * s))
+        G[..., 1, 2] = dt * (v_c * c - w * (a * s + b * c))
+        # d(x', y', phi') / d(v_c, omega)
+        A = np.zeros((*batch, 3, 2))
+        A[..., 0, 0] = dt * c
+        A[..., 1, 0] = dt * s
+        A[..., 0, 1] = -dt * (a * s + b * c)
+        A[..., 1, 1] = dt * (a * c - b * s)
+        A[..., 2, 1] = dt
+        # d(v_c, omega) / d(speed, alpha), from v_c = speed / D, D = 1 - tan(alpha) H / L:
+        #   dv_c/dspeed = 1/D,            dv_c/dalpha = speed H sec² / (L D²)
+        #   domega/dspeed = tan / (L D),  domega/dalpha = speed sec² / (L D²)
+        B = np.zeros((*batch, 2, 2))
+        B[..., 0, 0] = 1.0 / D
+        B[..., 0, 1] = speed * H * sec2 / (L * D * D)
+        B[..., 1, 0] = tan_a / (L * D)
+        B[..., 1, 1] = speed * sec2 / (L * D * D)
+        return G, A @ B
+
+
+# --------------------------------------------------------------------------------------------
+# Gaussian propagation (the dead-reckoning / EKF prediction step)
+# --------------------------------------------------------------------------------------------
+
+
+def propagate_gaussian(
+    model: MotionModel,
+    mean: ArrayLike,
+    cov: ArrayLike,
+    u: ArrayLike,
+    dt: float,
+    control_cov: ArrayLike,
+) -> tuple[FloatArray, FloatArray]:
+    """One linearised prediction of a Gaussian pose belief through ``model``.
+
+    ``mean' = g(mean, u, dt)`` and ``cov' = G cov Gᵀ + V Q Vᵀ`` with ``(G, V)`` evaluated at
+    ``(mean, u)`` and ``Q = control_cov`` ``(k, k)``; the result is symmetrised
+    ``(P + Pᵀ)/2`` so round-off never makes it asymmetric. ``mean (..., 3)``,
+    ``cov (..., 3, 3)`` (PSD; zero for a known start) and ``control_cov`` may carry batch
+    axes that broadcast together.
+    """
+    m = as_array(mean, "mean", (..., 3))
+    P = as_covariance(cov, "cov", 3, semidefinite=True)
+    Q = as_covariance(control_cov, "control_cov", model.control_dim, semidefinite=True)
+    new_mean = model.apply(m, u, dt)
+    G, V = model.jacobians(m, u, dt)
+    Gt, Vt = np.swapaxes(G, -1, -2), np.swapaxes(V, -1, -2)
+    new_cov = G @ P @ Gt + V @ Q @ Vt
+    new_cov = 0.5 * (new_cov + np.swapaxes(new_cov, -1, -2))
+    return new_mean, new_cov

@@ -1,0 +1,33 @@
+"""The pipeline: the estimator contract, the estimator registry, the runner, evaluation.
+
+Data flows ``Dataset → run(estimator) → Result → evaluate → metrics``; ``slamkit.io`` writes
+results and ``slamkit.viz`` draws them.
+"""
+
+from slamkit.pipeline.estimator import (
+    Estimator,
+    EstimatorOutput,
+    LandmarkEstimate,
+    PoseEstimate,
+)
+from slamkit.pipeline.registry import (
+    ESTIMATORS,
+    EstimatorEntry,
+    get_estimator_entry,
+    list_estimators,
+)
+from slamkit.pipeline.runner import Progress, Result, run
+
+__all__ = [
+    "ESTIMATORS",
+    "Estimator",
+    "EstimatorEntry",
+    "EstimatorOutput",
+    "LandmarkEstimate",
+    "PoseEstimate",
+    "Progress",
+    "Result",
+    "get_estimator_entry",
+    "list_estimators",
+    "run",
+]

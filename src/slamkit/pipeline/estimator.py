@@ -1,0 +1,61 @@
+"""The contract between the runner and every estimator.
+
+An estimator is built from ``(dataset, config, rng)``, is fed the dataset's events one by one
+through :meth:`Estimator.handle`, reports its current pose estimate through
+:meth:`Estimator.estimate` after each time stamp, and hands back its map and diagnostics from
+:meth:`Estimator.finish`. The filters themselves are written as pure functions
+(``predict(belief, ...) -> belief``); an estimator is the thin stateful shell around them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from slamkit._validation import FloatArray
+from slamkit.datasets.stream import Dataset, Event
+from slamkit.maps import LandmarkMap, OccupancyGrid
+
+__all__ = ["Estimator", "EstimatorOutput", "LandmarkEstimate", "PoseEstimate"]
+
+
+@dataclass(frozen=True)
+class PoseEstimate:
+    """The current pose ``(3,)`` and, for Gaussian estimators, its covariance ``(3, 3)``."""
+
+    pose: FloatArray
+    cov: FloatArray | None = None
+
+
+@dataclass(frozen=True)
+class LandmarkEstimate:
+    """An estimated landmark map and, where known, each landmark's covariance ``(M, 2, 2)``."""
+
+    landmarks: LandmarkMap
+    covariances: FloatArray | None = None
+
+
+@dataclass(frozen=True)
+class EstimatorOutput:
+    """What an estimator returns at the end besides its trajectory."""
+
+    landmarks: LandmarkEstimate | None = None
+    grid: OccupancyGrid | None = None
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+    """JSON-able numbers and short lists (counts, statistics) merged into ``metrics.json``."""
+
+
+class Estimator(Protocol):
+    """What the runner needs of an estimator (see the module docstring)."""
+
+    def handle(self, event: Event) -> None: ...
+
+    def estimate(self) -> PoseEstimate: ...
+
+    def finish(self) -> EstimatorOutput: ...
+
+
+class EstimatorFactory(Protocol):
+    def __call__(self, dataset: Dataset, config: Any, rng: np.random.Generator) -> Estimator: ...

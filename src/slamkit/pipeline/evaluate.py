@@ -1,0 +1,96 @@
+"""Score a :class:`Result` against its data set's ground truth (where there is some)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from slamkit._validation import FloatArray
+from slamkit.datasets.stream import Dataset
+from slamkit.errors import CovarianceError
+from slamkit.eval import (
+    absolute_trajectory_error,
+    associate,
+    chi2_bounds,
+    landmark_map_error,
+    nees,
+    pose_errors,
+    relative_pose_error,
+)
+from slamkit.pipeline.runner import Result
+
+__all__ = ["Evaluation", "evaluate"]
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Metrics (JSON-able) plus the matched arrays that plots need."""
+
+    metrics: dict[str, Any]
+    matched_times: FloatArray | None = None
+    errors: FloatArray | None = None
+    """Per matched step ``(dx, dy, dtheta)`` estimate minus truth, no alignment."""
+    sigmas: FloatArray | None = None
+    """Per matched step standard deviations ``(3,)`` from the estimator's covariance."""
+    nees: FloatArray | None = None
+
+
+def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -> Evaluation:
+    """ATE (SE(2)-aligned and unaligned), RPE over one step and over 10 m, NEES against the
+    true trajectory, landmark-map error, and run times. Steps are matched by time stamp
+    within ``max_dt`` (default: half the median step of the result)."""
+    metrics: dict[str, Any] = {
+        "estimator": result.estimator,
+        "dataset": result.dataset,
+        "seed": result.seed,
+        "steps": len(result),
+        "runtime": {
+            "total_seconds": result.total_seconds,
+            "mean_step_seconds": float(result.step_seconds.mean()) if len(result) else 0.0,
+            "max_step_seconds": float(result.step_seconds.max()) if len(result) else 0.0,
+        },
+        "diagnostics": result.output.diagnostics,
+    }
+    truth = dataset.truth
+    ev = Evaluation(metrics)
+    if truth.times is not None and truth.poses is not None and len(result) > 1:
+        if max_dt is None:
+            max_dt = 0.5 * float(np.median(np.diff(result.times))) if len(result) > 1 else 0.0
+        ia, ib = associate(result.times, truth.times, max_dt)
+        est, ref = result.poses[ia], truth.poses[ib]
+        metrics["matched_steps"] = int(ia.size)
+        if ia.size >= 2:
+            metrics["ate"] = absolute_trajectory_error(est, ref, align="se2").as_dict()
+            metrics["ate_unaligned"] = absolute_trajectory_error(est, ref, align="none").as_dict()
+            metrics["rpe_1_step"] = relative_pose_error(est, ref, delta=1).as_dict()
+            metrics["rpe_10_m"] = relative_pose_error(est, ref, delta=10.0, unit="meters").as_dict()
+            err = pose_errors(est, ref)
+            metrics["final_position_error"] = float(np.hypot(*err[-1, :2]))
+            sig = nees_vals = None
+            if result.covariances is not None:
+                covs = result.covariances[ia]
+                sig = np.sqrt(np.clip(np.diagonal(covs, axis1=1, axis2=2), 0.0, None))
+                ok = np.linalg.det(covs) > 1e-300
+                nees_vals = np.full(ia.size, np.nan)
+                try:
+                    nees_vals[ok] = nees(err[ok], covs[ok])
+                except CovarianceError:
+                    ok[:] = False
+                if np.any(ok):
+                    lo, hi = chi2_bounds(3, 1, 0.95)
+                    vals = nees_vals[ok]
+                    metrics["nees"] = {
+                        "mean": float(vals.mean()),
+                        "dof": 3,
+                        "band_95": [lo, hi],
+                        "fraction_in_band": float(np.mean((vals >= lo) & (vals <= hi))),
+                        "steps": int(ok.sum()),
+                    }
+            ev = Evaluation(metrics, result.times[ia], err, sig, nees_vals)
+    if result.output.landmarks is not None and truth.landmarks is not None:
+        metrics["landmarks"] = landmark_map_error(
+            result.output.landmarks.landmarks, truth.landmarks, align=True
+        ).as_dict()
+    return ev

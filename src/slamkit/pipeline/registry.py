@@ -1,0 +1,94 @@
+"""The one list of every estimator, by name.
+
+To add an estimator: write a config dataclass and a class with the
+:class:`~slamkit.pipeline.estimator.Estimator` methods whose constructor takes
+``(dataset, config, rng)``, then add one :class:`EstimatorEntry` below. The runner and the
+CLI (``slamkit run NAME``) find it here. Targets are imported on use, so listing is cheap.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from slamkit.config import config_from_mapping
+from slamkit.datasets.stream import Dataset
+from slamkit.errors import InputError, UnknownNameError
+from slamkit.pipeline.estimator import Estimator, EstimatorFactory
+
+__all__ = ["ESTIMATORS", "EstimatorEntry", "get_estimator_entry", "list_estimators"]
+
+Requirement = Literal[
+    "motion", "initial_pose", "landmark_sensor", "known_landmarks", "laser", "known_grid"
+]
+
+
+@dataclass(frozen=True)
+class EstimatorEntry:
+    """A registered estimator: ``target`` and ``config`` are ``"module:Name"`` strings;
+    ``requires`` lists the parts of a :class:`Dataset` it cannot run without."""
+
+    name: str
+    description: str
+    target: str
+    config: str
+    requires: tuple[Requirement, ...] = ()
+
+    @staticmethod
+    def _resolve(spec: str) -> Any:
+        module, _, attr = spec.partition(":")
+        return getattr(importlib.import_module(module), attr)
+
+    def config_type(self) -> type:
+        cls: type = self._resolve(self.config)
+        return cls
+
+    def make_config(self, values: Mapping[str, Any] | Any | None = None) -> Any:
+        """The config object from a mapping (unknown keys rejected), or the object itself."""
+        cls = self.config_type()
+        if isinstance(values, cls):
+            return values
+        return config_from_mapping(cls, values, f"estimator {self.name}")
+
+    def check(self, dataset: Dataset) -> None:
+        """Raise :class:`InputError` naming what the data set lacks for this estimator."""
+        missing = [r for r in self.requires if getattr(dataset, r) is None]
+        if missing:
+            raise InputError(
+                f"estimator {self.name!r} needs {', '.join(missing)}, which data set "
+                f"{dataset.name!r} does not provide"
+            )
+
+    def create(self, dataset: Dataset, config: Any, rng: np.random.Generator) -> Estimator:
+        self.check(dataset)
+        factory: EstimatorFactory = self._resolve(self.target)
+        return factory(dataset, config, rng)
+
+
+ESTIMATORS: dict[str, EstimatorEntry] = {
+    e.name: e
+    for e in (
+        EstimatorEntry(
+            "dead-reckoning",
+            "integrate controls/odometry, propagate the covariance; no measurements",
+            "slamkit.localization.dead_reckoning:DeadReckoning",
+            "slamkit.localization.dead_reckoning:DeadReckoningConfig",
+            requires=("motion",),
+        ),
+    )
+}
+
+
+def list_estimators() -> list[EstimatorEntry]:
+    return list(ESTIMATORS.values())
+
+
+def get_estimator_entry(name: str) -> EstimatorEntry:
+    try:
+        return ESTIMATORS[name]
+    except KeyError:
+        raise UnknownNameError("estimator", name, sorted(ESTIMATORS)) from None

@@ -1,0 +1,35 @@
+"""Simulation: worlds, trajectories, sensors and named scenarios (rng injected)."""
+
+from slamkit.sim.scenarios import (
+    LandmarkScenarioConfig,
+    LaserScenarioConfig,
+    build_five_features,
+    build_landmark_loop,
+    build_rooms_laser,
+)
+from slamkit.sim.sensors import observe_landmarks, simulate_scan
+from slamkit.sim.trajectory import simulate_motion, waypoint_controls
+from slamkit.sim.worlds import (
+    five_feature_world,
+    random_landmarks,
+    rasterize_segments,
+    rectangle_segments,
+    rooms_world,
+)
+
+__all__ = [
+    "LandmarkScenarioConfig",
+    "LaserScenarioConfig",
+    "build_five_features",
+    "build_landmark_loop",
+    "build_rooms_laser",
+    "five_feature_world",
+    "observe_landmarks",
+    "random_landmarks",
+    "rasterize_segments",
+    "rectangle_segments",
+    "rooms_world",
+    "simulate_motion",
+    "simulate_scan",
+    "waypoint_controls",
+]

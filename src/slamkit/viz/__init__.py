@@ -1,0 +1,40 @@
+"""Plotting: trajectories, covariance ellipses, maps, pose errors and NEES/NIS traces.
+
+Needs matplotlib (``pip install "slamkit[plot]"``). Numerical packages never import this one;
+every function draws on an ``Axes`` it is given and returns the artists it drew.
+"""
+
+try:
+    import matplotlib as _matplotlib  # noqa: F401
+except ImportError as exc:  # pragma: no cover - depends on the environment
+    raise ImportError(
+        'slamkit.viz needs matplotlib; install it with: pip install "slamkit[plot]"'
+    ) from exc
+
+from slamkit.viz.plots import (
+    new_figure,
+    plot_consistency,
+    plot_covariance_ellipses,
+    plot_landmark_estimates,
+    plot_landmarks,
+    plot_occupancy_grid,
+    plot_pose_errors,
+    plot_segments,
+    plot_trajectories,
+    plot_trajectory,
+    save_figure,
+)
+
+__all__ = [
+    "new_figure",
+    "plot_consistency",
+    "plot_covariance_ellipses",
+    "plot_landmark_estimates",
+    "plot_landmarks",
+    "plot_occupancy_grid",
+    "plot_pose_errors",
+    "plot_segments",
+    "plot_trajectories",
+    "plot_trajectory",
+    "save_figure",
+]

@@ -1,0 +1,81 @@
+"""The standard figures of one run: map view, per-axis errors with ±3σ, NEES over time."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from slamkit.eval import chi2_bounds
+from slamkit.viz.plots import (
+    new_figure,
+    plot_consistency,
+    plot_covariance_ellipses,
+    plot_landmark_estimates,
+    plot_landmarks,
+    plot_pose_errors,
+    plot_segments,
+    plot_trajectories,
+)
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from slamkit.datasets import Dataset
+    from slamkit.pipeline.evaluate import Evaluation
+    from slamkit.pipeline.runner import Result
+
+__all__ = ["run_figures"]
+
+
+def run_figures(
+    result: Result, dataset: Dataset, evaluation: Evaluation, *, n_sigma: float = 3.0
+) -> dict[str, Figure]:
+    """Figures keyed by file name: ``trajectory.png`` always; ``errors.png`` and ``nees.png``
+    when the data set has a true trajectory (and the estimator covariances)."""
+    figs: dict[str, Figure] = {}
+    fig = new_figure(figsize=(7.0, 6.0))
+    ax = fig.add_subplot()
+    truth = dataset.truth
+    if truth.walls is not None:
+        plot_segments(ax, truth.walls)
+    if truth.landmarks is not None:
+        plot_landmarks(ax, truth.landmarks, label="true landmarks")
+    plot_trajectories(ax, truth=truth.poses, estimate=result.poses, legend=False)
+    if result.covariances is not None and len(result) > 1:
+        every = max(1, len(result) // 25)
+        plot_covariance_ellipses(
+            ax,
+            result.poses[:, :2],
+            result.covariances[:, :2, :2],
+            n_sigma=n_sigma,
+            every=every,
+            label=f"{n_sigma:g}σ position",
+        )
+    est_lm = result.output.landmarks
+    if est_lm is not None:
+        plot_landmark_estimates(ax, est_lm.landmarks.positions, est_lm.covariances, n_sigma=n_sigma)
+    ax.set_title(f"{result.estimator} on {result.dataset}")
+    ax.legend(loc="best", fontsize="small")
+    figs["trajectory.png"] = fig
+
+    if evaluation.errors is not None and evaluation.matched_times is not None:
+        fig = new_figure(figsize=(7.0, 6.0))
+        axes = fig.subplots(3, 1, sharex=True)
+        plot_pose_errors(
+            axes, evaluation.matched_times, evaluation.errors, evaluation.sigmas, n_sigma
+        )
+        axes[0].set_title(f"estimate − truth with ±{n_sigma:g}σ")
+        figs["errors.png"] = fig
+    if evaluation.nees is not None and evaluation.matched_times is not None:
+        ok = np.isfinite(evaluation.nees)
+        if np.any(ok):
+            fig = new_figure(figsize=(7.0, 3.5))
+            ax = fig.add_subplot()
+            lo, hi = chi2_bounds(3, 1, 0.95)
+            plot_consistency(ax, evaluation.matched_times[ok], evaluation.nees[ok], (lo, hi))
+            ax.set_yscale("log")
+            ax.set_xlabel("time [s]")
+            ax.set_title("NEES of the pose (3 dof) with the 95 % χ² band")
+            figs["nees.png"] = fig
+    return figs

@@ -1,0 +1,102 @@
+"""The CLI on a simulated scenario: files, metrics, error messages, exit codes."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from slamkit.cli.main import app
+from slamkit.datasets import load_dataset
+from slamkit.io import read_tum
+
+runner = CliRunner()
+
+
+def test_run_dead_reckoning_writes_trajectory_metrics_config_and_plots(tmp_path):
+    out = tmp_path / "dr"
+    res = runner.invoke(
+        app, ["run", "dead-reckoning", "--data", "five-features", "--seed", "3", "--out", str(out)]
+    )
+    assert res.exit_code == 0, res.output
+    files = sorted(p.name for p in out.iterdir())
+    assert files == [
+        "config.json",
+        "errors.png",
+        "metrics.json",
+        "nees.png",
+        "trajectory.png",
+        "trajectory.tum",
+    ]
+    for png in ("trajectory.png", "errors.png", "nees.png"):
+        assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    metrics = json.loads((out / "metrics.json").read_text())
+    config = json.loads((out / "config.json").read_text())
+    assert config["seed"] == 3 and config["estimator"]["name"] == "dead-reckoning"
+    assert config["dataset"]["name"] == "five-features" and config["dataset"]["dt"] == 0.1
+    # The written trajectory is the dead-reckoned one: its final error matches the metric.
+    t, poses = read_tum(out / "trajectory.tum")
+    truth = load_dataset("five-features", seed=3).truth
+    np.testing.assert_allclose(t, truth.times, atol=1e-9)
+    err = np.hypot(*(poses[-1, :2] - truth.poses[-1, :2]))
+    assert err == pytest.approx(metrics["final_position_error"], abs=1e-6)
+    assert metrics["ate_unaligned"]["rmse"] > metrics["ate"]["rmse"] > 0
+
+
+def test_config_file_sets_estimator_and_dataset(tmp_path):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("seed = 5\n[estimator]\nnoise_scale = 4.0\n[dataset]\nsigma_v = 0.2\n")
+    out = tmp_path / "o"
+    res = runner.invoke(
+        app, ["run", "dead-reckoning", "--config", str(cfg), "--out", str(out), "--no-plots"]
+    )
+    assert res.exit_code == 0, res.output
+    config = json.loads((out / "config.json").read_text())
+    assert config["seed"] == 5
+    assert config["estimator"]["noise_scale"] == 4.0
+    assert config["dataset"]["sigma_v"] == 0.2
+    assert not list(out.glob("*.png"))
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["run", "kalman-magic"], "unknown estimator 'kalman-magic'"),
+        (["run", "dead-reckoning", "--data", "atlantis"], "unknown dataset 'atlantis'"),
+    ],
+)
+def test_known_errors_are_one_line_with_exit_code_1(tmp_path, args, message):
+    res = runner.invoke(app, [*args, "--out", str(tmp_path / "x")])
+    assert res.exit_code == 1
+    assert message in res.output
+    assert "Traceback" not in res.output
+    assert not (tmp_path / "x").exists()
+
+
+def test_bad_config_leaves_no_output_folder(tmp_path):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[estimator]\nnoise_scale = -1.0\n")
+    res = runner.invoke(
+        app, ["run", "dead-reckoning", "--config", str(cfg), "--out", str(tmp_path / "x")]
+    )
+    assert res.exit_code == 1 and "noise_scale" in res.output
+    assert not (tmp_path / "x").exists()
+    assert [p.name for p in tmp_path.iterdir()] == ["c.toml"]
+
+
+def test_data_list_and_estimators():
+    res = runner.invoke(app, ["data", "list"])
+    assert res.exit_code == 0
+    for name in ("five-features", "landmark-loop", "rooms-laser"):
+        assert name in res.output
+    res = runner.invoke(app, ["estimators"])
+    assert res.exit_code == 0 and "dead-reckoning" in res.output
+
+
+def test_demo_writes_results(tmp_path):
+    res = runner.invoke(app, ["demo", "--out", str(tmp_path / "demo")])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "demo" / "metrics.json").exists()
+    assert str(tmp_path / "demo") in res.output.replace("\n", "")
