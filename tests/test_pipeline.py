@@ -197,3 +197,19 @@ def test_dataset_validation_names_the_bad_event():
         LandmarkSensorSpec("range-bearing", np.diag([0.01, -0.001]))
     with pytest.raises(InputError, match="times and poses"):
         GroundTruth(times=np.zeros(3))
+
+
+def test_metrics_that_do_not_apply_are_skipped_with_a_reason():
+    # A short run (2 s at 1 m/s) cannot give a 10 m relative pose error: the metric says why.
+    ds = load_dataset("five-features", seed=0)
+    short = Dataset(
+        ds.name,
+        tuple(e for e in ds.events if e.t <= 2.0),
+        motion=ds.motion,
+        landmark_sensor=ds.landmark_sensor,
+        initial_pose=ds.initial_pose,
+        initial_cov=ds.initial_cov,
+        truth=GroundTruth(ds.truth.times[:21], ds.truth.poses[:21], ds.truth.landmarks),
+    )
+    m = evaluate(run("dead-reckoning", short), short).metrics
+    assert "skipped" in m["rpe_10_m"] and "rmse" in m["ate"]

@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset
-from slamkit.errors import CovarianceError
+from slamkit.errors import CovarianceError, SlamkitError
 from slamkit.eval import (
     absolute_trajectory_error,
     associate,
@@ -37,6 +38,19 @@ class Evaluation:
     nees: FloatArray | None = None
 
 
+class _HasDict(Protocol):
+    def as_dict(self) -> dict[str, Any]: ...
+
+
+def _metric(metrics: dict[str, Any], name: str, compute: Callable[[], _HasDict]) -> None:
+    """Store one metric, or why it could not be computed on this run (a path shorter than
+    the RPE distance, a robot that never moved, maps without common landmarks)."""
+    try:
+        metrics[name] = compute().as_dict()
+    except SlamkitError as exc:
+        metrics[name] = {"skipped": str(exc)}
+
+
 def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -> Evaluation:
     """ATE (SE(2)-aligned and unaligned), RPE over one step and over 10 m, NEES against the
     true trajectory, landmark-map error, and run times. Steps are matched by time stamp
@@ -62,10 +76,16 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
         est, ref = result.poses[ia], truth.poses[ib]
         metrics["matched_steps"] = int(ia.size)
         if ia.size >= 2:
-            metrics["ate"] = absolute_trajectory_error(est, ref, align="se2").as_dict()
-            metrics["ate_unaligned"] = absolute_trajectory_error(est, ref, align="none").as_dict()
-            metrics["rpe_1_step"] = relative_pose_error(est, ref, delta=1).as_dict()
-            metrics["rpe_10_m"] = relative_pose_error(est, ref, delta=10.0, unit="meters").as_dict()
+            _metric(metrics, "ate", lambda: absolute_trajectory_error(est, ref, align="se2"))
+            _metric(
+                metrics, "ate_unaligned", lambda: absolute_trajectory_error(est, ref, align="none")
+            )
+            _metric(metrics, "rpe_1_step", lambda: relative_pose_error(est, ref, delta=1))
+            _metric(
+                metrics,
+                "rpe_10_m",
+                lambda: relative_pose_error(est, ref, delta=10.0, unit="meters"),
+            )
             err = pose_errors(est, ref)
             metrics["final_position_error"] = float(np.hypot(*err[-1, :2]))
             sig = nees_vals = None
@@ -90,7 +110,6 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
                     }
             ev = Evaluation(metrics, result.times[ia], err, sig, nees_vals)
     if result.output.landmarks is not None and truth.landmarks is not None:
-        metrics["landmarks"] = landmark_map_error(
-            result.output.landmarks.landmarks, truth.landmarks, align=True
-        ).as_dict()
+        est_map, true_map = result.output.landmarks.landmarks, truth.landmarks
+        _metric(metrics, "landmarks", lambda: landmark_map_error(est_map, true_map, align=True))
     return ev
