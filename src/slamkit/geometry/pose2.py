@@ -25,22 +25,31 @@ def _arr(x: ArrayLike) -> FloatArray:
     return np.asarray(x, dtype=np.float64)
 
 
+def _out(*arrays: FloatArray) -> FloatArray:
+    shape = np.broadcast_shapes(*(x.shape[:-1] for x in arrays))
+    return np.empty((*shape, 3))
+
+
 def compose(T_a_b: ArrayLike, T_b_c: ArrayLike) -> FloatArray:
     """``T_a_c = T_a_b ⊕ T_b_c``: rotate the second translation by the first heading, add."""
     a, b = _arr(T_a_b), _arr(T_b_c)
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-    x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
-    y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
-    return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
+    out = _out(a, b)
+    out[..., 0] = a[..., 0] + c * b[..., 0] - s * b[..., 1]
+    out[..., 1] = a[..., 1] + s * b[..., 0] + c * b[..., 1]
+    out[..., 2] = wrap_angle(a[..., 2] + b[..., 2])
+    return out
 
 
 def inverse(T_a_b: ArrayLike) -> FloatArray:
     """``T_b_a = ⊖T_a_b``: ``(-Rᵀ t, -theta)``."""
     a = _arr(T_a_b)
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-    x = -c * a[..., 0] - s * a[..., 1]
-    y = s * a[..., 0] - c * a[..., 1]
-    return np.stack([x, y, wrap_angle(-a[..., 2])], axis=-1)
+    out = _out(a)
+    out[..., 0] = -c * a[..., 0] - s * a[..., 1]
+    out[..., 1] = s * a[..., 0] - c * a[..., 1]
+    out[..., 2] = wrap_angle(-a[..., 2])
+    return out
 
 
 def between(T_w_a: ArrayLike, T_w_b: ArrayLike) -> FloatArray:
@@ -48,7 +57,11 @@ def between(T_w_a: ArrayLike, T_w_b: ArrayLike) -> FloatArray:
     a, b = _arr(T_w_a), _arr(T_w_b)
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
-    return np.stack([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[..., 2] - a[..., 2])], axis=-1)
+    out = _out(a, b)
+    out[..., 0] = c * dx + s * dy
+    out[..., 1] = -s * dx + c * dy
+    out[..., 2] = wrap_angle(b[..., 2] - a[..., 2])
+    return out
 
 
 def transform_points(T_a_b: ArrayLike, p_b: ArrayLike) -> FloatArray:

@@ -122,7 +122,8 @@ def cast_rays_grid(
     beams = _as_beams(beam_angles)
     rmax = as_positive(max_range, "max_range")
     batch, origin, direction = _rays(poses, beams)
-    occ = grid.occupied(occupied_threshold)
+    threshold = float(as_array(occupied_threshold, "occupied_threshold", ()))
+    occ = grid.occupied(threshold)
     rows, cols = grid.shape
     res = grid.resolution
     n_rays = origin.shape[0]
