@@ -43,6 +43,9 @@ def test_run_dead_reckoning_writes_trajectory_metrics_config_and_plots(tmp_path)
     err = np.hypot(*(poses[-1, :2] - truth.poses[-1, :2]))
     assert err == pytest.approx(metrics["final_position_error"], abs=1e-6)
     assert metrics["ate_unaligned"]["rmse"] > metrics["ate"]["rmse"] > 0
+    # The summary table shows the metric with its unit.
+    assert "ATE RMSE, unaligned [m]" in res.output
+    assert f"{metrics['ate_unaligned']['rmse']:.3f}" in res.output
 
 
 def test_config_file_sets_estimator_and_dataset(tmp_path):
@@ -100,3 +103,23 @@ def test_demo_writes_results(tmp_path):
     assert res.exit_code == 0, res.output
     assert (tmp_path / "demo" / "metrics.json").exists()
     assert str(tmp_path / "demo") in res.output.replace("\n", "")
+
+
+@pytest.mark.parametrize(
+    "toml,message",
+    [
+        ("[dataset]\nsigma_range = nan\n", "expected a finite number"),
+        ("[dataset]\nsigma_range = 0.0\n", "sigma_range"),
+        ("[dataset]\nsensor = 3\n", "expected one of"),
+        ("[estimatr]\n", "unknown section"),
+    ],
+)
+def test_bad_values_in_a_config_file_are_one_line_errors(tmp_path, toml, message):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(toml)
+    res = runner.invoke(
+        app, ["run", "dead-reckoning", "--config", str(cfg), "--out", str(tmp_path / "x")]
+    )
+    assert res.exit_code == 1, res.output
+    assert message in res.output and "Traceback" not in res.output
+    assert not (tmp_path / "x").exists()

@@ -15,6 +15,7 @@ from typing import Annotated, Any, ParamSpec, TypeVar
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from slamkit.errors import SlamkitError
@@ -98,8 +99,8 @@ def _render_metrics(metrics: dict[str, Any]) -> Table:
     table.add_column("value", justify="right")
 
     def add(name: str, value: float | None, fmt: str) -> None:
-        if value is not None:
-            table.add_row(name, format(value, fmt))
+        if value is not None:  # escape: "[m]" would otherwise be read as rich markup
+            table.add_row(escape(name), format(value, fmt))
 
     ate = metrics.get("ate", {})
     add("ATE RMSE, SE(2)-aligned [m]", ate.get("rmse"), ".3f")
