@@ -147,3 +147,29 @@ def test_bad_scenario_options_are_config_errors():
         load_dataset("five-features", options={"sensor": "sonar"})
     with pytest.raises(ConfigError, match="dt"):
         load_dataset("five-features", options={"dt": -1.0})
+
+
+def test_kidnapping_teleports_the_truth_once_and_commands_a_standstill():
+    ds = load_dataset("five-features", seed=0, options={"kidnap_time": 10.0, "kidnap_skip": 8.0})
+    step = np.hypot(*np.diff(ds.truth.poses[:, :2], axis=0).T)
+    jump = int(np.argmax(step))
+    assert jump == 100 and step[jump] > 3.0  # 8 s of route at 1 m/s, cut across
+    assert np.sort(step)[-2] < 0.2  # every other step is a normal 0.1 s move
+    controls = [ev for ev in ds.of_type(Control)]
+    np.testing.assert_array_equal(controls[jump].u, [0.0, 0.0])
+    assert len(controls) == ds.truth.poses.shape[0] - 1
+
+
+def test_registered_variants_apply_their_presets():
+    assert load_dataset("five-features-range").landmark_sensor.kind == "range"
+    assert load_dataset("five-features-bearing").landmark_sensor.kind == "bearing"
+    kid = load_dataset("five-features-kidnapped")
+    err = kid.initial_pose - kid.truth.poses[0]
+    assert np.hypot(*err[:2]) > 3.0 and abs(wrap_angle(err[2])) > np.deg2rad(55)
+    glob = load_dataset("rooms-laser-global")
+    assert glob.initial_pose is None and glob.known_grid is not None
+    # The caller's options win over the preset.
+    assert (
+        load_dataset("five-features-range", options={"sensor": "bearing"}).landmark_sensor.kind
+        == "bearing"
+    )

@@ -7,9 +7,10 @@ To add a data set, write its builder or loader (a function
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -40,6 +41,8 @@ class DatasetEntry:
     description: str
     target: str
     files: tuple[str, ...] = ()
+    defaults: Mapping[str, Any] = field(default_factory=dict)
+    """Options preset for this entry (a scenario variant); the caller's options win."""
 
     def loader(self) -> Loader:
         module, _, func = self.target.partition(":")
@@ -57,6 +60,27 @@ DATASETS: dict[str, DatasetEntry] = {
             "slamkit.sim.scenarios:build_five_features",
         ),
         DatasetEntry(
+            "five-features-range",
+            "simulated",
+            "the five-feature world with range-only readings (elongated uncertainty)",
+            "slamkit.sim.scenarios:build_five_features",
+            defaults={"sensor": "range", "sigma_range": 0.1},
+        ),
+        DatasetEntry(
+            "five-features-bearing",
+            "simulated",
+            "the five-feature world with bearing-only readings (no sense of depth)",
+            "slamkit.sim.scenarios:build_five_features",
+            defaults={"sensor": "bearing"},
+        ),
+        DatasetEntry(
+            "five-features-kidnapped",
+            "simulated",
+            "the five-feature world with a wrong prior: 3 m and 60 deg off (kidnapped start)",
+            "slamkit.sim.scenarios:build_five_features",
+            defaults={"prior_error_xy": (3.0, -2.0), "prior_error_theta_deg": 60.0},
+        ),
+        DatasetEntry(
             "landmark-loop",
             "simulated",
             "60 random landmarks along a 180 m loop that closes",
@@ -67,6 +91,20 @@ DATASETS: dict[str, DatasetEntry] = {
             "simulated",
             "laser tour of four rooms off a corridor, walls as ground truth",
             "slamkit.sim.scenarios:build_rooms_laser",
+        ),
+        DatasetEntry(
+            "rooms-laser-global",
+            "simulated",
+            "the laser tour of four rooms with no prior pose (global localization)",
+            "slamkit.sim.scenarios:build_rooms_laser",
+            defaults={"known_start": False},
+        ),
+        DatasetEntry(
+            "rooms-laser-kidnapped",
+            "simulated",
+            "the laser tour of four rooms; at 30 s the robot is carried 40 s along its route",
+            "slamkit.sim.scenarios:build_rooms_laser",
+            defaults={"kidnap_time": 30.0, "kidnap_skip": 40.0},
         ),
     )
 }
@@ -112,4 +150,8 @@ def load_dataset(
         raise DataNotFoundError(
             f"data set {name!r} needs {', '.join(missing)} under the data folder (set SLAMKIT_DATA)"
         )
-    return entry.loader()(dict(options or {}), seed=seed, data_root=root)
+    merged = {**entry.defaults, **dict(options or {})}
+    dataset: Dataset = entry.loader()(merged, seed=seed, data_root=root)
+    if dataset.name != entry.name:  # a variant carries its own registered name
+        dataset = dataclasses.replace(dataset, name=entry.name)
+    return dataset

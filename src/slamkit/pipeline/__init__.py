@@ -7,7 +7,9 @@ results and ``slamkit.viz`` draws them.
 from slamkit.pipeline.estimator import (
     Estimator,
     EstimatorOutput,
+    InnovationLog,
     LandmarkEstimate,
+    ParticleSnapshot,
     PoseEstimate,
 )
 from slamkit.pipeline.registry import (
@@ -23,7 +25,9 @@ __all__ = [
     "Estimator",
     "EstimatorEntry",
     "EstimatorOutput",
+    "InnovationLog",
     "LandmarkEstimate",
+    "ParticleSnapshot",
     "PoseEstimate",
     "Progress",
     "Result",

@@ -13,12 +13,20 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
+from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset, Event
 from slamkit.maps import LandmarkMap, OccupancyGrid
 
-__all__ = ["Estimator", "EstimatorOutput", "LandmarkEstimate", "PoseEstimate"]
+__all__ = [
+    "Estimator",
+    "EstimatorOutput",
+    "InnovationLog",
+    "LandmarkEstimate",
+    "ParticleSnapshot",
+    "PoseEstimate",
+]
 
 
 @dataclass(frozen=True)
@@ -38,6 +46,30 @@ class LandmarkEstimate:
 
 
 @dataclass(frozen=True)
+class InnovationLog:
+    """Every measurement update of a Gaussian filter: when, which landmark, the normalised
+    innovation squared ``νᵀ S⁻¹ ν`` and its degrees of freedom — the raw material of NIS
+    consistency checks on data without a true trajectory."""
+
+    times: FloatArray
+    nis: FloatArray
+    dof: NDArray[np.int64]
+    landmark_ids: NDArray[np.int64]
+
+    def __len__(self) -> int:
+        return int(self.times.size)
+
+
+@dataclass(frozen=True)
+class ParticleSnapshot:
+    """A particle set ``(P, 3)`` with normalised weights ``(P,)`` at time ``t`` (for plots)."""
+
+    t: float
+    particles: FloatArray
+    weights: FloatArray
+
+
+@dataclass(frozen=True)
 class EstimatorOutput:
     """What an estimator returns at the end besides its trajectory."""
 
@@ -45,6 +77,8 @@ class EstimatorOutput:
     grid: OccupancyGrid | None = None
     diagnostics: dict[str, Any] = field(default_factory=dict)
     """JSON-able numbers and short lists (counts, statistics) merged into ``metrics.json``."""
+    innovations: InnovationLog | None = None
+    particle_snapshots: tuple[ParticleSnapshot, ...] = ()
 
 
 class Estimator(Protocol):

@@ -80,8 +80,20 @@ class LandmarkScenarioConfig:
     """Prior standard deviation of the start position [m]; the true start is drawn from it."""
     initial_sigma_theta_deg: float = 1.0
     """Prior standard deviation of the start heading [deg]."""
+    known_start: bool = True
+    """False: the data set carries no prior pose (global localization)."""
+    prior_error_xy: tuple[float, float] = (0.0, 0.0)
+    """Added to the prior mean given to estimators [m]: a wrong prior (kidnapped robot)."""
+    prior_error_theta_deg: float = 0.0
+    """Added to the prior heading given to estimators [deg]."""
+    kidnap_time: float = -1.0
+    """If >= 0: at this time [s] the robot is carried to where the route is ``kidnap_skip``
+    seconds later, without any control telling so (the kidnapped-robot problem)."""
+    kidnap_skip: float = 10.0
+    """How far along the route [s] the kidnapper carries the robot."""
 
     def __post_init__(self) -> None:
+        _check_kidnap(self.kidnap_time, self.kidnap_skip)
         for name in ("dt", "speed", "max_range", "fov_deg"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"{name}: expected a positive number, got {getattr(self, name)}")
@@ -130,8 +142,14 @@ class LaserScenarioConfig:
     """Resolution of the rasterised true occupancy map [m]."""
     initial_sigma_xy: float = 0.05
     initial_sigma_theta_deg: float = 1.0
+    known_start: bool = True
+    """False: no prior pose (global localization from a uniform start)."""
+    kidnap_time: float = -1.0
+    """If >= 0: at this time [s] the robot is carried ``kidnap_skip`` seconds along its route."""
+    kidnap_skip: float = 40.0
 
     def __post_init__(self) -> None:
+        _check_kidnap(self.kidnap_time, self.kidnap_skip)
         if self.n_beams < 1:
             raise ConfigError(f"n_beams: expected >= 1, got {self.n_beams}")
         for name in ("dt", "speed", "fov_deg", "max_range", "sigma_range", "grid_resolution"):
@@ -143,6 +161,61 @@ class LaserScenarioConfig:
         endpoint = self.fov_deg < 360.0
         angles = np.linspace(-half, half, self.n_beams, endpoint=endpoint)
         return LaserSpec(angles, self.max_range, self.sigma_range)
+
+
+def _check_kidnap(kidnap_time: float, kidnap_skip: float) -> None:
+    if kidnap_time >= 0 and not kidnap_skip > 0:
+        raise ConfigError(f"kidnap_skip: expected a positive duration, got {kidnap_skip}")
+
+
+def _kidnap(controls: np.ndarray, dt: float, kidnap_time: float, skip: float) -> np.ndarray:
+    """Drop the controls of ``skip`` seconds after ``kidnap_time``: the robot is carried over
+    that stretch of its route. The jump is marked by a row of NaN that :func:`_drive` turns
+    into the teleport (commanded as standing still), so NaN never reaches the data set."""
+    if kidnap_time < 0:
+        return controls
+    k0 = round(kidnap_time / dt)
+    k1 = k0 + round(skip / dt)
+    if k1 >= len(controls):
+        raise ConfigError(
+            f"kidnap_time + kidnap_skip = {kidnap_time + skip} s lies beyond the route "
+            f"({len(controls) * dt:.1f} s)"
+        )
+    return np.concatenate([controls[:k0], np.full((1, 2), np.nan), controls[k1:]])
+
+
+def _drive(
+    model: UnicycleEuler,
+    x0: np.ndarray,
+    planned: np.ndarray,
+    controls: np.ndarray,
+    dt: float,
+    q: np.ndarray,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
+    """True poses for ``controls`` (which may hold one NaN row = a kidnapping) and the
+    commanded controls without the NaN row. The kidnapper puts the robot where the noise-free
+    route ``planned`` would be after the skipped stretch, so it lands in free space."""
+    jump = np.flatnonzero(np.isnan(controls[:, 0]))
+    if jump.size == 0:
+        return simulate_motion(model, x0, controls, dt, q, rng), controls
+    k0 = int(jump[0])
+    before = simulate_motion(model, x0, controls[:k0], dt, q, rng)
+    skipped = len(planned) - len(controls) + 1
+    landing = _noise_free(model, planned[: k0 + skipped], dt, x0)
+    after = simulate_motion(model, landing, controls[k0 + 1 :], dt, q, rng)
+    # The robot is told it stood still during the step in which it was carried.
+    commanded = np.concatenate([controls[:k0], np.zeros((1, 2)), controls[k0 + 1 :]])
+    return np.concatenate([before, after]), commanded
+
+
+def _noise_free(
+    model: UnicycleEuler, controls: np.ndarray, dt: float, x0: np.ndarray
+) -> np.ndarray:
+    x = x0.copy()
+    for u in controls:
+        x = model.apply(x, u, dt)
+    return x
 
 
 def _start(
@@ -162,11 +235,13 @@ def _landmark_dataset(
     waypoints: np.ndarray,
     rng: np.random.Generator,
 ) -> Dataset:
-    controls = waypoint_controls(start_pose, waypoints, speed=cfg.speed, dt=cfg.dt, laps=cfg.laps)
+    planned = waypoint_controls(start_pose, waypoints, speed=cfg.speed, dt=cfg.dt, laps=cfg.laps)
     prior, x0 = _start(start_pose, cfg.initial_cov(), rng)
     model = UnicycleEuler()
-    truth = simulate_motion(model, x0, controls, cfg.dt, cfg.control_cov(), rng)
+    with_jump = _kidnap(planned, cfg.dt, cfg.kidnap_time, cfg.kidnap_skip)
+    truth, controls = _drive(model, x0, planned, with_jump, cfg.dt, cfg.control_cov(), rng)
     times = cfg.dt * np.arange(truth.shape[0], dtype=np.float64)
+    prior = prior + np.array([*cfg.prior_error_xy, np.deg2rad(cfg.prior_error_theta_deg)])
     sensor = cfg.sensor_spec()
     events: list[Event] = []
     for k in range(truth.shape[0]):
@@ -181,8 +256,8 @@ def _landmark_dataset(
         events=tuple(events),
         motion=MotionSpec(model, cfg.control_cov()),
         landmark_sensor=sensor,
-        initial_pose=prior,
-        initial_cov=cfg.initial_cov(),
+        initial_pose=prior if cfg.known_start else None,
+        initial_cov=cfg.initial_cov() if cfg.known_start else None,
         known_landmarks=world,
         truth=GroundTruth(times=times, poses=truth, landmarks=world),
         description=description,
@@ -245,7 +320,7 @@ def build_rooms_laser(
         ]
     )  # fmt: skip
     start = np.array([1.5, 6.0, 0.0])
-    controls = waypoint_controls(
+    planned = waypoint_controls(
         start, waypoints, speed=cfg.speed, dt=cfg.dt, laps=cfg.laps, tolerance=0.25
     )
     s, st = cfg.initial_sigma_xy, np.deg2rad(cfg.initial_sigma_theta_deg)
@@ -253,7 +328,8 @@ def build_rooms_laser(
     prior, x0 = _start(start, init_cov, rng)
     model = UnicycleEuler()
     q = np.diag([cfg.sigma_v**2, np.deg2rad(cfg.sigma_omega_deg) ** 2])
-    truth = simulate_motion(model, x0, controls, cfg.dt, q, rng)
+    with_jump = _kidnap(planned, cfg.dt, cfg.kidnap_time, cfg.kidnap_skip)
+    truth, controls = _drive(model, x0, planned, with_jump, cfg.dt, q, rng)
     times = cfg.dt * np.arange(truth.shape[0], dtype=np.float64)
     laser = cfg.laser_spec()
     events: list[Event] = []
@@ -267,8 +343,8 @@ def build_rooms_laser(
         events=tuple(events),
         motion=MotionSpec(model, q),
         laser=laser,
-        initial_pose=prior,
-        initial_cov=init_cov,
+        initial_pose=prior if cfg.known_start else None,
+        initial_cov=init_cov if cfg.known_start else None,
         known_grid=grid,
         truth=GroundTruth(times=times, poses=truth, walls=walls, occupancy=grid),
         description="laser tour of four rooms off a corridor (20 m × 12 m)",
