@@ -8,6 +8,7 @@ from slamkit.eval.consistency import (
     nees,
     nis,
 )
+from slamkit.eval.innovations import NisSummary, nis_summary
 from slamkit.eval.landmarks import LandmarkError, landmark_map_error
 from slamkit.eval.trajectory import (
     AlignMode,
@@ -24,6 +25,7 @@ __all__ = [
     "AlignMode",
     "ConsistencyReport",
     "LandmarkError",
+    "NisSummary",
     "RelativeError",
     "RpeUnit",
     "TrajectoryError",
@@ -34,6 +36,7 @@ __all__ = [
     "landmark_map_error",
     "nees",
     "nis",
+    "nis_summary",
     "pose_errors",
     "relative_pose_error",
 ]

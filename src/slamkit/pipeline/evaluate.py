@@ -17,6 +17,7 @@ from slamkit.eval import (
     chi2_bounds,
     landmark_map_error,
     nees,
+    nis_summary,
     pose_errors,
     relative_pose_error,
 )
@@ -53,7 +54,8 @@ def _metric(metrics: dict[str, Any], name: str, compute: Callable[[], _HasDict])
 
 def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -> Evaluation:
     """ATE (SE(2)-aligned and unaligned), RPE over one step and over 10 m, NEES against the
-    true trajectory, landmark-map error, and run times. Steps are matched by time stamp
+    true trajectory, NIS statistics of the innovation log (windows of 50 updates),
+    landmark-map error, and run times. Steps are matched by time stamp
     within ``max_dt`` (default: half the median step of the result)."""
     metrics: dict[str, Any] = {
         "estimator": result.estimator,
@@ -109,6 +111,9 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
                         "steps": int(ok.sum()),
                     }
             ev = Evaluation(metrics, result.times[ia], err, sig, nees_vals)
+    log = result.output.innovations
+    if log is not None and len(log) > 0:
+        _metric(metrics, "nis", lambda: nis_summary(log.times, log.nis, log.dof, window=50))
     if result.output.landmarks is not None and truth.landmarks is not None:
         est_map, true_map = result.output.landmarks.landmarks, truth.landmarks
         _metric(metrics, "landmarks", lambda: landmark_map_error(est_map, true_map, align=True))

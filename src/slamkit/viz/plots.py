@@ -421,3 +421,61 @@ def plot_consistency(
     ax.set_xlabel("time [s]")
     ax.set_ylabel(label)
     return [band, line]
+
+
+# --------------------------------------------------------------------------------------------
+# particles and innovations
+# --------------------------------------------------------------------------------------------
+
+
+def plot_particles(
+    ax: Axes,
+    particles: ArrayLike,
+    weights: ArrayLike | None = None,
+    *,
+    max_points: int = 5000,
+    true_pose: ArrayLike | None = None,
+    color: str = "tab:red",
+) -> list[Artist]:
+    """Draw a particle cloud ``(P, 3)`` as dots whose opacity follows the weights, at most
+    ``max_points`` of them (a deterministic stride, so plots are reproducible), and the true
+    pose as a black arrow if given. Returns ``[scatter]`` or ``[scatter, arrow]``."""
+    p = as_array(particles, "particles", (None, 3))
+    w = None if weights is None else as_array(weights, "weights", (p.shape[0],))
+    step = max(1, p.shape[0] // _count(max_points, "max_points", 1))
+    p = p[::step]
+    alpha: Any = 0.5
+    if w is not None:
+        w = w[::step]
+        top = float(w.max()) if w.size else 0.0
+        alpha = np.clip(0.15 + 0.85 * (w / top if top > 0 else w), 0.0, 1.0)
+    drawn: list[Artist] = [ax.scatter(p[:, 0], p[:, 1], s=2.0, c=color, alpha=alpha, lw=0)]
+    if true_pose is not None:
+        x = as_array(true_pose, "true_pose", (3,))
+        span = max(float(np.ptp(p[:, 0])) if p.size else 1.0, 1.0)
+        drawn.append(
+            ax.arrow(x[0], x[1], 0.05 * span * np.cos(x[2]), 0.05 * span * np.sin(x[2]),
+                     width=0.01 * span, color="black", length_includes_head=True)
+        )  # fmt: skip
+    return drawn
+
+
+def plot_nis(
+    ax: Axes,
+    window_times: ArrayLike,
+    window_sums: ArrayLike,
+    lower: ArrayLike,
+    upper: ArrayLike,
+    *,
+    color: str = "tab:blue",
+) -> list[Artist]:
+    """Window sums of NIS with each window's two-sided χ² band, all divided by the band's
+    centre ``(lower + upper) / 2`` so that windows with different degrees of freedom share one
+    axis: a value inside the grey band is a consistent window, above it over-confident.
+    Returns ``[band, line]`` as :func:`plot_consistency`."""
+    t = as_array(window_times, "window_times", (None,))
+    v = as_array(window_sums, "window_sums", (t.size,))
+    lo = as_array(lower, "lower", (t.size,))
+    hi = as_array(upper, "upper", (t.size,))
+    mid = 0.5 * (lo + hi)
+    return plot_consistency(ax, t, v / mid, (lo / mid, hi / mid), label="window NIS", color=color)

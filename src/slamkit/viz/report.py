@@ -6,13 +6,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from slamkit.eval import chi2_bounds
+from slamkit.eval import chi2_bounds, nis_summary
 from slamkit.viz.plots import (
     new_figure,
     plot_consistency,
     plot_covariance_ellipses,
     plot_landmark_estimates,
     plot_landmarks,
+    plot_nis,
+    plot_occupancy_grid,
+    plot_particles,
     plot_pose_errors,
     plot_segments,
     plot_trajectories,
@@ -32,7 +35,8 @@ def run_figures(
     result: Result, dataset: Dataset, evaluation: Evaluation, *, n_sigma: float = 3.0
 ) -> dict[str, Figure]:
     """Figures keyed by file name: ``trajectory.png`` always; ``errors.png`` and ``nees.png``
-    when the data set has a true trajectory (and the estimator covariances)."""
+    when the data set has a true trajectory (and the estimator covariances); ``particles.png``
+    when the estimator kept particle snapshots; ``nis.png`` when it logged innovations."""
     figs: dict[str, Figure] = {}
     fig = new_figure(figsize=(7.0, 6.0))
     ax = fig.add_subplot()
@@ -78,4 +82,50 @@ def run_figures(
             ax.set_xlabel("time [s]")
             ax.set_title("NEES of the pose (3 dof) with the 95 % χ² band")
             figs["nees.png"] = fig
+    snaps = result.output.particle_snapshots
+    if snaps:
+        figs["particles.png"] = _particle_figure(result, dataset)
+    log = result.output.innovations
+    if log is not None and len(log) > 0:
+        summary = nis_summary(log.times, log.nis, log.dof, window=50)
+        fig = new_figure(figsize=(7.0, 3.5))
+        ax = fig.add_subplot()
+        plot_nis(ax, summary.window_start, summary.window_sums, summary.window_lower,
+                 summary.window_upper)  # fmt: skip
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("NIS / band centre")
+        ax.set_title(
+            f"NIS over windows of {summary.window} updates: consistent for "
+            f"{100 * summary.consistent_time_fraction:.0f} % of the run"
+        )
+        figs["nis.png"] = fig
     return figs
+
+
+def _particle_figure(result: Result, dataset: Dataset) -> Figure:
+    """Up to six particle clouds side by side, with the map and the true pose."""
+    snaps = result.output.particle_snapshots
+    pick = np.unique(np.linspace(0, len(snaps) - 1, min(6, len(snaps))).round().astype(int))
+    cols = min(3, pick.size)
+    rows = int(np.ceil(pick.size / cols))
+    fig = new_figure(figsize=(4.0 * cols, 3.6 * rows))
+    axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
+    truth = dataset.truth
+    for ax, i in zip(axes, pick, strict=False):
+        snap = snaps[int(i)]
+        if truth.walls is not None:
+            plot_segments(ax, truth.walls)
+        elif dataset.known_grid is not None:
+            plot_occupancy_grid(ax, dataset.known_grid)
+        if truth.landmarks is not None:
+            plot_landmarks(ax, truth.landmarks)
+        true_pose = None
+        if truth.times is not None and truth.poses is not None and truth.times.size:
+            k = int(np.argmin(np.abs(truth.times - snap.t)))
+            true_pose = truth.poses[k]
+        plot_particles(ax, snap.particles, snap.weights, true_pose=true_pose)
+        ax.set_aspect("equal")
+        ax.set_title(f"t = {snap.t:.1f} s, {snap.particles.shape[0]} particles", fontsize="small")
+    for ax in axes[pick.size :]:
+        ax.set_visible(False)
+    return fig

@@ -1,0 +1,40 @@
+"""The standard figures of a run, including particle clouds and NIS windows."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from slamkit.datasets import load_dataset
+from slamkit.pipeline import EstimatorOutput, InnovationLog, ParticleSnapshot, run
+from slamkit.pipeline.evaluate import evaluate
+from slamkit.viz.report import run_figures
+
+
+def test_run_figures_include_particles_and_nis_when_the_estimator_provides_them():
+    ds = load_dataset("five-features", seed=0)
+    res = run("dead-reckoning", ds)
+    rng = np.random.default_rng(0)
+    k = 400
+    log = InnovationLog(
+        times=np.linspace(0, 30, k), nis=rng.chisquare(2, k), dof=np.full(k, 2),
+        landmark_ids=np.zeros(k, dtype=np.int64),
+    )  # fmt: skip
+    snaps = tuple(
+        ParticleSnapshot(float(t), ds.truth.poses[i] + rng.normal(0, 0.2, (300, 3)),
+                         np.full(300, 1 / 300))
+        for i, t in ((0, 0.0), (100, 10.0), (200, 20.0))
+    )  # fmt: skip
+    res = type(res)(
+        **{**res.__dict__, "output": EstimatorOutput(innovations=log, particle_snapshots=snaps)}
+    )
+    ev = evaluate(res, ds)
+    assert ev.metrics["nis"]["count"] == k and ev.metrics["nis"]["windows"] == 8
+    assert abs(ev.metrics["nis"]["mean_nis_per_dof"] - 1.0) < 0.15
+    figs = run_figures(res, ds, ev)
+    assert set(figs) == {"trajectory.png", "errors.png", "nees.png", "particles.png", "nis.png"}
+    # Three snapshots: three visible panels with one particle scatter each.
+    visible = [ax for ax in figs["particles.png"].axes if ax.get_visible()]
+    assert len(visible) == 3
+    offsets = visible[1].collections[-1].get_offsets()
+    assert offsets.shape == (300, 2)
+    np.testing.assert_allclose(np.mean(offsets, axis=0), ds.truth.poses[100, :2], atol=0.05)
