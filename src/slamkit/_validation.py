@@ -24,18 +24,23 @@ def describe_shape(shape: Sequence[int | type(Ellipsis) | None]) -> str:  # type
     return "(" + ", ".join(parts) + ("," if len(parts) == 1 else "") + ")"
 
 
-def _shape_matches(actual: tuple[int, ...], expected: Sequence[object]) -> bool:
-    if Ellipsis in expected:
-        i = list(expected).index(Ellipsis)
-        head, tail = list(expected[:i]), list(expected[i + 1 :])
-        if len(actual) < len(head) + len(tail):
-            return False
-        a_head = actual[: len(head)]
-        a_tail = actual[len(actual) - len(tail) :] if tail else ()
-        return _shape_matches(tuple(a_head), head) and _shape_matches(tuple(a_tail), tail)
+def _dims_match(actual: tuple[int, ...], expected: Sequence[object]) -> bool:
     if len(actual) != len(expected):
         return False
     return all(e is None or e == a for a, e in zip(actual, expected, strict=True))
+
+
+def _shape_matches(actual: tuple[int, ...], expected: Sequence[object]) -> bool:
+    # Called on every public entry point, so kept to plain tuple work (no recursion).
+    for i, e in enumerate(expected):
+        if e is Ellipsis:
+            head, tail = expected[:i], expected[i + 1 :]
+            if len(actual) < len(head) + len(tail):
+                return False
+            return _dims_match(actual[: len(head)], head) and _dims_match(
+                actual[len(actual) - len(tail) :], tail
+            )
+    return _dims_match(actual, expected)
 
 
 def as_array(
@@ -50,13 +55,18 @@ def as_array(
     ``shape`` uses ``None`` for "any size" and ``...`` for "any number of leading axes",
     e.g. ``(..., 3)`` for a batch of SE(2) poses.
     """
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ShapeError(f"{name}: expected numbers, got {type(value).__name__}") from exc
+    if type(value) is np.ndarray and value.dtype == np.float64:
+        arr = value  # the common case: no conversion
+    else:
+        try:
+            arr = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ShapeError(f"{name}: expected numbers, got {type(value).__name__}") from exc
     if shape is not None and not _shape_matches(arr.shape, shape):
         raise ShapeError(f"{name}: expected shape {describe_shape(shape)}, got {arr.shape}")
-    if finite and not np.all(np.isfinite(arr)):
+    # isfinite(sum) is one pass without a boolean temporary; overflow to inf in the sum of
+    # finite values is possible only near 1e308, so fall back to the exact check then.
+    if finite and not np.isfinite(np.sum(arr)) and not np.all(np.isfinite(arr)):
         bad = int(np.size(arr) - np.count_nonzero(np.isfinite(arr)))
         raise NonFiniteError(f"{name}: expected finite numbers, got {bad} NaN/inf value(s)")
     return arr

@@ -106,6 +106,44 @@ DATASETS: dict[str, DatasetEntry] = {
             "slamkit.sim.scenarios:build_rooms_laser",
             defaults={"kidnap_time": 30.0, "kidnap_skip": 40.0},
         ),
+        DatasetEntry(
+            "mrclam-snapshots",
+            "real",
+            "UTIAS MRCLAM 1 cut into 9782 stationary range-bearing snapshots, 15 known "
+            "landmarks, true poses",
+            "slamkit.datasets.mrclam_snapshots:load_mrclam_snapshots",
+            files=(
+                "landmarks/utias_mrclam/triangulation_toolbox/mrclam1_groundtruth.csv",
+                "landmarks/utias_mrclam/triangulation_toolbox/mrclam1_landmark.csv",
+                "landmarks/utias_mrclam/triangulation_toolbox/mrclam1_measurement.csv",
+            ),
+        ),
+        DatasetEntry(
+            "mrclam1",
+            "real",
+            "UTIAS MRCLAM data set 1, robot 1: 100 Hz commanded velocities, range-bearing "
+            "readings of 15 landmarks, Vicon landmark map; no prior, no true path",
+            "slamkit.datasets.mrclam:load_mrclam",
+            files=(
+                "landmarks/utias_mrclam/MRCLAM_Dataset1/Barcodes.dat",
+                "landmarks/utias_mrclam/MRCLAM_Dataset1/Landmark_Groundtruth.dat",
+                "landmarks/utias_mrclam/MRCLAM_Dataset1/Robot1_Measurement.dat",
+                "landmarks/utias_mrclam/MRCLAM_Dataset1/Robot1_Odometry.dat.gz",
+            ),
+        ),
+        DatasetEntry(
+            "plaza1",
+            "real",
+            "CMU Plaza 1: 5 Hz odometry increments, range-only readings of 4 radio beacons "
+            "(ranges calibrated by 1/1.070), true path, known start",
+            "slamkit.datasets.plaza:load_plaza1",
+            files=(
+                "landmarks/plaza/Plaza1_DR.txt",
+                "landmarks/plaza/Plaza1_TD.txt",
+                "landmarks/plaza/Plaza1_GT.csv",
+                "landmarks/plaza/Plaza1_TL.csv",
+            ),
+        ),
     )
 }
 

@@ -27,13 +27,13 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Any, Literal, TypeAlias
+from typing import Any, Literal, NoReturn, TypeAlias
 
 import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray, as_array, as_covariance, as_positive
-from slamkit.errors import InputError, ShapeError
+from slamkit.errors import InputError, NonFiniteError, ShapeError
 from slamkit.maps import LandmarkMap, OccupancyGrid, SegmentMap
 from slamkit.models import (
     BearingOnly,
@@ -42,6 +42,7 @@ from slamkit.models import (
     OdometryModel,
     RangeBearing,
     RangeOnly,
+    RelativePosition,
 )
 
 __all__ = [
@@ -120,7 +121,7 @@ class MotionSpec:
             raise InputError("MotionSpec: source 'odometry' needs model OdometryModel()")
 
 
-LandmarkKind = Literal["range-bearing", "range", "bearing"]
+LandmarkKind = Literal["range-bearing", "range", "bearing", "position"]
 
 
 @dataclass(frozen=True)
@@ -134,10 +135,10 @@ class LandmarkSensorSpec:
     identities: bool = True
 
     def __post_init__(self) -> None:
-        if self.kind not in ("range-bearing", "range", "bearing"):
+        if self.kind not in ("range-bearing", "range", "bearing", "position"):
             raise InputError(
-                f"landmark sensor kind: expected 'range-bearing', 'range' or 'bearing', "
-                f"got {self.kind!r}"
+                f"landmark sensor kind: expected 'range-bearing', 'range', 'bearing' or "
+                f"'position', got {self.kind!r}"
             )
         cov = as_covariance(self.noise_cov, "landmark noise_cov", self.dim)
         object.__setattr__(self, "noise_cov", cov)
@@ -148,12 +149,14 @@ class LandmarkSensorSpec:
 
     @property
     def dim(self) -> int:
-        return 2 if self.kind == "range-bearing" else 1
+        return 2 if self.kind in ("range-bearing", "position") else 1
 
     def model(self) -> LandmarkModel:
         """The measurement model h(pose, landmark) of this sensor."""
         if self.kind == "range-bearing":
             return RangeBearing()
+        if self.kind == "position":
+            return RelativePosition()
         return RangeOnly() if self.kind == "range" else BearingOnly()
 
 
@@ -241,36 +244,81 @@ class Dataset:
         self._validate_events()
 
     def _validate_events(self) -> None:
-        last = -np.inf
-        k = self.motion.model.control_dim if self.motion is not None else None
-        m = self.landmark_sensor.dim if self.landmark_sensor is not None else None
-        b = self.laser.n_beams if self.laser is not None else None
-        for i, ev in enumerate(self.events):
-            where = f"event {i} ({type(ev).__name__} at t={ev.t})"
-            if not np.isfinite(ev.t) or ev.t < last:
-                raise InputError(f"{where}: expected finite, non-decreasing times")
-            last = ev.t
-            if isinstance(ev, Control):
-                if k is None or self.motion is None or self.motion.source != "control":
-                    raise InputError(f"{where}: a Control event needs a control MotionSpec")
-                as_array(ev.u, f"{where} u", (k,))
-                as_positive(ev.dt, f"{where} dt", allow_zero=True)
-            elif isinstance(ev, Odometry):
+        """Check the whole stream once: times finite and non-decreasing, every event's arrays
+        of the shape the metadata declares and finite. Vectorised per event type (a loop over
+        100k events doing a full check each would dominate load times); on failure the first
+        offending event is named."""
+        events = self.events
+        if not events:
+            return
+        times = np.fromiter((ev.t for ev in events), dtype=np.float64, count=len(events))
+        bad = ~np.isfinite(times)
+        bad[1:] |= np.diff(times) < 0
+        if np.any(bad):
+            self._fail(int(np.argmax(bad)), "expected finite, non-decreasing times")
+        by_type: dict[type, list[int]] = {}
+        for i, ev in enumerate(events):
+            by_type.setdefault(type(ev), []).append(i)
+        for kind, idx in by_type.items():
+            if kind is Control:
+                self._check_controls(idx)
+            elif kind is Odometry:
                 if self.motion is None or self.motion.source != "odometry":
-                    raise InputError(f"{where}: an Odometry event needs an odometry MotionSpec")
-                as_array(ev.pose, f"{where} pose", (3,))
-            elif isinstance(ev, LandmarkReadings):
-                if m is None:
-                    raise InputError(f"{where}: landmark readings need a LandmarkSensorSpec")
-                z = as_array(ev.z, f"{where} z", (None, m))
-                if np.asarray(ev.ids).shape != (z.shape[0],):
-                    raise ShapeError(f"{where}: expected {z.shape[0]} ids")
-            elif isinstance(ev, LaserScan):
-                if b is None:
-                    raise InputError(f"{where}: a laser scan needs a LaserSpec")
-                as_array(ev.ranges, f"{where} ranges", (b,))
+                    self._fail(idx[0], "an Odometry event needs an odometry MotionSpec")
+                self._check_rows(idx, "pose", (3,))
+            elif kind is LandmarkReadings:
+                if self.landmark_sensor is None:
+                    self._fail(idx[0], "landmark readings need a LandmarkSensorSpec")
+                self._check_readings(idx, self.landmark_sensor.dim)
+            elif kind is LaserScan:
+                if self.laser is None:
+                    self._fail(idx[0], "a laser scan needs a LaserSpec")
+                self._check_rows(idx, "ranges", (self.laser.n_beams,))
             else:
-                raise InputError(f"{where}: unknown event type")
+                self._fail(idx[0], "unknown event type")
+
+    def _fail(self, i: int, message: str, error: type[InputError] = InputError) -> NoReturn:
+        ev = self.events[i]
+        raise error(f"event {i} ({type(ev).__name__} at t={ev.t}): {message}")
+
+    def _check_rows(self, idx: list[int], attr: str, shape: tuple[int, ...]) -> FloatArray:
+        """Stack ``attr`` of the events ``idx`` (each of ``shape``) and check them at once."""
+        try:
+            rows = np.asarray([getattr(self.events[i], attr) for i in idx], dtype=np.float64)
+        except (TypeError, ValueError):
+            rows = np.empty(0)
+        if rows.shape != (len(idx), *shape):
+            for i in idx:  # find the culprit for the message
+                a = np.asarray(getattr(self.events[i], attr))
+                if a.shape != shape:
+                    self._fail(i, f"{attr}: expected shape {shape}, got {a.shape}", ShapeError)
+        finite = np.isfinite(rows).reshape(len(idx), -1).all(axis=1)
+        if not finite.all():
+            self._fail(idx[int(np.argmin(finite))], f"{attr}: expected finite numbers",
+                       NonFiniteError)  # fmt: skip
+        return rows
+
+    def _check_controls(self, idx: list[int]) -> None:
+        if self.motion is None or self.motion.source != "control":
+            self._fail(idx[0], "a Control event needs a control MotionSpec")
+        self._check_rows(idx, "u", (self.motion.model.control_dim,))
+        dts = self._check_rows(idx, "dt", ())
+        if np.any(dts < 0):
+            self._fail(idx[int(np.argmax(dts < 0))], "dt: expected a time step >= 0")
+
+    def _check_readings(self, idx: list[int], m: int) -> None:
+        for i in idx:  # shapes vary per event (K readings), so check each cheaply
+            ev = self.events[i]
+            z, ids = np.asarray(ev.z), ev.ids  # type: ignore[union-attr]
+            if z.ndim != 2 or z.shape[1] != m:
+                self._fail(i, f"z: expected shape (K, {m}), got {np.shape(z)}", ShapeError)
+            if np.shape(ids) != (z.shape[0],):
+                self._fail(i, f"expected {z.shape[0]} ids, got shape {np.shape(ids)}", ShapeError)
+        z_all = np.concatenate([np.asarray(self.events[i].z, float) for i in idx])  # type: ignore[union-attr]
+        if not np.all(np.isfinite(z_all)):
+            for i in idx:
+                if not np.all(np.isfinite(self.events[i].z)):  # type: ignore[union-attr]
+                    self._fail(i, "z: expected finite readings", NonFiniteError)
 
     # -- convenience views -------------------------------------------------------------
 

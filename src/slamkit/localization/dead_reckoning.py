@@ -13,7 +13,7 @@ import numpy as np
 
 from slamkit.datasets.stream import Control, Dataset, Event, Odometry
 from slamkit.errors import ConfigError, InputError
-from slamkit.localization.belief import GaussianBelief, predict
+from slamkit.localization.belief import GaussianBelief, predict_unchecked
 from slamkit.models import odometry_control
 from slamkit.pipeline.estimator import EstimatorOutput, PoseEstimate
 
@@ -49,12 +49,15 @@ class DeadReckoning:
 
     def handle(self, event: Event) -> None:
         if isinstance(event, Control):
-            self._belief = predict(self._belief, event.u, event.dt, self._motion.model, self._Q)
+            # The Dataset validated u and dt, MotionSpec the noise: no re-checks per step.
+            self._belief = predict_unchecked(
+                self._belief, event.u, event.dt, self._motion.model, self._Q
+            )
             self._steps += 1
         elif isinstance(event, Odometry):
             if self._last_odometry is not None:
                 u = odometry_control(self._last_odometry, event.pose)
-                self._belief = predict(self._belief, u, 0.0, self._motion.model, self._Q)
+                self._belief = predict_unchecked(self._belief, u, 0.0, self._motion.model, self._Q)
                 self._steps += 1
             self._last_odometry = event.pose
 

@@ -7,6 +7,7 @@ from slamkit.models.measurement import (
     LandmarkModel,
     RangeBearing,
     RangeOnly,
+    RelativePosition,
     landmark_initial_covariance,
 )
 from slamkit.models.motion import (
@@ -19,6 +20,7 @@ from slamkit.models.motion import (
     odometry_control,
     odometry_noise_cov,
     propagate_gaussian,
+    propagate_gaussian_unchecked,
 )
 
 __all__ = [
@@ -32,6 +34,7 @@ __all__ = [
     "OdometryModel",
     "RangeBearing",
     "RangeOnly",
+    "RelativePosition",
     "UnicycleArc",
     "UnicycleEuler",
     "cast_rays_grid",
@@ -40,4 +43,5 @@ __all__ = [
     "odometry_control",
     "odometry_noise_cov",
     "propagate_gaussian",
+    "propagate_gaussian_unchecked",
 ]

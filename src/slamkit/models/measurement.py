@@ -9,6 +9,8 @@ Conventions:
   ``range = |l - p|`` (m) and ``bearing = wrap(atan2(dy, dx) - theta)`` (rad, in
   ``[-pi, pi)``, counter-clockwise from the robot's heading), with ``(dx, dy) = l - p``.
   :class:`RangeOnly` and :class:`BearingOnly` keep one of the two components.
+* A relative-position measurement (:class:`RelativePosition`) is the landmark's ``(x, y)`` in
+  the robot frame (m), ``R(theta)ᵀ (l - p)``.
 * ``angular`` flags the components that are angles; :meth:`residual` wraps those.
 * A landmark closer than ``1e-9`` m to the sensor makes the bearing and every Jacobian
   undefined: such calls raise :class:`slamkit.errors.GeometryError` instead of returning NaN.
@@ -33,6 +35,7 @@ __all__ = [
     "LandmarkModel",
     "RangeBearing",
     "RangeOnly",
+    "RelativePosition",
     "landmark_initial_covariance",
 ]
 
@@ -274,3 +277,81 @@ def landmark_initial_covariance(
     except ValueError as exc:
         raise InputError("landmark_initial_covariance: batch axes do not broadcast") from exc
     return 0.5 * (out + np.swapaxes(out, -1, -2))
+
+
+def _prepare_pose_and_z(pose: ArrayLike, z: ArrayLike, m: int) -> tuple[FloatArray, FloatArray]:
+    p = as_array(pose, "pose", (..., 3))
+    za = as_array(z, "z", (..., m))
+    try:
+        batch = np.broadcast_shapes(p.shape[:-1], za.shape[:-1])
+    except ValueError as exc:
+        raise ShapeError(f"pose {p.shape} and z {za.shape}: batch axes do not broadcast") from exc
+    return np.broadcast_to(p, (*batch, 3)), np.broadcast_to(za, (*batch, m))
+
+
+@dataclass(frozen=True)
+class RelativePosition(_LandmarkBase):
+    """``z = (x, y)`` of a point landmark in the ROBOT frame (metres): ``z = R(θ)ᵀ (l − t)``.
+
+    This is what pose-graph files with landmarks store (iSAM's ``LANDMARK`` lines, GTSAM's
+    Pose2–Point2 factors) and what a stereo camera or a laser feature detector reports after
+    converting its own readings to Cartesian coordinates. No component is an angle and the
+    model is defined everywhere, including at zero range.
+
+    With ``(dx, dy) = l − t``, ``c = cos θ``, ``s = sin θ`` and ``z = (zx, zy)``:
+    ``zx = c dx + s dy``, ``zy = −s dx + c dy``, so
+    ``H_landmark = R(θ)ᵀ = [[c, s], [−s, c]]`` and
+    ``H_pose = [[−c, −s, zy], [s, −c, −zx]]`` (``∂/∂θ`` of ``R(θ)ᵀ d`` is ``(zy, −zx)``).
+    The inverse ``l = t + R(θ) z`` is ``pose ⊕ z``; its Jacobians are
+    ``L_x = [[1, 0, −s zx − c zy], [0, 1, c zx − s zy]]`` and ``L_z = R(θ)``.
+    """
+
+    dim: ClassVar[int] = 2
+    angular: ClassVar[tuple[bool, ...]] = (False, False)
+
+    def _h(self, p: FloatArray, l: FloatArray) -> FloatArray:
+        c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
+        dx, dy = l[..., 0] - p[..., 0], l[..., 1] - p[..., 1]
+        return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
+
+    def _jac(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
+        c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
+        dx, dy = l[..., 0] - p[..., 0], l[..., 1] - p[..., 1]
+        zx, zy = c * dx + s * dy, -s * dx + c * dy
+        batch = c.shape
+        Hl = np.empty((*batch, 2, 2))
+        Hl[..., 0, 0] = c  # R(θ)ᵀ
+        Hl[..., 0, 1] = s
+        Hl[..., 1, 0] = -s
+        Hl[..., 1, 1] = c
+        Hp = np.empty((*batch, 2, 3))
+        Hp[..., :, :2] = -Hl  # l − t: the position enters with the opposite sign
+        Hp[..., 0, 2] = zy
+        Hp[..., 1, 2] = -zx
+        return Hp, Hl
+
+    def inverse(self, pose: ArrayLike, z: ArrayLike) -> FloatArray:
+        """The landmark ``(..., 2)`` in the world seen at ``z`` (robot frame) from ``pose``:
+        ``l = t + R(θ) z`` (the point ``pose ⊕ z``)."""
+        p, za = _prepare_pose_and_z(pose, z, 2)
+        c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
+        zx, zy = za[..., 0], za[..., 1]
+        return np.stack([p[..., 0] + c * zx - s * zy, p[..., 1] + s * zx + c * zy], axis=-1)
+
+    def inverse_jacobians(self, pose: ArrayLike, z: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """``(L_x (..., 2, 3), L_z (..., 2, 2))``: derivatives of :meth:`inverse` with respect
+        to the pose and to ``z``."""
+        p, za = _prepare_pose_and_z(pose, z, 2)
+        c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
+        zx, zy = za[..., 0], za[..., 1]
+        batch = c.shape
+        Lz = np.empty((*batch, 2, 2))
+        Lz[..., 0, 0] = c  # R(θ)
+        Lz[..., 0, 1] = -s
+        Lz[..., 1, 0] = s
+        Lz[..., 1, 1] = c
+        Lx = np.zeros((*batch, 2, 3))
+        Lx[..., 0, 0] = Lx[..., 1, 1] = 1.0
+        Lx[..., 0, 2] = -s * zx - c * zy  # ∂(R(θ) z)/∂θ
+        Lx[..., 1, 2] = c * zx - s * zy
+        return Lx, Lz

@@ -20,6 +20,7 @@ Inputs are never modified; every function returns new arrays.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar, Protocol, runtime_checkable
 
@@ -40,6 +41,7 @@ __all__ = [
     "odometry_control",
     "odometry_noise_cov",
     "propagate_gaussian",
+    "propagate_gaussian_unchecked",
 ]
 
 
@@ -90,6 +92,8 @@ def _prepare(x: ArrayLike, u: ArrayLike, k: int) -> tuple[FloatArray, FloatArray
     """Validate a pose and a control and broadcast their batch axes against each other."""
     xa = as_array(x, "pose x", (..., 3))
     ua = as_array(u, "control u", (..., k))
+    if xa.shape[:-1] == ua.shape[:-1]:
+        return xa, ua  # nothing to broadcast (one pose, or one control per particle)
     try:
         batch = np.broadcast_shapes(xa.shape[:-1], ua.shape[:-1])
     except ValueError as exc:
@@ -207,6 +211,9 @@ _ARC_SERIES_BELOW = 1e-3
 
 def _sinc_half(phi: FloatArray) -> tuple[FloatArray, FloatArray]:
     """``s(phi) = sin(phi/2) / (phi/2)`` and its derivative ``s'(phi)``, finite at 0."""
+    if phi.ndim == 0:  # one pose (an EKF step): plain floats are ~20x cheaper than 0-d arrays
+        s0, d0 = _sinc_half_scalar(float(phi))
+        return np.float64(s0), np.float64(d0)  # type: ignore[return-value]
     small = np.abs(phi) < _ARC_SERIES_BELOW
     h = np.where(small, 1.0, phi / 2.0)  # safe divisor on the series branch
     s_closed = np.sin(h) / h
@@ -217,6 +224,15 @@ def _sinc_half(phi: FloatArray) -> tuple[FloatArray, FloatArray]:
     s_series = 1.0 - p2 / 24.0 + p2 * p2 / 1920.0
     ds_series = -phi / 12.0 + phi * p2 / 480.0
     return np.where(small, s_series, s_closed), np.where(small, ds_series, ds_closed)
+
+
+def _sinc_half_scalar(phi: float) -> tuple[float, float]:
+    if abs(phi) < _ARC_SERIES_BELOW:
+        p2 = phi * phi
+        return 1.0 - p2 / 24.0 + p2 * p2 / 1920.0, -phi / 12.0 + phi * p2 / 480.0
+    h = phi / 2.0
+    sh, ch = math.sin(h), math.cos(h)
+    return sh / h, (h * ch - sh) / (2.0 * h * h)
 
 
 def _arc_g(x: FloatArray, v: FloatArray, w: FloatArray, dt: float) -> FloatArray:
@@ -618,9 +634,24 @@ def propagate_gaussian(
     m = as_array(mean, "mean", (..., 3))
     P = as_covariance(cov, "cov", 3, semidefinite=True)
     Q = as_covariance(control_cov, "control_cov", model.control_dim, semidefinite=True)
-    new_mean = model.apply(m, u, dt)
-    G, V = model.jacobians(m, u, dt)
+    return propagate_gaussian_unchecked(model, m, P, u, dt, Q)
+
+
+def propagate_gaussian_unchecked(
+    model: MotionModel,
+    mean: FloatArray,
+    cov: FloatArray,
+    u: ArrayLike,
+    dt: float,
+    control_cov: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`propagate_gaussian` without re-validating ``mean``, ``cov`` and
+    ``control_cov``: for estimators that validated their noise once and feed back their own
+    (PSD by construction) covariances every step. The eigenvalue check of a covariance costs
+    more than the propagation itself."""
+    new_mean = model.apply(mean, u, dt)
+    G, V = model.jacobians(mean, u, dt)
     Gt, Vt = np.swapaxes(G, -1, -2), np.swapaxes(V, -1, -2)
-    new_cov = G @ P @ Gt + V @ Q @ Vt
+    new_cov = G @ cov @ Gt + V @ control_cov @ Vt
     new_cov = 0.5 * (new_cov + np.swapaxes(new_cov, -1, -2))
     return new_mean, new_cov

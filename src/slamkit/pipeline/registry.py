@@ -79,6 +79,13 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.localization.dead_reckoning:DeadReckoningConfig",
             requires=("motion",),
         ),
+        EstimatorEntry(
+            "least-squares",
+            "static single-shot least-squares fix at every landmark event (no filtering)",
+            "slamkit.localization.least_squares:LeastSquaresLocalization",
+            "slamkit.localization.least_squares:LeastSquaresConfig",
+            requires=("landmark_sensor", "known_landmarks"),
+        ),
     )
 }
 

@@ -1,0 +1,177 @@
+"""A reader for the numeric text tables that public data sets come as.
+
+Every real-data loader reads its files through :func:`read_table`: plain or gzip-compressed
+(``.gz``, detected by suffix) text with one record per line, numbers separated by white space
+(or by commas, ``delimiter=","``), and ``#`` starting a comment that runs to the end of the
+line. Blank and comment-only lines are skipped.
+
+Strict by default: the first line that has the wrong number of columns, a field that is not a
+number, or a NaN/infinite value raises :class:`~slamkit.errors.DatasetFormatError` naming the
+file and the line (1-based, counting every physical line). With ``lenient=True`` such lines
+are skipped instead and reported in the returned :class:`NumericTable`.
+
+Speed: lines are split in Python and all fields converted by NumPy in one call; only when that
+bulk conversion fails is the offending line looked for field by field. A 100,000-line file
+reads in about a tenth of a second.
+"""
+
+from __future__ import annotations
+
+import gzip
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from slamkit._validation import FloatArray
+from slamkit.errors import DataNotFoundError, DatasetFormatError
+
+__all__ = ["NumericTable", "read_table"]
+
+#: How many skipped line numbers a lenient read keeps (the count is always exact).
+MAX_REPORTED_LINES = 20
+
+
+@dataclass(frozen=True, eq=False)
+class NumericTable:
+    """The rows of a table, and what a lenient read left out."""
+
+    values: FloatArray
+    """The data ``(n, k)``, float64, every entry finite, rows in file order."""
+    line_numbers: np.ndarray
+    """``(n,)`` 1-based line of the file each row came from (for messages about a row)."""
+    skipped: int = 0
+    """How many malformed lines were skipped (always 0 for a strict read)."""
+    skipped_lines: tuple[int, ...] = ()
+    """The first :data:`MAX_REPORTED_LINES` skipped line numbers."""
+
+    def __len__(self) -> int:
+        return int(self.values.shape[0])
+
+
+def _read_text(path: Path) -> str:
+    try:
+        if path.suffix == ".gz":
+            with gzip.open(path, "rt", encoding="utf-8") as fh:
+                return fh.read()
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DataNotFoundError(f"{path}: not found") from None
+    except (gzip.BadGzipFile, EOFError, zlib.error) as exc:
+        raise DatasetFormatError(f"not a valid gzip file ({exc})", path) from exc
+    except UnicodeDecodeError as exc:
+        raise DatasetFormatError(f"not UTF-8 text ({exc.reason})", path) from exc
+    except OSError as exc:
+        raise DataNotFoundError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
+
+
+def _split(line: str, delimiter: str | None) -> list[str]:
+    """The fields of one line, comment removed; ``[]`` for a blank or comment-only line."""
+    hash_at = line.find("#")
+    if hash_at >= 0:
+        line = line[:hash_at]
+    if delimiter is None:
+        return line.split()
+    if not line.strip():
+        return []
+    return [field.strip() for field in line.split(delimiter)]
+
+
+def _line_problem(fields: list[str], k: int) -> str | None:
+    """Why one line is not a row of ``k`` finite numbers (``None`` if it is)."""
+    if len(fields) != k:
+        return f"expected {k} columns, got {len(fields)}"
+    for j, field in enumerate(fields, start=1):
+        try:
+            value = float(field)
+        except ValueError:
+            return f"column {j}: expected a number, got {field!r}"
+        if not np.isfinite(value):
+            return f"column {j}: expected a finite number, got {field!r}"
+    return None
+
+
+def read_table(
+    path: str | Path,
+    columns: int,
+    *,
+    lenient: bool = False,
+    delimiter: str | None = None,
+) -> NumericTable:
+    """Read a numeric table of ``columns`` columns from ``path`` (``.gz``: gzip).
+
+    ``delimiter=None`` splits on runs of white space (tabs, trailing blanks allowed); ``","``
+    splits on commas (an empty field is an error). Raises :class:`DatasetFormatError` with the
+    file and 1-based line of the first malformed line, unless ``lenient`` is true: then such
+    lines are skipped and counted. A missing file raises
+    :class:`~slamkit.errors.DataNotFoundError`.
+    """
+    if columns < 1:
+        raise ValueError(f"columns: expected a positive number, got {columns}")
+    p = Path(path)
+    text = _read_text(p)
+
+    fields: list[str] = []
+    numbers: list[int] = []
+    bad: list[int] = []
+    count_error: DatasetFormatError | None = None
+    for i, line in enumerate(text.splitlines(), start=1):
+        parts = _split(line, delimiter)
+        if not parts:
+            continue
+        if len(parts) != columns:
+            if not lenient:
+                # Raised below unless an earlier line holds a bad value: the first wins.
+                count_error = DatasetFormatError(
+                    f"expected {columns} columns, got {len(parts)}", p, i
+                )
+                break
+            bad.append(i)
+            continue
+        fields.extend(parts)
+        numbers.append(i)
+
+    try:
+        # Python's float() syntax, applied by NumPy to every field at once.
+        values = np.array(fields, dtype=np.float64).reshape(-1, columns)
+        ok = np.isfinite(values).all(axis=1)
+    except ValueError:
+        values, ok = _convert_rowwise(fields, columns)
+
+    if not ok.all():
+        rows = np.flatnonzero(~ok)
+        if not lenient:
+            r = int(rows[0])
+            line_fields = fields[r * columns : (r + 1) * columns]
+            why = _line_problem(line_fields, columns) or "malformed line"
+            raise DatasetFormatError(why, p, numbers[r])
+        bad.extend(numbers[int(r)] for r in rows)
+        values = values[ok]
+        numbers = np.asarray(numbers, dtype=np.int64)[ok].tolist()
+    if count_error is not None:
+        raise count_error
+
+    bad.sort()
+    return NumericTable(
+        values=np.ascontiguousarray(values, dtype=np.float64),
+        line_numbers=np.asarray(numbers, dtype=np.int64),
+        skipped=len(bad),
+        skipped_lines=tuple(bad[:MAX_REPORTED_LINES]),
+    )
+
+
+def _convert_rowwise(fields: list[str], columns: int) -> tuple[FloatArray, np.ndarray]:
+    """Slow path after a failed bulk conversion: rows that hold a non-number become NaN and
+    are marked bad, the rest are converted."""
+    n = len(fields) // columns
+    values = np.full((n, columns), np.nan)
+    ok = np.zeros(n, dtype=bool)
+    for r in range(n):
+        row = fields[r * columns : (r + 1) * columns]
+        try:
+            values[r] = np.array(row, dtype=np.float64)
+        except ValueError:
+            continue
+        ok[r] = bool(np.isfinite(values[r]).all())
+    return values, ok

@@ -1,0 +1,326 @@
+"""UTIAS MRCLAM: one robot of the Multi-Robot Cooperative Localization and Mapping data set.
+
+Leung, Halpern, Barfoot and Liu, "The UTIAS Multi-Robot Cooperative Localization and Mapping
+Dataset", IJRR 30(8), 2011. Five small robots drive among 15 landmark tubes indoors; each
+robot logs its *commanded* velocities and camera readings (range, bearing) of barcodes on the
+landmarks and on the other robots; a Vicon system surveyed the landmarks.
+
+Files under ``landmarks/utias_mrclam/MRCLAM_Dataset<n>/`` (white space separated, ``#``
+headers; the robot files may be gzip-compressed, ``.gz``):
+
+==============================  =============================================================
+``Barcodes.dat``                ``subject barcode`` — subjects 1–5 are the robots, 6–20 the
+                                landmarks
+``Landmark_Groundtruth.dat``    ``subject x y sx sy`` — Vicon landmark positions [m] and
+                                their standard deviations
+``Robot<r>_Odometry.dat``       ``time v omega`` — commanded speed [m/s] and turn rate
+                                [rad/s], about 100 Hz, time in UNIX seconds
+``Robot<r>_Measurement.dat``    ``time barcode range bearing`` [s, -, m, rad]
+==============================  =============================================================
+
+Conversion (:func:`load_mrclam`):
+
+* **Controls.** Odometry sample ``k`` is the command held until sample ``k + 1``: it becomes
+  ``Control(t_{k+1}, u = (v_k, omega_k), dt = t_{k+1} - t_k)`` for the
+  :class:`~slamkit.models.UnicycleArc` model, whose constant-velocity arc is the exact motion
+  under a piecewise-constant command (the Euler step would be off by half a step's turn
+  wherever the log has gaps — 44 gaps over 0.2 s, up to 1 s, in Dataset 1). The last sample
+  has no successor and gives no control.
+* **Readings.** Barcodes are mapped to subjects through ``Barcodes.dat``; the landmark id of a
+  reading is its *subject* number (6–20), the id used by the landmark map. Readings of other
+  robots (subjects 1–5), of barcodes missing from ``Barcodes.dat``, of subjects without a
+  surveyed position and readings earlier than the first odometry sample are dropped and
+  counted in ``metadata["dropped"]``. Bearings are wrapped to ``[-pi, pi)``. Readings with
+  the same time stamp form one :class:`LandmarkReadings` event, placed after the control
+  that ends at that time. A reading between two odometry samples sees the pose of the
+  earlier one: the robot moves at most 1 cm (99th percentile) and 6.6 cm (worst, in a gap)
+  in that time in Dataset 1, well below the range noise.
+* **Times** are seconds since the first odometry sample, rounded to the microsecond to
+  drop the float rounding of the 1.2e9-second UNIX stamps (the files have millisecond
+  resolution); ``metadata["start_time_unix_s"]`` keeps the absolute start.
+* **Maps and truth.** ``known_landmarks`` and ``truth.landmarks`` are the Vicon landmark map
+  (ids = subjects). The robots' true trajectories are not part of the files here, so the data
+  set has no true trajectory, and no prior pose: the start is unknown (localize globally, or
+  from the first readings).
+
+Nominal noise — measured, not taken from the paper (which gives no such numbers). The
+Triangulation Toolbox conversion of Dataset 1 (``landmarks/utias_mrclam/triangulation_toolbox``)
+holds Vicon poses of the robots at moments when they stood still; its experiments 1–1085 are
+Robot 1's (every one of their readings appears, with equal values, in
+``Robot1_Measurement.dat`` within 1.5 s). Against those true poses:
+
+* readings (3419, outliers already removed by the conversion): range residual median
+  −0.024 m, MAD-based sigma 0.135 m, RMS 0.148 m; bearing residual median −0.010 rad,
+  standard deviation 0.031 rad, RMS 0.034 rad → ``sigma_range = 0.15`` m,
+  ``sigma_bearing = 0.035`` rad (the values of :mod:`slamkit.datasets.mrclam_snapshots`).
+  The stream here is *not* cleaned: of the 706 readings Robot 1 took during those stationary
+  moments, 16 % lie more than 3 sigma from the truth in range or bearing. Gate them.
+* controls: the commanded motion integrated between two true poses 0.5–40 s apart (about
+  77,000 pairs) misses the true relative motion by an RMS of 0.008–0.085 m along the path and
+  0.016–0.10 rad in heading. Treating the velocity error as white noise on each 10 ms
+  command, the spread after ``T`` seconds is ``sigma * sqrt(0.01 s * T)``; matching the
+  measured heading and along-track errors over 1–40 s gives 0.08–0.23 for both, so
+  ``sigma_v = 0.2`` m/s and ``sigma_omega = 0.2`` rad/s *per command* (2 cm and 0.02 rad after
+  1 s, 6 cm and 0.06 rad after 10 s). Over a minute and more the real errors are larger and
+  systematic (about 10 % of the distance driven): estimators must use the landmarks. Since
+  the covariance of a step scales with ``dt²``, the rare long gaps get a generous share.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from slamkit.config import config_from_mapping, config_to_dict
+from slamkit.datasets._text import NumericTable, read_table
+from slamkit.datasets.paths import data_root as resolve_data_root
+from slamkit.datasets.stream import (
+    Control,
+    Dataset,
+    Event,
+    GroundTruth,
+    LandmarkReadings,
+    LandmarkSensorSpec,
+    MotionSpec,
+)
+from slamkit.errors import ConfigError, DataNotFoundError, DatasetFormatError
+from slamkit.geometry import wrap_angle
+from slamkit.maps import LandmarkMap
+from slamkit.models import UnicycleArc
+
+__all__ = [
+    "ROBOT_SUBJECTS",
+    "MrclamOptions",
+    "load_mrclam",
+    "mrclam_files",
+]
+
+ROBOT_SUBJECTS = frozenset(range(1, 6))
+"""Subject numbers of the five robots; every other subject is a landmark."""
+
+_TIME_DECIMALS = 6
+
+
+@dataclass(frozen=True)
+class MrclamOptions:
+    """Options of :func:`load_mrclam` (units: metres, radians, seconds)."""
+
+    dataset: int = 1
+    """Which MRCLAM data set (1–9): the folder ``MRCLAM_Dataset<n>``."""
+    robot: int = 1
+    """Which robot (1–5): the files ``Robot<r>_Odometry.dat`` and ``Robot<r>_Measurement.dat``."""
+    sigma_v: float = 0.2
+    """Nominal speed noise per 10 ms command [m/s] (measured; see the module docstring)."""
+    sigma_omega: float = 0.2
+    """Nominal turn-rate noise per 10 ms command [rad/s] (measured; see the module docstring)."""
+    sigma_range: float = 0.15
+    """Nominal range noise [m] (measured against Vicon poses; see the module docstring)."""
+    sigma_bearing: float = 0.035
+    """Nominal bearing noise [rad] (measured against Vicon poses)."""
+    max_duration_s: float | None = None
+    """Keep only the events of the first this many seconds (all when ``None``)."""
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.dataset <= 9:
+            raise ConfigError(f"dataset: expected 1 to 9, got {self.dataset}")
+        if self.robot not in ROBOT_SUBJECTS:
+            raise ConfigError(f"robot: expected 1 to 5, got {self.robot}")
+        for name in ("sigma_v", "sigma_omega"):
+            if not getattr(self, name) >= 0:
+                raise ConfigError(f"{name}: expected a number >= 0, got {getattr(self, name)}")
+        for name in ("sigma_range", "sigma_bearing"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"{name}: expected a number > 0, got {getattr(self, name)}")
+        if self.max_duration_s is not None and not self.max_duration_s > 0:
+            raise ConfigError(f"max_duration_s: expected a number > 0, got {self.max_duration_s}")
+
+
+def _folder(options: MrclamOptions) -> str:
+    return f"landmarks/utias_mrclam/MRCLAM_Dataset{options.dataset}"
+
+
+def mrclam_files(dataset: int = 1, robot: int = 1) -> tuple[str, ...]:
+    """The files a robot of a data set needs, relative to the data root (as shipped here,
+    the odometry gzip-compressed; the uncompressed original is accepted as well)."""
+    folder = _folder(MrclamOptions(dataset=dataset, robot=robot))
+    return (
+        f"{folder}/Barcodes.dat",
+        f"{folder}/Landmark_Groundtruth.dat",
+        f"{folder}/Robot{robot}_Measurement.dat",
+        f"{folder}/Robot{robot}_Odometry.dat.gz",
+    )
+
+
+def _find(root: Path, relative: str) -> Path:
+    """``relative`` under ``root``, or its gzip-compressed / uncompressed twin."""
+    path = root / relative
+    twin = path.with_suffix("") if path.suffix == ".gz" else path.with_name(path.name + ".gz")
+    for p in (path, twin):
+        if p.exists():
+            return p
+    raise DataNotFoundError(f"{path}: not found (needed under the data folder, SLAMKIT_DATA)")
+
+
+def _barcode_table(table: NumericTable, path: Path) -> dict[int, int]:
+    """``barcode -> subject`` from ``Barcodes.dat`` (both columns integers, barcodes unique)."""
+    out: dict[int, int] = {}
+    for (subject, barcode), line in zip(table.values, table.line_numbers, strict=True):
+        if subject != int(subject) or barcode != int(barcode):
+            raise DatasetFormatError("expected integer subject and barcode", path, int(line))
+        if int(barcode) in out:
+            raise DatasetFormatError(f"barcode {int(barcode)} listed twice", path, int(line))
+        out[int(barcode)] = int(subject)
+    if not out:
+        raise DatasetFormatError("no barcodes", path)
+    return out
+
+
+def _landmark_map(table: NumericTable, path: Path) -> LandmarkMap:
+    subjects = table.values[:, 0]
+    bad = np.flatnonzero(subjects != np.round(subjects))
+    if bad.size:
+        raise DatasetFormatError(
+            "expected an integer subject", path, int(table.line_numbers[bad[0]])
+        )
+    ids = subjects.astype(np.int64)
+    _, first = np.unique(ids, return_index=True)
+    if first.size != ids.size:
+        dup = np.setdiff1d(np.arange(ids.size), first)[0]
+        raise DatasetFormatError(
+            f"subject {ids[dup]} listed twice", path, int(table.line_numbers[dup])
+        )
+    if ids.size == 0:
+        raise DatasetFormatError("no landmarks", path)
+    return LandmarkMap(table.values[:, 1:3].copy(), ids)
+
+
+def load_mrclam(
+    options: Mapping[str, Any] | None = None,
+    *,
+    seed: int = 0,
+    data_root: Path | None = None,
+) -> Dataset:
+    """Load one robot of an MRCLAM data set (Dataset 1, Robot 1 by default) as a
+    :class:`Dataset`: unicycle-arc controls, range-bearing readings of the 15 landmarks with
+    ids = subject numbers, the Vicon landmark map, no prior and no true trajectory.
+
+    ``options`` are the fields of :class:`MrclamOptions`; ``seed`` is unused (real data);
+    ``data_root`` defaults to :func:`slamkit.datasets.paths.data_root`. Raises
+    :class:`DatasetFormatError` (file and line) on malformed files and
+    :class:`DataNotFoundError` when a file is missing.
+    """
+    opts = config_from_mapping(MrclamOptions, options, "mrclam")
+    root = resolve_data_root(data_root)
+    folder = _folder(opts)
+    p_barcodes = _find(root, f"{folder}/Barcodes.dat")
+    p_landmarks = _find(root, f"{folder}/Landmark_Groundtruth.dat")
+    p_odometry = _find(root, f"{folder}/Robot{opts.robot}_Odometry.dat")
+    p_readings = _find(root, f"{folder}/Robot{opts.robot}_Measurement.dat")
+
+    barcode_to_subject = _barcode_table(read_table(p_barcodes, 2), p_barcodes)
+    world = _landmark_map(read_table(p_landmarks, 5), p_landmarks)
+    odo = read_table(p_odometry, 3)
+    meas = read_table(p_readings, 4)
+
+    # ---- odometry: command k holds over (t_k, t_{k+1}] ----------------------------------
+    if len(odo) < 2:
+        raise DatasetFormatError(
+            f"expected at least 2 odometry samples, got {len(odo)}", p_odometry
+        )
+    t_abs = odo.values[:, 0]
+    back = np.flatnonzero(np.diff(t_abs) < 0)
+    if back.size:
+        line = int(odo.line_numbers[back[0] + 1])
+        raise DatasetFormatError("time goes backwards", p_odometry, line)
+    t_start = float(t_abs[0])
+    t_odo = np.round(t_abs - t_start, _TIME_DECIMALS)
+    ctrl_t = t_odo[1:]
+    ctrl_dt = np.round(np.diff(t_odo), _TIME_DECIMALS)
+    ctrl_u = odo.values[:-1, 1:3]
+
+    # ---- readings: barcode -> subject, keep landmarks ------------------------------------
+    m = meas.values
+    bad_range = np.flatnonzero(~(m[:, 2] > 0))
+    if bad_range.size:
+        r = bad_range[0]
+        raise DatasetFormatError(
+            f"expected a positive range, got {m[r, 2]}", p_readings, int(meas.line_numbers[r])
+        )
+    barcodes = m[:, 1]
+    if np.any(barcodes != np.round(barcodes)):
+        r = int(np.flatnonzero(barcodes != np.round(barcodes))[0])
+        raise DatasetFormatError(
+            "expected an integer barcode", p_readings, int(meas.line_numbers[r])
+        )
+    subjects = np.array([barcode_to_subject.get(int(b), -1) for b in barcodes], dtype=np.int64)
+    unknown = subjects < 0
+    robots = np.isin(subjects, list(ROBOT_SUBJECTS))
+    not_mapped = ~unknown & ~robots & ~np.isin(subjects, world.ids)
+    early = m[:, 0] < t_start
+    keep = ~(unknown | robots | not_mapped | early)
+    dropped = {
+        "robot": int(robots.sum()),
+        "unknown_barcode": int(unknown.sum()),
+        "no_landmark_position": int(not_mapped.sum()),
+        "before_odometry": int((early & ~(unknown | robots | not_mapped)).sum()),
+    }
+    order = np.argsort(m[keep, 0], kind="stable")
+    r_t = np.round(m[keep, 0] - t_start, _TIME_DECIMALS)[order]
+    r_z = np.column_stack([m[keep, 2], wrap_angle(m[keep, 3])])[order]
+    r_id = subjects[keep][order]
+
+    # ---- cut, then merge the two streams by time (controls first at equal times) ---------
+    cut = np.inf if opts.max_duration_s is None else float(opts.max_duration_s)
+    n_ctrl = int(np.searchsorted(ctrl_t, cut, side="right"))
+    n_read = int(np.searchsorted(r_t, cut, side="right"))
+    group_t, group_start = np.unique(r_t[:n_read], return_index=True)
+    group_end = np.append(group_start[1:], n_read)
+    times = np.concatenate([ctrl_t[:n_ctrl], group_t])
+    kinds = np.concatenate([np.zeros(n_ctrl, np.int8), np.ones(group_t.size, np.int8)])
+    index = np.concatenate([np.arange(n_ctrl), np.arange(group_t.size)])
+    events: list[Event] = []
+    for j in np.lexsort((kinds, times)):
+        i = int(index[j])
+        if kinds[j] == 0:
+            events.append(Control(float(ctrl_t[i]), ctrl_u[i].copy(), float(ctrl_dt[i])))
+        else:
+            a, b = group_start[i], group_end[i]
+            events.append(LandmarkReadings(float(group_t[i]), r_z[a:b].copy(), r_id[a:b].copy()))
+
+    sensor = LandmarkSensorSpec(
+        kind="range-bearing",
+        noise_cov=np.diag([opts.sigma_range**2, opts.sigma_bearing**2]),
+    )
+    files = [p_barcodes, p_landmarks, p_odometry, p_readings]
+    metadata: dict[str, Any] = {
+        "kind": "real",
+        "source": f"UTIAS MRCLAM Dataset {opts.dataset}, robot {opts.robot}",
+        "files": [str(p.relative_to(root)) for p in files],
+        "start_time_unix_s": t_start,
+        "odometry_samples": len(odo),
+        "controls": n_ctrl,
+        "readings_in_file": len(meas),
+        "readings_kept": int(group_end[-1]) if group_t.size else 0,
+        "reading_events": int(group_t.size),
+        "dropped": dropped,
+        "cut_at_s": None if opts.max_duration_s is None else cut,
+        "options": config_to_dict(opts),
+    }
+    return Dataset(
+        name=f"mrclam{opts.dataset}",
+        events=tuple(events),
+        motion=MotionSpec(UnicycleArc(), np.diag([opts.sigma_v**2, opts.sigma_omega**2])),
+        landmark_sensor=sensor,
+        known_landmarks=world,
+        truth=GroundTruth(landmarks=world),
+        description=(
+            f"UTIAS MRCLAM data set {opts.dataset}, robot {opts.robot}: commanded velocities "
+            "at 100 Hz, camera range-bearing readings of 15 landmarks, Vicon landmark map; "
+            "no prior, no true trajectory"
+        ),
+        metadata=metadata,
+    )
