@@ -173,3 +173,15 @@ def test_registered_variants_apply_their_presets():
         load_dataset("five-features-range", options={"sensor": "bearing"}).landmark_sensor.kind
         == "bearing"
     )
+
+
+def test_readings_respect_the_minimum_range():
+    ds = load_dataset("landmark-loop", seed=4, options={"min_range": 1.0})
+    t_index = {float(t): k for k, t in enumerate(ds.truth.times)}
+    for ev in ds.of_type(LandmarkReadings):
+        true_rb = RangeBearing().predict(
+            ds.truth.poses[t_index[ev.t]], ds.truth.landmarks.position_of(ev.ids)
+        )
+        assert np.all(true_rb[:, 0] >= 1.0)
+    with pytest.raises(ConfigError, match="min_range"):
+        load_dataset("five-features", options={"min_range": 9.0})

@@ -144,6 +144,14 @@ DATASETS: dict[str, DatasetEntry] = {
                 "landmarks/plaza/Plaza1_TL.csv",
             ),
         ),
+        DatasetEntry(
+            "citytrees10000",
+            "real",
+            "iSAM cityTrees10000 (simulated): 10000 poses, 100 landmarks, 4443 robot-frame "
+            "position readings, true poses",
+            "slamkit.datasets.isam_landmarks:load_citytrees10000",
+            files=("isam/cityTrees10000.txt", "isam/groundtruth/cityTrees10000_groundtruth.txt"),
+        ),
     )
 }
 

@@ -16,7 +16,8 @@ event                    meaning
 
 Conventions (also in ``docs/architecture.md``): times in seconds, lengths in metres, angles in
 radians wrapped to ``[-pi, pi)``; poses ``(x, y, theta)``; landmark readings ordered
-``(range, bearing)`` (a single column for range-only or bearing-only sensors). Loaders convert
+``(range, bearing)`` (a single column for range-only or bearing-only sensors), or ``(x, y)``
+in the robot frame for the ``"position"`` kind. Loaders convert
 units and conventions at load time so estimators never see a data set's own quirks.
 
 Events are plain frozen values; the :class:`Dataset` validates the whole stream once (order,
@@ -133,6 +134,9 @@ class LandmarkSensorSpec:
     max_range: float = float("inf")
     fov: float = 2.0 * np.pi
     identities: bool = True
+    min_range: float = 0.0
+    """Landmarks closer than this are not reported (real sensors have a minimum range; a
+    bearing read at millimetres is meaningless and wrecks a linearised filter)."""
 
     def __post_init__(self) -> None:
         if self.kind not in ("range-bearing", "range", "bearing", "position"):
@@ -145,6 +149,10 @@ class LandmarkSensorSpec:
         if not float(self.max_range) > 0:  # +inf (no range limit) is allowed
             raise InputError(f"max_range: expected a number > 0, got {self.max_range!r}")
         object.__setattr__(self, "max_range", float(self.max_range))
+        if not 0.0 <= float(self.min_range) < self.max_range:
+            raise InputError(
+                f"min_range: expected 0 <= min_range < max_range, got {self.min_range!r}"
+            )
         object.__setattr__(self, "fov", as_positive(self.fov, "fov"))
 
     @property

@@ -23,8 +23,21 @@ from slamkit.pipeline.estimator import Estimator, EstimatorFactory
 __all__ = ["ESTIMATORS", "EstimatorEntry", "get_estimator_entry", "list_estimators"]
 
 Requirement = Literal[
-    "motion", "initial_pose", "landmark_sensor", "known_landmarks", "laser", "known_grid"
+    "motion",
+    "initial_pose",
+    "landmark_sensor",
+    "known_landmarks",
+    "laser",
+    "known_grid",
+    "true_poses",
 ]
+"""Parts of a Dataset an estimator may need; ``true_poses`` is for mapping with known poses."""
+
+
+def _has(dataset: Dataset, requirement: Requirement) -> bool:
+    if requirement == "true_poses":
+        return dataset.truth.poses is not None
+    return getattr(dataset, requirement) is not None
 
 
 @dataclass(frozen=True)
@@ -56,7 +69,7 @@ class EstimatorEntry:
 
     def check(self, dataset: Dataset) -> None:
         """Raise :class:`InputError` naming what the data set lacks for this estimator."""
-        missing = [r for r in self.requires if getattr(dataset, r) is None]
+        missing = [r for r in self.requires if not _has(dataset, r)]
         if missing:
             raise InputError(
                 f"estimator {self.name!r} needs {', '.join(missing)}, which data set "
@@ -85,6 +98,14 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.localization.least_squares:LeastSquaresLocalization",
             "slamkit.localization.least_squares:LeastSquaresConfig",
             requires=("landmark_sensor", "known_landmarks"),
+        ),
+        EstimatorEntry(
+            "ekf-mapping",
+            "EKF landmark mapping with known (true) poses; nearest-neighbour association for "
+            "unlabelled readings",
+            "slamkit.mapping.ekf_mapping:EkfMapping",
+            "slamkit.mapping.ekf_mapping:EkfMappingConfig",
+            requires=("landmark_sensor", "true_poses"),
         ),
     )
 }

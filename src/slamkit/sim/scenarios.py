@@ -70,6 +70,8 @@ class LandmarkScenarioConfig:
     """Bearing noise [deg]."""
     max_range: float = 8.0
     """Landmarks farther than this are not seen [m]."""
+    min_range: float = 0.3
+    """Landmarks closer than this are not seen [m] (the robot may drive right past one)."""
     fov_deg: float = 360.0
     """Field of view centred on the heading [deg]."""
     identities: bool = True
@@ -102,6 +104,11 @@ class LandmarkScenarioConfig:
                 raise ConfigError(f"{name}: expected a number >= 0, got {getattr(self, name)}")
         if not (self.sigma_range > 0 and self.sigma_bearing_deg > 0):
             raise ConfigError("sigma_range and sigma_bearing_deg: expected positive numbers")
+        if not 0.0 <= self.min_range < self.max_range:
+            raise ConfigError(
+                f"min_range: expected 0 <= min_range < max_range ({self.max_range}), "
+                f"got {self.min_range}"
+            )
         if self.laps < 1 or self.observe_every < 1:
             raise ConfigError("laps and observe_every: expected integers >= 1")
 
@@ -115,6 +122,7 @@ class LandmarkScenarioConfig:
             kind=self.sensor,
             noise_cov=np.asarray(cov[self.sensor], dtype=float),
             max_range=self.max_range,
+            min_range=self.min_range,
             fov=np.deg2rad(min(self.fov_deg, 360.0)),
             identities=self.identities,
         )

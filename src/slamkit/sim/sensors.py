@@ -20,13 +20,17 @@ def observe_landmarks(
     sensor: LandmarkSensorSpec,
     rng: np.random.Generator,
 ) -> tuple[FloatArray, NDArray[np.int64]]:
-    """Readings ``z (K, m)`` and ids ``(K,)`` of the landmarks within range and field of
-    view of ``pose``; noise ``N(0, sensor.noise_cov)``; ids are ``-1`` (and the order shuffled)
-    when the sensor gives no identities."""
+    """Readings ``z (K, m)`` and ids ``(K,)`` of the landmarks within ``[min_range,
+    max_range]`` and the field of view of ``pose``; noise ``N(0, sensor.noise_cov)``; ids
+    are ``-1`` (and the order shuffled) when the sensor gives no identities."""
     x = as_array(pose, "pose", (3,))
     # Visibility is decided on the noise-free range and bearing.
     rb = RangeBearing().predict(x, landmarks.positions)
-    visible = (rb[:, 0] <= sensor.max_range) & (np.abs(rb[:, 1]) <= sensor.fov / 2.0)
+    visible = (
+        (rb[:, 0] <= sensor.max_range)
+        & (rb[:, 0] >= sensor.min_range)
+        & (np.abs(rb[:, 1]) <= sensor.fov / 2.0)
+    )
     z_true = sensor.model().predict(x, landmarks.positions[visible])
     noise = rng.standard_normal(z_true.shape) @ np.linalg.cholesky(sensor.noise_cov).T
     z = z_true + noise
@@ -34,7 +38,7 @@ def observe_landmarks(
     for j, angular in enumerate(model.angular):
         if angular:
             z[:, j] = wrap_angle(z[:, j])
-    if sensor.kind != "bearing":
+    if sensor.kind in ("range-bearing", "range"):
         z[:, 0] = np.abs(z[:, 0])  # a range reading is never negative
     ids = landmarks.ids[visible].copy()
     if not sensor.identities:
