@@ -62,16 +62,16 @@ DATASETS: dict[str, DatasetEntry] = {
         DatasetEntry(
             "five-features-range",
             "simulated",
-            "the five-feature world with range-only readings (elongated uncertainty)",
+            "the five-feature world, range-only readings in a 120° view (elongated ellipse)",
             "slamkit.sim.scenarios:build_five_features",
-            defaults={"sensor": "range", "sigma_range": 0.1},
+            defaults={"sensor": "range", "fov_deg": 120.0},
         ),
         DatasetEntry(
             "five-features-bearing",
             "simulated",
-            "the five-feature world with bearing-only readings (no sense of depth)",
+            "the five-feature world, bearing-only readings in a 120° view (no sense of depth)",
             "slamkit.sim.scenarios:build_five_features",
-            defaults={"sensor": "bearing"},
+            defaults={"sensor": "bearing", "fov_deg": 120.0},
         ),
         DatasetEntry(
             "five-features-kidnapped",

@@ -1,6 +1,70 @@
-"""Localization: Gaussian beliefs, the shared prediction step and dead reckoning."""
+"""Localization: beliefs, dead reckoning, static least squares, KF/EKF/UKF and MCL.
 
-from slamkit.localization.belief import GaussianBelief, predict
+Functional cores (``predict``, ``kf_update``, ``ekf_update``, ``ukf_update``, ...) work on
+frozen beliefs; the estimator classes are thin stateful shells registered in
+:mod:`slamkit.pipeline.registry`.
+"""
+
+from slamkit.localization.association import Association, associate_ml
+from slamkit.localization.belief import GaussianBelief, predict, predict_unchecked
 from slamkit.localization.dead_reckoning import DeadReckoning, DeadReckoningConfig
+from slamkit.localization.ekf import EkfConfig, EkfLocalization, ekf_predict, ekf_update
+from slamkit.localization.kalman import Gaussian, KalmanFilter, UpdateInfo, kf_predict, kf_update
+from slamkit.localization.least_squares import LeastSquaresConfig, LeastSquaresLocalization
+from slamkit.localization.static import (
+    LeastSquaresResult,
+    PoseFix,
+    PositionFix,
+    localize_from_readings,
+    localize_range_bearing,
+    rls_from_first,
+    rls_init,
+    rls_update,
+    triangulate,
+    trilaterate,
+    weighted_least_squares,
+)
+from slamkit.localization.ukf import (
+    SigmaPointParams,
+    UkfConfig,
+    UkfLocalization,
+    ukf_predict,
+    ukf_update,
+)
 
-__all__ = ["DeadReckoning", "DeadReckoningConfig", "GaussianBelief", "predict"]
+__all__ = [
+    "Association",
+    "DeadReckoning",
+    "DeadReckoningConfig",
+    "EkfConfig",
+    "EkfLocalization",
+    "Gaussian",
+    "GaussianBelief",
+    "KalmanFilter",
+    "LeastSquaresConfig",
+    "LeastSquaresLocalization",
+    "LeastSquaresResult",
+    "PoseFix",
+    "PositionFix",
+    "SigmaPointParams",
+    "UkfConfig",
+    "UkfLocalization",
+    "UpdateInfo",
+    "associate_ml",
+    "ekf_predict",
+    "ekf_update",
+    "kf_predict",
+    "kf_update",
+    "localize_from_readings",
+    "localize_range_bearing",
+    "predict",
+    "predict_unchecked",
+    "rls_from_first",
+    "rls_init",
+    "rls_update",
+    "triangulate",
+    "trilaterate",
+    "ukf_predict",
+    "ukf_update",
+    "weighted_least_squares",
+]

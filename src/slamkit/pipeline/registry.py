@@ -100,6 +100,20 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             requires=("landmark_sensor", "known_landmarks"),
         ),
         EstimatorEntry(
+            "ekf-localization",
+            "EKF localization against a known landmark map (known ids or ML association)",
+            "slamkit.localization.ekf:EkfLocalization",
+            "slamkit.localization.ekf:EkfConfig",
+            requires=("motion", "landmark_sensor", "known_landmarks"),
+        ),
+        EstimatorEntry(
+            "ukf-localization",
+            "UKF localization (augmented sigma points, circular means) against a known map",
+            "slamkit.localization.ukf:UkfLocalization",
+            "slamkit.localization.ukf:UkfConfig",
+            requires=("motion", "landmark_sensor", "known_landmarks"),
+        ),
+        EstimatorEntry(
             "ekf-mapping",
             "EKF landmark mapping with known (true) poses; nearest-neighbour association for "
             "unlabelled readings",

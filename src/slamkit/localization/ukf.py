@@ -1,0 +1,301 @@
+"""UKF localization: the unscented transform instead of Jacobians.
+
+**Sigma points** (Van der Merwe's scaled set, parameters in :class:`SigmaPointParams`): for a
+Gaussian ``N(μ, P)`` of dimension ``n``, with ``c = α² (n + κ)`` (``= n + λ``, ``λ = c − n``)
+and ``L`` a square root of ``P`` (``L Lᵀ = P``, Cholesky), the ``2n + 1`` points are ``μ`` and
+``μ ± √c Lᵢ`` (columns ``Lᵢ``), with weights ``Wm₀ = λ / c``, ``Wc₀ = Wm₀ + 1 − α² + β`` and
+``Wmᵢ = Wcᵢ = 1 / (2c)``.
+
+**Prediction** (:func:`ukf_predict`). The control noise enters the motion model
+non-additively (``g(x, u + ε, dt)``), so it is handled by *augmenting* the state with it: the
+sigma points are drawn from ``N([μ, 0], blockdiag(P, Q))`` (dimension ``n + k``), each is moved
+with its own perturbed control, and the new mean and covariance are the weighted moments of the
+moved poses. (Sampling sigma points of the control alone would ignore the coupling of heading
+uncertainty and control noise that the augmented set keeps.)
+
+**Update** (:func:`ukf_update`). Fresh sigma points of the current belief are passed through
+``h``; ``ẑ`` is their weighted mean, ``S = Σ Wcᵢ (Zᵢ − ẑ)(Zᵢ − ẑ)ᵀ + R`` and
+``P_xz = Σ Wcᵢ (χᵢ − μ)(Zᵢ − ẑ)ᵀ``; then ``K = P_xz S⁻¹``, ``μ ← μ + K ν``,
+``P ← P − K S Kᵀ``.
+
+**Angles.** The mean of headings (state) and bearings (readings) is the weighted *circular*
+mean (:func:`slamkit.geometry.circular_mean`), taken relative to the central sigma point so the
+sums do not cancel; every residual ``χᵢ − μ`` and ``Zᵢ − ẑ`` has its angular components wrapped
+before it enters a covariance, and so has the innovation ``ν``. In the update the state
+residuals are the sigma offsets ``±√c Lᵢ`` themselves (no angles are subtracted there).
+
+A covariance that stops being positive semi-definite (possible with a negative ``Wc₀`` and a
+strongly non-linear model) raises :class:`~slamkit.errors.ConvergenceError`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from slamkit._validation import FloatArray, as_array, as_covariance
+from slamkit.datasets.stream import Dataset
+from slamkit.errors import ConfigError, ConvergenceError, InputError
+from slamkit.geometry import circular_mean, wrap_angle
+from slamkit.localization.belief import GaussianBelief
+from slamkit.localization.ekf import _check_reading, _GaussianFilterConfig, _GaussianLocalization
+from slamkit.localization.kalman import (
+    UpdateInfo,
+    _angular_indices,
+    _check_covariance,
+    _innovation,
+    _move,
+    _predict_measurement,
+    _solve_innovation,
+    _wrap_array,
+    _wrap_components,
+)
+from slamkit.models import LandmarkModel, MotionModel
+
+__all__ = ["SigmaPointParams", "UkfConfig", "UkfLocalization", "ukf_predict", "ukf_update"]
+
+
+@dataclass(frozen=True)
+class SigmaPointParams:
+    """Van der Merwe's scaled sigma points (see the module docstring).
+
+    The defaults ``α = 1, β = 2, κ = 0`` put the points at ``±√n`` standard deviations with
+    non-negative mean weights (``Wm₀ = 0``), which keeps the circular means well conditioned;
+    a small ``α`` (e.g. 1e-3) shrinks the spread towards the EKF's local linearisation at the
+    price of a large negative ``Wm₀``.
+    """
+
+    alpha: float = 1.0
+    """Spread of the points around the mean (> 0)."""
+    beta: float = 2.0
+    """Prior knowledge of the distribution: 2 is optimal for a Gaussian (>= 0)."""
+    kappa: float = 0.0
+    """Secondary scaling; ``n + κ`` must stay > 0 for every dimension ``n`` it is used at."""
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.alpha) and self.alpha > 0):
+            raise ConfigError(f"alpha: expected a number > 0, got {self.alpha}")
+        if not (math.isfinite(self.beta) and self.beta >= 0):
+            raise ConfigError(f"beta: expected a number >= 0, got {self.beta}")
+        if not math.isfinite(self.kappa):
+            raise ConfigError(f"kappa: expected a finite number, got {self.kappa}")
+
+
+@lru_cache(maxsize=64)
+def _weights(params: SigmaPointParams, n: int) -> tuple[FloatArray, FloatArray, float]:
+    """``(Wm (2n+1,), Wc (2n+1,), c)`` with ``c = α² (n + κ)`` (read-only arrays)."""
+    c = params.alpha**2 * (n + params.kappa)
+    if not c > 0:
+        raise InputError(
+            f"sigma points: alpha² (n + kappa) must be > 0, got {c:.3g} for n = {n} "
+            f"(alpha = {params.alpha}, kappa = {params.kappa})"
+        )
+    lam = c - n
+    Wm = np.full(2 * n + 1, 0.5 / c)
+    Wc = Wm.copy()
+    Wm[0] = lam / c
+    Wc[0] = lam / c + 1.0 - params.alpha**2 + params.beta
+    Wm.setflags(write=False)
+    Wc.setflags(write=False)
+    return Wm, Wc, c
+
+
+def _sqrt_psd(P: FloatArray, where: str) -> FloatArray:
+    """A square root ``L`` with ``L Lᵀ = P``: the Cholesky factor when ``P`` is positive
+    definite, else (a singular PSD ``P``, e.g. a known start) a symmetric root from ``eigh``."""
+    try:
+        return np.asarray(np.linalg.cholesky(P), dtype=np.float64)
+    except np.linalg.LinAlgError:
+        w, V = np.linalg.eigh(P)
+        scale = max(float(np.abs(w).max()), 1e-300)
+        if w[0] < -1e-9 * scale:
+            raise ConvergenceError(
+                f"{where}: the covariance lost positive definiteness (smallest eigenvalue "
+                f"{w[0]:.3g})"
+            ) from None
+        return np.asarray(V * np.sqrt(np.clip(w, 0.0, None)), dtype=np.float64)
+
+
+def _circular_mean_about(angles: FloatArray, weights: FloatArray, ref: float) -> float:
+    """Weighted circular mean of ``angles`` computed about the reference angle ``ref``: the
+    offsets ``angles − ref`` are small, so the weighted sums of sines and cosines keep full
+    precision even with a large negative central weight. Wrapped to ``[-π, π)``."""
+    a = ref + float(circular_mean(angles - ref, weights))
+    return a if -math.pi <= a < math.pi else float(wrap_angle(a))
+
+
+def _ukf_predict_arrays(
+    mean: FloatArray,
+    cov: FloatArray,
+    u: FloatArray,
+    dt: float,
+    model: MotionModel,
+    Q: FloatArray,
+    params: SigmaPointParams,
+    sqrt_Q: FloatArray | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`ukf_predict` on validated arrays; ``sqrt_Q`` may carry a precomputed root of Q."""
+    n, k = mean.size, u.size
+    N = n + k
+    Wm, Wc, c = _weights(params, N)
+    s = math.sqrt(c)
+    Lx = _sqrt_psd(cov, "ukf_predict")
+    Lq = _sqrt_psd(Q, "ukf_predict control noise") if sqrt_Q is None else sqrt_Q
+    # Augmented sigma points [x, ε]: the centre, then +√c and −√c times the columns of
+    # blockdiag(Lx, Lq). Rows 1..n and N+1..N+n move the state, the others the control noise.
+    X = np.tile(mean, (2 * N + 1, 1))
+    E = np.zeros((2 * N + 1, k))
+    X[1 : n + 1] += s * Lx.T
+    X[N + 1 : N + n + 1] -= s * Lx.T
+    E[n + 1 : N + 1] = s * Lq.T
+    E[N + n + 1 :] = -s * Lq.T
+    Y = X  # moved in place: the pose part through g, the rest (if any) unchanged
+    Y[:, :3] = _move(model, X[:, :3], u + E, dt)
+    new_mean = Wm @ Y
+    new_mean[2] = _circular_mean_about(Y[:, 2], Wm, float(Y[0, 2]))
+    D = Y - new_mean
+    D[:, 2] = _wrap_array(D[:, 2])  # heading residuals wrapped before the outer products
+    new_cov = (D.T * Wc) @ D
+    new_cov = 0.5 * (new_cov + new_cov.T)
+    _check_covariance(new_cov, "ukf_predict")
+    return new_mean, new_cov
+
+
+def _ukf_update_arrays(
+    mean: FloatArray,
+    cov: FloatArray,
+    z: FloatArray,
+    landmark: FloatArray,
+    model: LandmarkModel,
+    R: FloatArray,
+    params: SigmaPointParams,
+    angular: tuple[int, ...],
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, float]:
+    """:func:`ukf_update` on validated arrays: ``(mean, cov, ν, S, nis)``."""
+    n = mean.size
+    Wm, Wc, c = _weights(params, n)
+    L = math.sqrt(c) * _sqrt_psd(cov, "ukf_update")
+    dX = np.zeros((2 * n + 1, n))  # χᵢ − μ: the sigma offsets
+    dX[1 : n + 1] = L.T
+    dX[n + 1 :] = -L.T
+    X = mean + dX
+    Z = _predict_measurement(model, X[:, :3], landmark)  # (2n+1, m)
+    z_hat = Wm @ Z
+    for i in angular:
+        z_hat[i] = _circular_mean_about(Z[:, i], Wm, float(Z[0, i]))
+    dZ = Z - z_hat
+    for i in angular:
+        dZ[:, i] = _wrap_array(dZ[:, i])  # bearing residuals wrapped before the outer products
+    WdZ = dZ.T * Wc  # (m, 2n+1)
+    S = WdZ @ dZ + R
+    S = 0.5 * (S + S.T)
+    Pxz = (WdZ @ dX).T  # Σ Wcᵢ (χᵢ − μ)(Zᵢ − ẑ)ᵀ, (n, m)
+    nu = _innovation(model, z, z_hat, angular)
+    # One solve S X = [P_xzᵀ | ν] (no S⁻¹): X[:, :n] = Kᵀ (S symmetric), X[:, n] = S⁻¹ ν.
+    sol = _solve_innovation(S, np.column_stack((Pxz.T, nu)), "ukf_update")
+    K = sol[:, :n].T
+    nis = float(nu @ sol[:, n])
+    new_mean = mean + K @ nu
+    _wrap_components(new_mean, (2,))
+    new_cov = cov - K @ S @ K.T
+    new_cov = 0.5 * (new_cov + new_cov.T)
+    _check_covariance(new_cov, "ukf_update")
+    return new_mean, new_cov, nu, S, nis
+
+
+# --------------------------------------------------------------------------------------------
+# public functional core
+# --------------------------------------------------------------------------------------------
+
+
+def ukf_predict(
+    belief: GaussianBelief,
+    u: ArrayLike,
+    dt: float,
+    motion_model: MotionModel,
+    Q: ArrayLike,
+    params: SigmaPointParams | None = None,
+) -> GaussianBelief:
+    """The UKF prediction with control ``u (k,)`` over ``dt`` seconds and control-noise
+    covariance ``Q (k, k)`` (positive semi-definite), by the augmented unscented transform
+    (module docstring). ``params`` defaults to :class:`SigmaPointParams()`. Only the pose
+    (the first three entries) moves; the rest of a longer state is carried along."""
+    if not isinstance(motion_model, MotionModel):
+        raise InputError(f"motion_model: expected a MotionModel, got {type(motion_model)}")
+    k = motion_model.control_dim
+    ua = as_array(u, "control u", (k,))
+    dta = float(dt)
+    if not (math.isfinite(dta) and dta >= 0):
+        raise InputError(f"dt: expected a number >= 0, got {dt!r}")
+    Qa = as_covariance(Q, "Q", k, semidefinite=True)
+    p = SigmaPointParams() if params is None else params
+    mean, cov = _ukf_predict_arrays(belief.mean, belief.cov, ua, dta, motion_model, Qa, p)
+    return GaussianBelief(mean, cov)
+
+
+def ukf_update(
+    belief: GaussianBelief,
+    z: ArrayLike,
+    landmark: ArrayLike,
+    model: LandmarkModel,
+    R: ArrayLike,
+    params: SigmaPointParams | None = None,
+) -> tuple[GaussianBelief, UpdateInfo]:
+    """One UKF update with the reading ``z (m,)`` of the landmark at ``landmark (2,)``,
+    measurement model ``model`` and noise ``R (m, m)`` (module docstring). Returns the new
+    belief and the innovation statistics. Errors as :func:`slamkit.localization.ekf.ekf_update`.
+    """
+    za, la, Ra = _check_reading(z, landmark, model, R)
+    p = SigmaPointParams() if params is None else params
+    idx = _angular_indices(model)
+    mean, cov, nu, S, nis = _ukf_update_arrays(belief.mean, belief.cov, za, la, model, Ra, p, idx)
+    return GaussianBelief(mean, cov), UpdateInfo(nu, S, nis)
+
+
+# --------------------------------------------------------------------------------------------
+# estimator
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class UkfConfig(_GaussianFilterConfig):
+    """Settings of :class:`UkfLocalization`: those of the EKF plus the sigma points."""
+
+    sigma_points: SigmaPointParams = field(default_factory=SigmaPointParams)
+    """α, β, κ of the scaled sigma points (a ``[estimator.sigma_points]`` table in a file)."""
+
+
+class UkfLocalization(_GaussianLocalization):
+    """UKF localization with point landmarks of a known map; the same events, association
+    and diagnostics as :class:`~slamkit.localization.ekf.EkfLocalization`, configured by
+    :class:`UkfConfig`."""
+
+    name = "UKF localization"
+
+    def __init__(self, dataset: Dataset, config: UkfConfig, rng: np.random.Generator) -> None:
+        super().__init__(dataset, config, rng)
+        self._params = config.sigma_points
+        self._sqrt_Q = _sqrt_psd(self._Q, "control noise")
+        # Fail at construction, not at the first step, if the sigma points are degenerate.
+        _weights(self._params, 3)
+        _weights(self._params, 3 + self._Q.shape[0])
+
+    def _predict(self, u: FloatArray, dt: float) -> None:
+        assert self._mean is not None and self._cov is not None
+        self._mean, self._cov = _ukf_predict_arrays(
+            self._mean, self._cov, u, dt, self._motion, self._Q, self._params, self._sqrt_Q
+        )
+
+    def _update(self, z: FloatArray, landmark: FloatArray, gate: float) -> tuple[float, bool]:
+        assert self._mean is not None and self._cov is not None
+        mean, cov, _, _, nis = _ukf_update_arrays(
+            self._mean, self._cov, z, landmark, self._meas, self._R, self._params, self._angular
+        )
+        if nis > gate:
+            return nis, False
+        self._mean, self._cov = mean, cov
+        return nis, True
