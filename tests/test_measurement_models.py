@@ -15,6 +15,7 @@ from slamkit.models import (
     LandmarkModel,
     RangeBearing,
     RangeOnly,
+    RelativePosition,
     landmark_initial_covariance,
 )
 
@@ -247,3 +248,18 @@ def test_bad_inputs_raise_typed_errors() -> None:
         RangeOnly().sample([0, 0, 0], [1.0, 1.0], np.eye(2), rng)
     with pytest.raises(NonFiniteError):
         rb.inverse([0, 0, 0], [np.nan, 0.0])
+
+
+@pytest.mark.parametrize(
+    "model", [RangeBearing(), RangeOnly(), BearingOnly(), RelativePosition()], ids=repr
+)
+def test_single_pose_kernel_agrees_with_the_batched_kernels(model):
+    # The EKF's fused plain-float kernel must equal the vectorised h and H_pose exactly.
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        pose = np.array([*rng.normal(0, 5, 2), rng.uniform(-np.pi, np.pi)])
+        lm = rng.normal(0, 5, 2)
+        h, H = model._h_and_pose_jacobian(pose, lm)
+        np.testing.assert_allclose(h, model.predict(pose, lm), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(H, model.jacobians(pose, lm)[0], rtol=0, atol=1e-12)
+        assert h.shape == (model.dim,) and H.shape == (model.dim, 3)

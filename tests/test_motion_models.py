@@ -492,3 +492,21 @@ def test_bad_inputs_raise_typed_errors() -> None:
         Ackermann(1.0, (1.0, 2.0, 3.0))  # type: ignore[arg-type]
     with pytest.raises(ShapeError):
         odometry_control([0, 0, 0], [[0, 0]])
+
+
+@pytest.mark.parametrize(
+    "model",
+    [UnicycleEuler(), UnicycleArc(), DifferentialDrive(0.5), OdometryModel(),
+     Ackermann(2.83, (3.78, 0.5), 0.76)],
+    ids=repr,
+)  # fmt: skip
+def test_single_pose_step_agrees_with_the_batched_kernels(model):
+    rng = np.random.default_rng(5)
+    for w in (0.0, 1e-9, 0.3, -0.5):  # Ackermann steering must stay below pi/2
+        x = np.array([*rng.normal(0, 5, 2), rng.uniform(-np.pi, np.pi)])
+        u = np.array([0.8, w, 0.1][: model.control_dim])
+        g, G, V = model._step_single(x, u, 0.1)
+        np.testing.assert_allclose(g, model.apply(x, u, 0.1), rtol=0, atol=1e-12)
+        G_ref, V_ref = model.jacobians(x, u, 0.1)
+        np.testing.assert_allclose(G, G_ref, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(V, V_ref, rtol=0, atol=1e-12)

@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike
 from slamkit._validation import FloatArray, as_array
 from slamkit.errors import InputError
 
-__all__ = ["angle_diff", "circular_mean", "pose_mean", "wrap_angle"]
+__all__ = ["angle_diff", "circular_mean", "pose_mean", "wrap_angle", "wrap_angle_float"]
 
 _TWO_PI = 2.0 * np.pi
 
@@ -23,7 +23,7 @@ def wrap_angle(angle: ArrayLike) -> FloatArray:
     """Wrap angles (radians) to ``[-pi, pi)``; works on scalars and arrays of any shape."""
     if isinstance(angle, float | int) or (isinstance(angle, np.ndarray) and angle.ndim == 0):
         # Filters call this once per reading: plain floats are ~10x cheaper than 0-d arrays.
-        return np.float64(_wrap_scalar(float(angle)))  # type: ignore[return-value]
+        return np.float64(wrap_angle_float(float(angle)))  # type: ignore[return-value]
     a = np.asarray(angle, dtype=np.float64)
     # a - 2pi * floor((a + pi) / 2pi) is ~4x faster than np.mod on large arrays. Rounding can
     # leave a result a hair outside [-pi, pi) (e.g. a = pi - 1e-16 gives -pi - 4e-16), so
@@ -36,7 +36,8 @@ def wrap_angle(angle: ArrayLike) -> FloatArray:
     return np.where((a >= -np.pi) & (a < np.pi), a, w)
 
 
-def _wrap_scalar(a: float) -> float:
+def wrap_angle_float(a: float) -> float:
+    """:func:`wrap_angle` for one Python float (for per-reading kernels)."""
     if -math.pi <= a < math.pi:
         return a
     w = a - _TWO_PI * math.floor((a + math.pi) / _TWO_PI)

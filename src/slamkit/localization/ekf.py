@@ -44,6 +44,7 @@ from slamkit.localization.kalman import (
     _wrap_components,
 )
 from slamkit.models import LandmarkModel, MotionModel, odometry_control
+from slamkit.models.motion import _MotionBase
 from slamkit.pipeline.estimator import EstimatorOutput, InnovationLog, PoseEstimate
 from slamkit.prob import chi2_gate
 
@@ -78,13 +79,16 @@ def _predict_arrays(
     """:func:`ekf_predict` on validated arrays (the estimators' fast path; same equations as
     :func:`slamkit.localization.belief.predict`, checked against it in the tests)."""
     x = mean[:3]
-    G, V = _motion_jacobians(model, x, u, dt)
+    if isinstance(model, _MotionBase):  # one pose: the fused plain-float kernel
+        moved, G, V = model._step_single(x, u, dt)
+    else:
+        moved, (G, V) = _move(model, x, u, dt), _motion_jacobians(model, x, u, dt)
     if mean.size == 3:
-        new_mean = _move(model, x, u, dt)
+        new_mean = moved
         new_cov = G @ cov @ G.T + V @ Q @ V.T
     else:  # landmarks do not move: only the pose block and the pose-map cross terms change
         new_mean = mean.copy()
-        new_mean[:3] = _move(model, x, u, dt)
+        new_mean[:3] = moved
         new_cov = cov.copy()
         new_cov[:3, :3] = G @ cov[:3, :3] @ G.T + V @ Q @ V.T
         new_cov[:3, 3:] = G @ cov[:3, 3:]

@@ -26,11 +26,13 @@ fast path, run on arrays validated once). A result that is not a covariance any 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import TypeVar
 
 import numpy as np
+import scipy.linalg
 from numpy.typing import ArrayLike
 
 from slamkit._validation import FloatArray, as_array, as_covariance
@@ -105,38 +107,50 @@ def _check_finite(cov: FloatArray, where: str) -> None:
 
     Enough after a Joseph-form update or a linearised prediction: both are sums of terms
     ``A P Aᵀ`` with ``P`` PSD, so they can lose definiteness by rounding only, never by more.
+    (One sum is checked: it is finite exactly when every entry is, barring overflow near
+    1e308, which the element-wise check then catches.)
     """
-    if not np.isfinite(cov).all():
+    if not math.isfinite(float(cov.sum())) and not np.isfinite(cov).all():
         raise ConvergenceError(f"{where}: the covariance became non-finite")
 
 
-def _solve_innovation(S: FloatArray, rhs: FloatArray, where: str) -> FloatArray:
-    """``S⁻¹ rhs`` for the innovation covariance ``S (m, m)``; ConvergenceError unless S is
-    positive definite (a filter whose S is not has diverged).
+def _small_spd_inverse(S: FloatArray, where: str) -> FloatArray | None:
+    """``S⁻¹`` of a 1x1 or 2x2 innovation covariance by its closed form, after proving it
+    positive definite (Sylvester: ``S₀₀ > 0`` and ``det S > 0``); ``None`` for larger ``S``.
 
-    Readings have one to three components, where the fixed cost of a LAPACK call dominates:
-    for ``m = 1`` the solve is a division, for ``m = 2`` definiteness is Sylvester's criterion
-    (``S₀₀ > 0`` and ``det S > 0``) before one LU solve; larger ``S`` are proved definite by a
-    Cholesky factorisation.
+    Readings have one or two components, where a LAPACK call costs ten times the arithmetic;
+    for a positive definite 2x2 matrix the adjugate formula is as accurate as a solve (both
+    lose what the conditioning of ``S`` dictates, nothing more).
     """
     m = S.shape[0]
     if m == 1:
         s = float(S[0, 0])
         if not s > 0.0:
             raise ConvergenceError(f"{where}: the innovation variance S = {s:.3g} is not > 0")
-        return rhs / s
+        return np.array([[1.0 / s]])
     if m == 2:
         a, b, c, d = float(S[0, 0]), float(S[0, 1]), float(S[1, 0]), float(S[1, 1])
-        definite = a > 0.0 and a * d - b * c > 0.0
-    else:
-        try:
-            np.linalg.cholesky(S)
-            definite = True
-        except np.linalg.LinAlgError:
-            definite = False
-    if not definite:
-        raise ConvergenceError(f"{where}: the innovation covariance S is not positive definite")
-    return np.asarray(np.linalg.solve(S, rhs), dtype=np.float64)
+        det = a * d - b * c
+        if not (a > 0.0 and det > 0.0):
+            raise ConvergenceError(f"{where}: the innovation covariance S is not positive definite")
+        return np.array([[d / det, -b / det], [-c / det, a / det]])
+    return None
+
+
+def _solve_innovation(S: FloatArray, rhs: FloatArray, where: str) -> FloatArray:
+    """``S⁻¹ rhs`` for an innovation covariance ``S (m, m)``; ConvergenceError unless S is
+    positive definite (a filter whose S is not has diverged). Closed form for ``m <= 2``
+    (:func:`_small_spd_inverse`), else a Cholesky factorisation and triangular solves."""
+    inv = _small_spd_inverse(S, where)
+    if inv is not None:
+        return inv @ rhs
+    try:
+        factor = scipy.linalg.cho_factor(S)
+    except np.linalg.LinAlgError:
+        raise ConvergenceError(
+            f"{where}: the innovation covariance S is not positive definite"
+        ) from None
+    return np.asarray(scipy.linalg.cho_solve(factor, rhs), dtype=np.float64)
 
 
 @lru_cache(maxsize=16)
@@ -161,16 +175,17 @@ def _gain_update(
     """
     n = mean.size
     PHt = cov @ H.T  # (n, m)
-    S = H @ PHt + R  # symmetric to rounding (P is); only solved with, never accumulated
-    # Solve S X = [H P | ν] once instead of forming S⁻¹: cheaper, and exact to the
-    # conditioning of S rather than squared by an explicit inverse. As S and P are
-    # symmetric, the first n columns of X are Kᵀ = S⁻¹ H P and the last one is S⁻¹ ν.
-    rhs = np.empty((nu.size, n + 1))
-    rhs[:, :n] = PHt.T
-    rhs[:, n] = nu
-    X = _solve_innovation(S, rhs, where)
-    K = X[:, :n].T  # K = P Hᵀ S⁻¹
-    nis = float(nu @ X[:, n])  # νᵀ S⁻¹ ν
+    S = H @ PHt + R  # symmetric to rounding (P is)
+    S_inv = _small_spd_inverse(S, where)
+    if S_inv is not None:  # one or two components: the closed form (see there)
+        K = PHt @ S_inv  # K = P Hᵀ S⁻¹
+        Sinv_nu = S_inv @ nu
+    else:
+        # Solve S X = [H P | ν] once instead of forming S⁻¹. As S and P are symmetric, the
+        # first n columns of X are Kᵀ = S⁻¹ H P and the last one is S⁻¹ ν.
+        X = _solve_innovation(S, np.column_stack([PHt.T, nu]), where)
+        K, Sinv_nu = X[:, :n].T, X[:, n]
+    nis = float(nu @ Sinv_nu)  # νᵀ S⁻¹ ν
     new_mean = mean + K @ nu
     # Joseph form: P ← (I − K H) P (I − K H)ᵀ + K R Kᵀ (PSD by construction, see the module
     # docstring), then symmetrised against round-off.
@@ -237,6 +252,8 @@ def _measure(
     """``(h(pose, landmark), H_pose)``; batch axes as in the model (pose and landmark must
     already have the same batch shape)."""
     if isinstance(model, _LandmarkBase):
+        if pose.ndim == 1 and landmark.ndim == 1:
+            return model._h_and_pose_jacobian(pose, landmark)
         return model._h(pose, landmark), model._jac(pose, landmark)[0]
     return model.predict(pose, landmark), model.jacobians(pose, landmark)[0]
 

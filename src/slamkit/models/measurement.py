@@ -18,6 +18,7 @@ Conventions:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar, Protocol, runtime_checkable
 
@@ -26,7 +27,7 @@ from numpy.typing import ArrayLike
 
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.errors import GeometryError, InputError, ShapeError
-from slamkit.geometry.angles import wrap_angle
+from slamkit.geometry.angles import wrap_angle, wrap_angle_float
 from slamkit.models.motion import _gaussian_draws
 
 __all__ = [
@@ -99,6 +100,18 @@ def _offsets(
     return dx, dy, r
 
 
+def _offsets_single(p: FloatArray, l: FloatArray) -> tuple[float, float, float]:
+    """:func:`_offsets` for one pose and one landmark, as plain floats (direction needed)."""
+    dx, dy = float(l[0]) - float(p[0]), float(l[1]) - float(p[1])
+    r = math.hypot(dx, dy)
+    if r < MIN_RANGE:
+        raise GeometryError(
+            f"a landmark closer than {MIN_RANGE:g} m to the sensor: the bearing and the "
+            "Jacobians are undefined there"
+        )
+    return dx, dy, r
+
+
 class _LandmarkBase:
     """Validation, residuals and sampling shared by the landmark models."""
 
@@ -110,6 +123,13 @@ class _LandmarkBase:
 
     def _jac(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
         raise NotImplementedError
+
+    def _h_and_pose_jacobian(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``(h (m,), H_pose (m, 3))`` for ONE validated pose ``(3,)`` and landmark ``(2,)``:
+        what an EKF update needs. Subclasses override it with plain-float arithmetic (NumPy's
+        per-call overhead on 0-d arrays is ~20x the arithmetic); a test checks every override
+        against the batched kernels ``_h`` and ``_jac``."""
+        return self._h(p, l), self._jac(p, l)[0]
 
     def predict(self, pose: ArrayLike, landmark: ArrayLike) -> FloatArray:
         """Expected measurement ``(..., m)`` of ``landmark (..., 2)`` from ``pose (..., 3)``."""
@@ -178,6 +198,13 @@ class RangeBearing(_LandmarkBase):
         Hp[..., 1, 2] = -1.0
         return Hp, Hl
 
+    def _h_and_pose_jacobian(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
+        dx, dy, r = _offsets_single(p, l)
+        q = r * r
+        bearing = wrap_angle_float(math.atan2(dy, dx) - float(p[2]))
+        H = np.array([[-dx / r, -dy / r, 0.0], [dy / q, -dx / q, -1.0]])
+        return np.array([r, bearing]), H
+
     def inverse(self, pose: ArrayLike, z: ArrayLike) -> FloatArray:
         """The landmark ``(..., 2)`` seen at ``z = (range, bearing)`` from ``pose``:
         ``l = p + r (cos(theta + bearing), sin(theta + bearing))``."""
@@ -232,6 +259,10 @@ class RangeOnly(_LandmarkBase):
         _, _, r = _offsets(p, l, need_direction=False)
         return r[..., None]
 
+    def _h_and_pose_jacobian(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
+        dx, dy, r = _offsets_single(p, l)
+        return np.array([r]), np.array([[-dx / r, -dy / r, 0.0]])
+
     def _jac(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
         dx, dy, r = _offsets(p, l, need_direction=True)
         Hl = np.stack([dx / r, dy / r], axis=-1)[..., None, :]
@@ -249,6 +280,12 @@ class BearingOnly(_LandmarkBase):
     def _h(self, p: FloatArray, l: FloatArray) -> FloatArray:
         dx, dy, _ = _offsets(p, l, need_direction=True)
         return wrap_angle(np.arctan2(dy, dx) - p[..., 2])[..., None]
+
+    def _h_and_pose_jacobian(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
+        dx, dy, r = _offsets_single(p, l)
+        q = r * r
+        bearing = wrap_angle_float(math.atan2(dy, dx) - float(p[2]))
+        return np.array([bearing]), np.array([[dy / q, -dx / q, -1.0]])
 
     def _jac(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
         dx, dy, r = _offsets(p, l, need_direction=True)

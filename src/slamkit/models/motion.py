@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike
 
 from slamkit._validation import FloatArray, as_array, as_covariance, as_positive
 from slamkit.errors import GeometryError, InputError, ShapeError
-from slamkit.geometry.angles import wrap_angle
+from slamkit.geometry.angles import wrap_angle, wrap_angle_float
 
 __all__ = [
     "Ackermann",
@@ -133,6 +133,15 @@ class _MotionBase:
 
     def _jac(self, x: FloatArray, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
         raise NotImplementedError
+
+    def _step_single(
+        self, x: FloatArray, u: FloatArray, dt: float
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``(g, G, V)`` for ONE validated pose ``(3,)`` and control ``(k,)``: an EKF
+        prediction. Overrides use plain floats (NumPy's per-call overhead on 0-d arrays
+        dominates there); a test checks each against the batched ``_g`` and ``_jac``."""
+        G, V = self._jac(x, u, dt)
+        return self._g(x, u, dt), G, V
 
     def apply(self, x: ArrayLike, u: ArrayLike, dt: float) -> FloatArray:
         """``g(x, u, dt)``: poses ``(..., 3)`` after one step, heading in ``[-pi, pi)``."""
@@ -298,6 +307,16 @@ class UnicycleEuler(_MotionBase):
     def _g(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
         return _euler_g(x, u[..., 0], u[..., 1], dt)
 
+    def _step_single(
+        self, x: FloatArray, u: FloatArray, dt: float
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        th, v, w = float(x[2]), float(u[0]), float(u[1])
+        c, s = math.cos(th), math.sin(th)
+        g = np.array([x[0] + v * c * dt, x[1] + v * s * dt, wrap_angle_float(th + w * dt)])
+        G = np.array([[1.0, 0.0, -v * s * dt], [0.0, 1.0, v * c * dt], [0.0, 0.0, 1.0]])
+        V = np.array([[c * dt, 0.0], [s * dt, 0.0], [0.0, dt]])
+        return g, G, V
+
     def _jac(self, x: FloatArray, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
         return _euler_jac(x, u[..., 0], u[..., 1], dt)
 
@@ -320,6 +339,28 @@ class UnicycleArc(_MotionBase):
 
     def _g(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
         return _arc_g(x, u[..., 0], u[..., 1], dt)
+
+    def _step_single(
+        self, x: FloatArray, u: FloatArray, dt: float
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        # The same chord form as _arc_g / _arc_jac, in plain floats.
+        th, v, w = float(x[2]), float(u[0]), float(u[1])
+        phi = w * dt
+        s, ds = _sinc_half_scalar(phi)
+        mid = th + phi / 2.0
+        c, sn = math.cos(mid), math.sin(mid)
+        chord = v * dt * s
+        g = np.array([x[0] + chord * c, x[1] + chord * sn, wrap_angle_float(th + phi)])
+        G = np.array([[1.0, 0.0, -chord * sn], [0.0, 1.0, chord * c], [0.0, 0.0, 1.0]])
+        vdt2 = v * dt * dt
+        V = np.array(
+            [
+                [dt * s * c, vdt2 * (ds * c - 0.5 * s * sn)],
+                [dt * s * sn, vdt2 * (ds * sn + 0.5 * s * c)],
+                [0.0, dt],
+            ]
+        )
+        return g, G, V
 
     def _jac(self, x: FloatArray, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
         return _arc_jac(x, u[..., 0], u[..., 1], dt)
