@@ -185,3 +185,28 @@ def test_readings_respect_the_minimum_range():
         assert np.all(true_rb[:, 0] >= 1.0)
     with pytest.raises(ConfigError, match="min_range"):
         load_dataset("five-features", options={"min_range": 9.0})
+
+
+def test_the_laser_robot_never_crosses_a_wall():
+    # Closed-loop driving keeps the true robot on its route: no step of the true path
+    # intersects a wall segment, on the plain tour and on the kidnapped one (the jump itself
+    # excluded: the robot is carried).
+    for name in ("rooms-laser", "rooms-laser-kidnapped"):
+        ds = load_dataset(name, seed=5)
+        p = ds.truth.poses[:, :2]
+        a, b = p[:-1], p[1:]
+        step = np.hypot(*(b - a).T)
+        walls = ds.truth.walls.segments
+        c, d = walls[:, 0], walls[:, 1]
+
+        def cross(o, u, v):
+            return (u[..., 0] - o[..., 0]) * (v[..., 1] - o[..., 1]) - (u[..., 1] - o[..., 1]) * (
+                v[..., 0] - o[..., 0]
+            )
+
+        A, B = a[:, None], b[:, None]
+        hit = (np.sign(cross(A, B, c)) != np.sign(cross(A, B, d))) & (
+            np.sign(cross(c, d, A)) != np.sign(cross(c, d, B))
+        )
+        moving = step < 1.0  # exclude the kidnapping jump
+        assert not np.any(hit[moving]), name

@@ -7,21 +7,15 @@ Heavy imports happen inside the commands so ``slamkit --help`` stays fast.
 
 from __future__ import annotations
 
-import functools
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Any, ParamSpec, TypeVar
+from typing import Annotated, Any
 
 import typer
-from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from slamkit.errors import SlamkitError
-
-P = ParamSpec("P")
-R = TypeVar("R")
+from slamkit.cli._common import console, known_errors, progress_bar, split_config
+from slamkit.cli.map_cmd import map_app
 
 app = typer.Typer(
     name="slamkit",
@@ -32,65 +26,7 @@ app = typer.Typer(
 )
 data_app = typer.Typer(help="Data sets: simulated scenarios and real-data loaders.")
 app.add_typer(data_app, name="data")
-
-console = Console()
-err_console = Console(stderr=True)
-
-
-def _known_errors(fn: Callable[P, R]) -> Callable[P, R]:
-    """Turn slamkit's own errors into one line on stderr and exit code 1."""
-
-    @functools.wraps(fn)
-    def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
-        try:
-            return fn(*args, **kwargs)
-        except SlamkitError as exc:
-            err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
-            raise typer.Exit(1) from None
-
-    return wrapper
-
-
-@contextmanager
-def _progress_bar(label: str) -> Iterator[Callable[[int, int], None]]:
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        TextColumn("{task.completed}/{task.total} events"),
-        TimeElapsedColumn(),
-        console=err_console,
-        transient=True,
-        disable=not err_console.is_terminal,
-    ) as bar:
-        task = bar.add_task(label, total=None)
-
-        def update(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total)
-
-        yield update
-
-
-def _split_config(path: Path | None) -> tuple[dict[str, Any], dict[str, Any], int | None]:
-    """``[estimator]``, ``[dataset]`` tables and an optional top-level ``seed``."""
-    if path is None:
-        return {}, {}, None
-    from slamkit.config import load_config_file
-    from slamkit.errors import ConfigError
-
-    raw = load_config_file(path)
-    unknown = sorted(set(raw) - {"estimator", "dataset", "seed"})
-    if unknown:
-        raise ConfigError(
-            f"{path}: unknown section(s) {', '.join(unknown)}; expected estimator, dataset, seed"
-        )
-    est, ds, seed = raw.get("estimator", {}), raw.get("dataset", {}), raw.get("seed")
-    est = {k: v for k, v in est.items() if k != "name"}
-    ds = {k: v for k, v in ds.items() if k != "name"}
-    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
-        raise ConfigError(f"{path}: seed must be an integer, got {seed!r}")
-    return est, ds, seed
+app.add_typer(map_app, name="map")
 
 
 def _render_metrics(metrics: dict[str, Any]) -> Table:
@@ -134,7 +70,7 @@ def _run(
 ) -> None:
     from slamkit.app import RunRequest, run_job
 
-    est_cfg, ds_opts, cfg_seed = _split_config(config)
+    est_cfg, ds_opts, cfg_seed = split_config(config, "estimator")
     request = RunRequest(
         estimator=estimator,
         dataset=data,
@@ -146,14 +82,14 @@ def _run(
         plots=plots,
         overwrite=overwrite,
     )
-    with _progress_bar(f"{estimator} on {data}") as progress:
+    with progress_bar(f"{estimator} on {data}") as progress:
         report = run_job(request, progress)
     console.print(_render_metrics(report.metrics))
     console.print(f"wrote {', '.join(report.files)} to [bold]{report.out_dir}[/]")
 
 
 @app.command("run")
-@_known_errors
+@known_errors
 def run_command(
     estimator: Annotated[str, typer.Argument(help="Estimator name (see `slamkit estimators`).")],
     data: Annotated[str, typer.Option("--data", "-d", help="Data set name.")] = "five-features",
@@ -186,7 +122,7 @@ def run_command(
 
 
 @app.command("demo")
-@_known_errors
+@known_errors
 def demo_command(
     out: Annotated[Path, typer.Option(help="Output folder.")] = Path("results/demo"),
     seed: Annotated[int, typer.Option(help="Seed of the simulated world.")] = 0,
@@ -221,7 +157,7 @@ def estimators_command() -> None:
 
 
 @data_app.command("list")
-@_known_errors
+@known_errors
 def data_list_command(
     data_root: Annotated[
         Path | None, typer.Option(help="Folder of the real data sets (else $SLAMKIT_DATA).")

@@ -152,6 +152,37 @@ DATASETS: dict[str, DatasetEntry] = {
             "slamkit.datasets.isam_landmarks:load_citytrees10000",
             files=("isam/cityTrees10000.txt", "isam/groundtruth/cityTrees10000_groundtruth.txt"),
         ),
+        DatasetEntry(
+            "intel",
+            "real",
+            "Intel Research Lab, corrected CARMEN log: 910 scans × 180 beams, corrected poses "
+            "as truth, odometry = truth + known noise",
+            "slamkit.datasets.carmen:load_intel",
+            files=("laser/corrected_carmen/intel-corrected.log.gz",),
+        ),
+        DatasetEntry(
+            "aces",
+            "real",
+            "ACES building, corrected CARMEN log: 440 scans × 180 beams (50 m clip), corrected "
+            "poses as truth, odometry = truth + known noise",
+            "slamkit.datasets.carmen:load_aces",
+            files=("laser/corrected_carmen/aces-corrected.log.gz",),
+        ),
+        DatasetEntry(
+            "freiburg-079",
+            "real",
+            "Freiburg building 079, corrected CARMEN log: 4791 scans × 360 beams (0.5°), "
+            "corrected poses as truth, odometry = truth + known noise",
+            "slamkit.datasets.carmen:load_freiburg079",
+            files=("laser/corrected_carmen/freiburg-079-corrected.log.gz",),
+        ),
+        DatasetEntry(
+            "loop5",
+            "real",
+            "DP-SLAM loop5: 551 scans × 181 beams with raw odometry, no ground truth",
+            "slamkit.datasets.carmen:load_loop5",
+            files=("laser/dpslam/loop5.log.gz",),
+        ),
     )
 }
 

@@ -114,6 +114,14 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             requires=("motion", "landmark_sensor", "known_landmarks"),
         ),
         EstimatorEntry(
+            "occupancy-mapping",
+            "occupancy grid with known (true) poses: log-odds, α/β inverse laser model, "
+            "Bresenham rays",
+            "slamkit.mapping.occupancy:OccupancyMapping",
+            "slamkit.mapping.occupancy:OccupancyMappingConfig",
+            requires=("laser",),
+        ),
+        EstimatorEntry(
             "ekf-mapping",
             "EKF landmark mapping with known (true) poses; nearest-neighbour association for "
             "unlabelled readings",

@@ -8,7 +8,7 @@ from slamkit.sim.scenarios import (
     build_rooms_laser,
 )
 from slamkit.sim.sensors import observe_landmarks, simulate_scan
-from slamkit.sim.trajectory import simulate_motion, waypoint_controls
+from slamkit.sim.trajectory import Drive, follow_waypoints, simulate_motion, waypoint_controls
 from slamkit.sim.worlds import (
     five_feature_world,
     random_landmarks,
@@ -18,12 +18,14 @@ from slamkit.sim.worlds import (
 )
 
 __all__ = [
+    "Drive",
     "LandmarkScenarioConfig",
     "LaserScenarioConfig",
     "build_five_features",
     "build_landmark_loop",
     "build_rooms_laser",
     "five_feature_world",
+    "follow_waypoints",
     "observe_landmarks",
     "random_landmarks",
     "rasterize_segments",

@@ -27,11 +27,11 @@ from slamkit.datasets.stream import (
     LaserSpec,
     MotionSpec,
 )
-from slamkit.errors import ConfigError
+from slamkit.errors import ConfigError, InputError
 from slamkit.maps import LandmarkMap, SegmentMap
 from slamkit.models import UnicycleEuler
 from slamkit.sim.sensors import observe_landmarks, simulate_scan
-from slamkit.sim.trajectory import simulate_motion, waypoint_controls
+from slamkit.sim.trajectory import follow_waypoints
 from slamkit.sim.worlds import (
     five_feature_world,
     random_landmarks,
@@ -176,54 +176,40 @@ def _check_kidnap(kidnap_time: float, kidnap_skip: float) -> None:
         raise ConfigError(f"kidnap_skip: expected a positive duration, got {kidnap_skip}")
 
 
-def _kidnap(controls: np.ndarray, dt: float, kidnap_time: float, skip: float) -> np.ndarray:
-    """Drop the controls of ``skip`` seconds after ``kidnap_time``: the robot is carried over
-    that stretch of its route. The jump is marked by a row of NaN that :func:`_drive` turns
-    into the teleport (commanded as standing still), so NaN never reaches the data set."""
+def _kidnap_steps(kidnap_time: float, skip: float, dt: float) -> tuple[int, int] | None:
+    """``(step, skipped steps)`` of a kidnapping, or None (``kidnap_time < 0``)."""
     if kidnap_time < 0:
-        return controls
-    k0 = round(kidnap_time / dt)
-    k1 = k0 + round(skip / dt)
-    if k1 >= len(controls):
-        raise ConfigError(
-            f"kidnap_time + kidnap_skip = {kidnap_time + skip} s lies beyond the route "
-            f"({len(controls) * dt:.1f} s)"
-        )
-    return np.concatenate([controls[:k0], np.full((1, 2), np.nan), controls[k1:]])
+        return None
+    return round(kidnap_time / dt), round(skip / dt)
 
 
-def _drive(
-    model: UnicycleEuler,
-    x0: np.ndarray,
-    planned: np.ndarray,
-    controls: np.ndarray,
+def _follow(
+    start: np.ndarray,
+    waypoints: np.ndarray,
+    *,
+    speed: float,
     dt: float,
-    q: np.ndarray,
+    laps: int,
+    control_cov: np.ndarray,
     rng: np.random.Generator,
+    kidnap_time: float,
+    kidnap_skip: float,
+    tolerance: float = 0.3,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """True poses for ``controls`` (which may hold one NaN row = a kidnapping) and the
-    commanded controls without the NaN row. The kidnapper puts the robot where the noise-free
-    route ``planned`` would be after the skipped stretch, so it lands in free space."""
-    jump = np.flatnonzero(np.isnan(controls[:, 0]))
-    if jump.size == 0:
-        return simulate_motion(model, x0, controls, dt, q, rng), controls
-    k0 = int(jump[0])
-    before = simulate_motion(model, x0, controls[:k0], dt, q, rng)
-    skipped = len(planned) - len(controls) + 1
-    landing = _noise_free(model, planned[: k0 + skipped], dt, x0)
-    after = simulate_motion(model, landing, controls[k0 + 1 :], dt, q, rng)
-    # The robot is told it stood still during the step in which it was carried.
-    commanded = np.concatenate([controls[:k0], np.zeros((1, 2)), controls[k0 + 1 :]])
-    return np.concatenate([before, after]), commanded
-
-
-def _noise_free(
-    model: UnicycleEuler, controls: np.ndarray, dt: float, x0: np.ndarray
-) -> np.ndarray:
-    x = x0.copy()
-    for u in controls:
-        x = model.apply(x, u, dt)
-    return x
+    """True poses and commanded controls of a closed-loop drive along the waypoints."""
+    try:
+        drive = follow_waypoints(
+            start, waypoints, speed=speed, dt=dt, laps=laps, tolerance=tolerance,
+            control_cov=control_cov, rng=rng,
+            kidnap=_kidnap_steps(kidnap_time, kidnap_skip, dt),
+        )  # fmt: skip
+    except InputError as exc:
+        if "kidnap" in str(exc):
+            raise ConfigError(
+                f"kidnap_time + kidnap_skip = {kidnap_time + kidnap_skip} s lies beyond the route"
+            ) from None
+        raise
+    return drive.poses, drive.controls
 
 
 def _start(
@@ -243,11 +229,12 @@ def _landmark_dataset(
     waypoints: np.ndarray,
     rng: np.random.Generator,
 ) -> Dataset:
-    planned = waypoint_controls(start_pose, waypoints, speed=cfg.speed, dt=cfg.dt, laps=cfg.laps)
     prior, x0 = _start(start_pose, cfg.initial_cov(), rng)
     model = UnicycleEuler()
-    with_jump = _kidnap(planned, cfg.dt, cfg.kidnap_time, cfg.kidnap_skip)
-    truth, controls = _drive(model, x0, planned, with_jump, cfg.dt, cfg.control_cov(), rng)
+    truth, controls = _follow(
+        x0, waypoints, speed=cfg.speed, dt=cfg.dt, laps=cfg.laps, control_cov=cfg.control_cov(),
+        rng=rng, kidnap_time=cfg.kidnap_time, kidnap_skip=cfg.kidnap_skip,
+    )  # fmt: skip
     times = cfg.dt * np.arange(truth.shape[0], dtype=np.float64)
     prior = prior + np.array([*cfg.prior_error_xy, np.deg2rad(cfg.prior_error_theta_deg)])
     sensor = cfg.sensor_spec()
@@ -323,21 +310,22 @@ def build_rooms_laser(
     waypoints = np.array(
         [
             [4.0, 6.0], [4.0, 3.0], [7.0, 2.5], [4.0, 4.0], [4.0, 6.0], [14.0, 6.0],
-            [14.0, 2.5], [18.0, 2.0], [14.0, 4.0], [16.0, 6.0], [16.0, 9.5], [18.0, 10.5],
-            [16.0, 8.0], [6.0, 6.0], [6.0, 9.0], [4.0, 10.5], [6.0, 8.0], [6.0, 6.0],
+            [14.0, 2.5], [18.0, 2.0], [17.8, 4.2], [14.0, 4.0], [16.0, 6.0], [16.0, 9.5], [18.0, 10.5],
+            [16.0, 8.0], [16.0, 6.0], [6.0, 6.0], [6.0, 9.0], [4.0, 10.5], [6.0, 8.0],
+            [6.0, 6.0],
         ]
     )  # fmt: skip
     start = np.array([1.5, 6.0, 0.0])
-    planned = waypoint_controls(
-        start, waypoints, speed=cfg.speed, dt=cfg.dt, laps=cfg.laps, tolerance=0.25
-    )
+
     s, st = cfg.initial_sigma_xy, np.deg2rad(cfg.initial_sigma_theta_deg)
     init_cov = np.diag([s**2, s**2, st**2])
     prior, x0 = _start(start, init_cov, rng)
     model = UnicycleEuler()
     q = np.diag([cfg.sigma_v**2, np.deg2rad(cfg.sigma_omega_deg) ** 2])
-    with_jump = _kidnap(planned, cfg.dt, cfg.kidnap_time, cfg.kidnap_skip)
-    truth, controls = _drive(model, x0, planned, with_jump, cfg.dt, q, rng)
+    truth, controls = _follow(
+        x0, waypoints, speed=cfg.speed, dt=cfg.dt, laps=cfg.laps, control_cov=q, rng=rng,
+        kidnap_time=cfg.kidnap_time, kidnap_skip=cfg.kidnap_skip, tolerance=0.25,
+    )  # fmt: skip
     times = cfg.dt * np.arange(truth.shape[0], dtype=np.float64)
     laser = cfg.laser_spec()
     events: list[Event] = []

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -10,7 +12,119 @@ from slamkit.errors import InputError
 from slamkit.geometry import wrap_angle
 from slamkit.models import MotionModel, UnicycleEuler
 
-__all__ = ["simulate_motion", "waypoint_controls"]
+__all__ = ["Drive", "follow_waypoints", "simulate_motion", "waypoint_controls"]
+
+
+@dataclass(frozen=True)
+class Drive:
+    """A simulated drive: ``controls (N, 2)`` as commanded (what an estimator is told) and
+    ``poses (N + 1, 3)`` as really driven."""
+
+    controls: FloatArray
+    poses: FloatArray
+
+
+def follow_waypoints(
+    start_pose: ArrayLike,
+    waypoints: ArrayLike,
+    *,
+    speed: float,
+    dt: float,
+    control_cov: ArrayLike | None = None,
+    rng: np.random.Generator | None = None,
+    max_turn_rate: float = 1.0,
+    gain: float = 2.0,
+    tolerance: float = 0.3,
+    laps: int = 1,
+    kidnap: tuple[int, int] | None = None,
+    max_steps: int = 1_000_000,
+) -> Drive:
+    """Drive a unicycle from ``start_pose`` through ``waypoints (W, 2)`` in order, ``laps``
+    times, in CLOSED LOOP: every step the controller looks at the true pose, commands
+    ``(v, omega)``, and the robot executes that command plus noise ``N(0, control_cov)``.
+
+    The controller: ``omega = clip(gain · bearing error, ±max_turn_rate)`` and a speed that
+    drops with the cosine of the heading error, so sharp turns happen nearly on the spot.
+    Steering on the true pose keeps the robot on its route however long it drives (open-loop
+    replay of planned controls would drift through walls).
+
+    ``kidnap = (k0, skip)``: at step ``k0`` the robot is carried to where the noise-free drive
+    is ``skip`` steps later, and the command of that step is a standstill (the robot is not
+    told) — the kidnapped-robot problem.
+    """
+    pose = as_array(start_pose, "start_pose", (3,))
+    wps = as_array(waypoints, "waypoints", (None, 2))
+    if wps.shape[0] == 0:
+        raise InputError("waypoints: expected at least one waypoint")
+    ctl = _Controller(as_positive(speed, "speed"), max_turn_rate, gain, tolerance)
+    step = as_positive(dt, "dt")
+    noise = None
+    if control_cov is not None:
+        if rng is None:
+            raise InputError("rng: a noisy drive needs an np.random.Generator")
+        noise = (as_covariance(control_cov, "control_cov", 2, semidefinite=True), rng)
+    route = np.tile(wps, (max(1, int(laps)), 1))
+    landing = None
+    if kidnap is not None:  # where the robot would be without noise, to land it there
+        plan_poses, plan_targets = _drive(pose, route, ctl, step, None, None, max_steps)[1:]
+        k_land = kidnap[0] + kidnap[1]
+        if k_land >= len(plan_poses):
+            raise InputError(f"kidnap: step {k_land} lies beyond the route")
+        landing = (kidnap[0], plan_poses[k_land], int(plan_targets[k_land]))
+    controls, poses, _ = _drive(pose, route, ctl, step, noise, landing, max_steps)
+    return Drive(controls, poses)
+
+
+@dataclass(frozen=True)
+class _Controller:
+    """Proportional heading control towards the current waypoint."""
+
+    speed: float
+    max_turn_rate: float
+    gain: float
+    tolerance: float
+
+    def command(self, pose: np.ndarray, goal: np.ndarray) -> tuple[float, float]:
+        d = goal - pose[:2]
+        err = float(wrap_angle(np.arctan2(d[1], d[0]) - pose[2]))
+        omega = float(np.clip(self.gain * err, -self.max_turn_rate, self.max_turn_rate))
+        return self.speed * max(np.cos(err), 0.05), omega
+
+
+def _drive(
+    pose: np.ndarray,
+    route: np.ndarray,
+    ctl: _Controller,
+    dt: float,
+    noise: tuple[np.ndarray, np.random.Generator] | None,
+    landing: tuple[int, np.ndarray, int] | None,
+    max_steps: int,
+) -> tuple[FloatArray, FloatArray, np.ndarray]:
+    """Commanded controls, driven poses and the waypoint index steered to at every pose."""
+    model = UnicycleEuler()
+    controls: list[tuple[float, float]] = []
+    poses, targets = [pose], [0]
+    target = 0
+    while target < len(route):
+        if len(controls) >= max_steps:
+            raise InputError(f"waypoints not reached within max_steps={max_steps}")
+        if landing is not None and len(controls) == landing[0]:
+            controls.append((0.0, 0.0))  # carried away; the robot is not told
+            pose, target = landing[1].copy(), landing[2]
+        elif np.hypot(*(route[target] - pose[:2])) < ctl.tolerance:
+            target += 1
+            targets[-1] = target
+            continue
+        else:
+            u = ctl.command(pose, route[target])
+            controls.append(u)
+            if noise is None:
+                pose = model.apply(pose, np.array(u), dt)
+            else:
+                pose = model.sample(pose, np.array(u), dt, noise[0], noise[1])
+        poses.append(pose)
+        targets.append(target)
+    return np.asarray(controls, dtype=float).reshape(-1, 2), np.asarray(poses), np.asarray(targets)
 
 
 def waypoint_controls(
@@ -25,37 +139,12 @@ def waypoint_controls(
     laps: int = 1,
     max_steps: int = 1_000_000,
 ) -> FloatArray:
-    """Unicycle controls ``(N, 2)`` of ``(v, omega)`` that drive from ``start_pose`` through
-    ``waypoints (W, 2)`` in order, ``laps`` times, then stop.
-
-    A proportional heading controller: ``omega = clip(gain * bearing error, ±max_turn_rate)``;
-    the speed drops with the cosine of the heading error so sharp turns happen nearly on the
-    spot. The controls are computed on the noise-free Euler unicycle, so they are
-    deterministic; :func:`simulate_motion` then adds the control noise.
-    """
-    pose = as_array(start_pose, "start_pose", (3,)).copy()
-    wps = as_array(waypoints, "waypoints", (None, 2))
-    if wps.shape[0] == 0:
-        raise InputError("waypoints: expected at least one waypoint")
-    v_max = as_positive(speed, "speed")
-    step = as_positive(dt, "dt")
-    model = UnicycleEuler()
-    route = np.tile(wps, (max(1, int(laps)), 1))
-    controls: list[tuple[float, float]] = []
-    target = 0
-    while target < len(route):
-        if len(controls) >= max_steps:
-            raise InputError(f"waypoints not reached within max_steps={max_steps}")
-        d = route[target] - pose[:2]
-        if np.hypot(*d) < tolerance:
-            target += 1
-            continue
-        err = float(wrap_angle(np.arctan2(d[1], d[0]) - pose[2]))
-        omega = float(np.clip(gain * err, -max_turn_rate, max_turn_rate))
-        v = v_max * max(np.cos(err), 0.05)
-        controls.append((v, omega))
-        pose = model.apply(pose, np.array([v, omega]), step)
-    return np.asarray(controls, dtype=float).reshape(-1, 2)
+    """The noise-free controls ``(N, 2)`` of :func:`follow_waypoints` (a plan; replaying it
+    with noise drifts, so simulations use :func:`follow_waypoints` with ``control_cov``)."""
+    return follow_waypoints(
+        start_pose, waypoints, speed=speed, dt=dt, max_turn_rate=max_turn_rate, gain=gain,
+        tolerance=tolerance, laps=laps, max_steps=max_steps,
+    ).controls  # fmt: skip
 
 
 def simulate_motion(

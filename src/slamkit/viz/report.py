@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from slamkit.eval import chi2_bounds, nis_summary
+from slamkit.viz.maps import plot_map
 from slamkit.viz.plots import (
     new_figure,
     plot_consistency,
@@ -36,7 +37,8 @@ def run_figures(
 ) -> dict[str, Figure]:
     """Figures keyed by file name: ``trajectory.png`` always; ``errors.png`` and ``nees.png``
     when the data set has a true trajectory (and the estimator covariances); ``particles.png``
-    when the estimator kept particle snapshots; ``nis.png`` when it logged innovations."""
+    when the estimator kept particle snapshots; ``nis.png`` when it logged innovations;
+    ``map.png`` when it built an occupancy grid."""
     figs: dict[str, Figure] = {}
     fig = new_figure(figsize=(7.0, 6.0))
     ax = fig.add_subplot()
@@ -82,6 +84,13 @@ def run_figures(
             ax.set_xlabel("time [s]")
             ax.set_title("NEES of the pose (3 dof) with the 95 % χ² band")
             figs["nees.png"] = fig
+    if result.output.grid is not None:
+        fig = new_figure(figsize=(7.0, 6.0))
+        ax = fig.add_subplot()
+        plot_map(ax, result.output.grid)
+        plot_trajectories(ax, estimate=result.poses, legend=False)
+        ax.set_title(f"{result.estimator} on {result.dataset}: occupancy grid")
+        figs["map.png"] = fig
     snaps = result.output.particle_snapshots
     if snaps:
         figs["particles.png"] = _particle_figure(result, dataset)
