@@ -443,13 +443,14 @@ def _five_features(seed: int) -> Dataset:
 @pytest.mark.parametrize("which", ["ekf", "ukf"])
 def test_pose_nees_is_consistent_over_50_runs(which):
     # Measured (seeds 0..49, 333 common time stamps, default config with its 0.999 gate):
-    # mean NEES 3.07 for both filters (the 50 per-run means have a spread of about 0.5, so the
-    # standard error is 0.07), and 92.5 % of the steps inside the per-step band. The time-averaged NEES is
-    # held to the band of a single 50-run average, chi2_bounds(3, 50) = (2.36, 3.72): the band
-    # that treats all 50 × 336 values as independent, (2.96, 3.04), is far too narrow because
-    # a filter's errors are strongly correlated from step to step. A consistent filter would
-    # put 95 % of the steps in the per-step band if steps were independent; the correlation
-    # makes that fraction noisy, hence ≥ 90 %.
+    # mean NEES 3.07 for both filters (the 50 per-run means spread by about 0.5, so the
+    # standard error is 0.07), and 92.5 % of the steps inside the per-step band.
+    # The time-averaged NEES is held to the band of a single 50-run average,
+    # chi2_bounds(3, 50) = (2.36, 3.72). The band that treats all 50 × 333 values as
+    # independent, (2.96, 3.04), is far too narrow: a filter's errors are strongly
+    # correlated from step to step. A consistent filter would put 95 % of the steps in the
+    # per-step band if steps were independent; the correlation makes that fraction noisy,
+    # hence ≥ 90 %.
     values = _nees_runs(which)
     assert values.shape[0] == N_RUNS
     report = consistency_report(values, dof=3, probability=0.95)
