@@ -45,6 +45,8 @@ def follow_waypoints(
 
     The controller: ``omega = clip(gain · bearing error, ±max_turn_rate)`` and a speed that
     drops with the cosine of the heading error, so sharp turns happen nearly on the spot.
+    A waypoint counts as reached within ``max(tolerance, speed · dt)``: a robot that moves
+    further than the tolerance in one step would otherwise step over it and orbit it.
     Steering on the true pose keeps the robot on its route however long it drives (open-loop
     replay of planned controls would drift through walls).
 
@@ -56,8 +58,9 @@ def follow_waypoints(
     wps = as_array(waypoints, "waypoints", (None, 2))
     if wps.shape[0] == 0:
         raise InputError("waypoints: expected at least one waypoint")
-    ctl = _Controller(as_positive(speed, "speed"), max_turn_rate, gain, tolerance)
     step = as_positive(dt, "dt")
+    reach = max(float(tolerance), float(speed) * step)
+    ctl = _Controller(as_positive(speed, "speed"), max_turn_rate, gain, reach)
     noise = None
     if control_cov is not None:
         if rng is None:
