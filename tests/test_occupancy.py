@@ -42,6 +42,7 @@ from slamkit.mapping import (
     scan_cells_ray,
     scan_cells_table,
 )
+from slamkit.mapping.bresenham import MAX_SEGMENT_STEPS, bresenham_segments, minor_steps
 from slamkit.maps import UNKNOWN, OccupancyGrid
 from slamkit.pipeline.registry import EstimatorEntry
 from slamkit.pipeline.runner import run
@@ -165,6 +166,62 @@ def test_bresenham_vectorised_equals_incremental_on_random_lines(rng):
     shared = np.broadcast_to(starts[0], ends.shape)
     expected = [bresenham_line(*starts[0], *b) for b in ends]
     np.testing.assert_array_equal(bresenham_rays(shared, ends).cells, np.concatenate(expected))
+
+
+def test_bresenham_segments_equal_the_incremental_lines(rng):
+    # Runs of consecutive steps of random lines, as flat indices of a 500-column grid.
+    n_cols = 500
+    starts = rng.integers(-60, 60, size=(300, 2))
+    ends = rng.integers(-60, 60, size=(300, 2))
+    lines = [bresenham_line(*a, *b) for a, b in zip(starts, ends, strict=True)]
+    d_row, d_col = (ends - starts).T
+    col_major = np.abs(d_col) >= np.abs(d_row)
+    n = np.maximum(np.abs(d_row), np.abs(d_col))
+    slope = np.minimum(np.abs(d_row), np.abs(d_col)) / np.maximum(n, 1)
+    major = np.where(col_major, np.sign(d_col), np.sign(d_row) * n_cols)
+    minor = np.where(col_major, np.sign(d_row) * n_cols, np.sign(d_col))
+    first = (rng.random(300) * (n + 1)).astype(np.int64)
+    lengths = (rng.random(300) * (n - first + 2)).astype(np.int64)  # 0 .. to the end cell
+    got = bresenham_segments(
+        lengths, first.astype(float), slope, major.astype(float), minor.astype(float),
+        (starts[:, 0] * n_cols + starts[:, 1]).astype(float),
+    )  # fmt: skip
+    expected = np.concatenate(
+        [
+            line[f : f + k, 0] * n_cols + line[f : f + k, 1]
+            for line, f, k in zip(lines, first, lengths, strict=True)
+        ]
+    )
+    np.testing.assert_array_equal(got, expected)
+    assert bresenham_segments(np.zeros(3, dtype=np.int64), *np.zeros((5, 3))).size == 0
+
+
+def test_minor_steps_are_exact_up_to_the_longest_ray(rng):
+    # q_i = floor((2 i m + n) / (2 n)) in integers against the floating-point form, over
+    # random rays up to MAX_SEGMENT_STEPS - 1 steps and on exact halves (the ties).
+    n = rng.integers(1, MAX_SEGMENT_STEPS, size=200_000)
+    m = (rng.random(n.size) * (n + 1)).astype(np.int64)
+    i = (rng.random(n.size) * (n + 1)).astype(np.int64)
+    half = n - n % 2  # m = n/2 and odd i: (2 i m + n) / (2 n) = (i + 1) / 2 exactly
+    n = np.concatenate([n, half, [MAX_SEGMENT_STEPS - 1] * 3])
+    m = np.concatenate([m, half // 2, [MAX_SEGMENT_STEPS - 1, 1, MAX_SEGMENT_STEPS - 2]])
+    i = np.concatenate([i, (i // 2) * 2 + 1, [MAX_SEGMENT_STEPS - 1] * 3])
+    i = np.minimum(i, n)
+    expected = (2 * i * m + n) // (2 * n)
+    np.testing.assert_array_equal(minor_steps(i.astype(float), m / n), expected)
+
+
+def test_range_grows_along_a_bresenham_ray(rng):
+    """What the block path relies on: along a Bresenham ray from the sensor's cell, the squared
+    range of the cell centres from the sensor grows by at least 2 i cells² at step i -> i + 1,
+    wherever the sensor sits in its cell."""
+    for _ in range(400):
+        sensor = rng.random(2) - 0.5  # offset of the start cell's centre, in cells
+        end = rng.integers(-150, 151, size=2)
+        cells = bresenham_line(0, 0, *end).astype(float)
+        r2 = np.sum((cells - sensor) ** 2, axis=1)
+        i = np.arange(r2.size - 1)
+        assert np.all(np.diff(r2) >= 2 * i - 1e-9)
 
 
 # --------------------------------------------------------------------------------------------
@@ -328,6 +385,141 @@ def test_per_reading_merge_counts_every_ray():
     assert g2.prob[tuple(g2.world_to_cell([0.55, 0.05]))] == pytest.approx(expit(5 * d_free))
     hit = g1.world_to_cell([2.05, 0.05])
     assert g1.prob[tuple(hit)] == pytest.approx(0.75)
+
+
+def test_apply_free_occupied_hand_case():
+    model = InverseSensorModel(p_min=0.1, p_max=0.95).resolve(0.1, [0.0], 5.0)
+    grid = LogOddsGrid(0.1, 0, 0, 3, 4)
+    # free cells 1, 5, 1, 6, 5; occupied 2, 6, 6: four distinct cells, and cell 6, free and
+    # occupied in the same scan, gets the occupied increment once
+    flat = np.array([1, 5, 1, 6, 5, 2, 6, 6])
+    assert grid.apply_free_occupied(flat, 5, model) == 4
+    expected = np.zeros(12, dtype=np.float32)
+    expected[[1, 5]] = np.float32(model.delta_free)
+    expected[[2, 6]] = np.float32(model.delta_occ)
+    np.testing.assert_array_equal(grid.log_odds.reshape(-1), expected)
+    for _ in range(40):  # clamped at logit(p_min) and logit(p_max)
+        grid.apply_free_occupied(flat, 5, model)
+    np.testing.assert_allclose(
+        grid.probabilities().reshape(-1)[[0, 1, 2, 5, 6]], [0.5, 0.1, 0.95, 0.1, 0.95]
+    )
+    assert grid.nbytes == grid.log_odds.nbytes  # the counting needs no scratch array
+
+
+def test_probabilities_in_blocks_equal_expit(rng):
+    grid = LogOddsGrid(0.1, -3, 7, 300, 700, 0.2)  # 210,000 cells: more than one block
+    grid.log_odds = rng.normal(0.0, 2.0, size=grid.shape).astype(np.float32)
+    np.testing.assert_array_equal(grid.probabilities(), expit(grid.log_odds))
+
+
+def _per_scan_reference(dataset, cfg, bounds, scans):
+    """The Bresenham model scan by scan, from public pieces only: scan_cells_ray, one merged
+    region per cell and scan (occupied wins), then l <- clamp(l + delta) in float32."""
+    laser = dataset.laser
+    beams = laser.beam_angles[:: cfg.beam_stride]
+    model = cfg.model.resolve(cfg.resolution, beams, laser.max_range)
+    m = cfg.margin
+    grid = LogOddsGrid.covering(
+        bounds[0] - m, bounds[1] - m, bounds[2] + m, bounds[3] + m, cfg.resolution, model.l0
+    )
+    events = [ev for ev in dataset.events if isinstance(ev, LaserScan)]
+    values = grid.log_odds.reshape(-1)
+    increment = np.array([0.0, model.delta_free, model.delta_occ], dtype=np.float32)
+    count = 0
+    for k in scans:
+        pose = known_pose_at(dataset.truth.times, dataset.truth.poses, events[k].t)
+        cells, regions, _ = scan_cells_ray(
+            pose, events[k].ranges[:: cfg.beam_stride], beams, model, cfg.resolution
+        )
+        flat, inside = grid.flat_index(cells)
+        assert np.all(inside)
+        order = np.lexsort((regions, flat))  # by cell, the largest region last
+        flat, regions = flat[order], regions[order]
+        last = np.r_[flat[1:] != flat[:-1], True]
+        cell, region = flat[last], regions[last]
+        new = values[cell] + increment[region]
+        values[cell] = np.clip(new, np.float32(model.l_min), np.float32(model.l_max))
+        count += cell.size
+    return grid, count
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {},  # 5 cm, the default model
+        {"resolution": 0.1, "beam_stride": 3},
+        {"model": InverseSensorModel(alpha=0.4, max_range=6.0)},  # thick walls: long tails
+        {"model": InverseSensorModel(max_range=3.0)},  # mostly max-range readings
+        {"resolution": 0.1, "model": InverseSensorModel(p_prior=0.3, p_occ=0.8, p_free=0.2)},
+    ],
+)
+def test_block_path_equals_the_per_scan_model_exactly(rooms, kwargs):
+    cfg = OccupancyMappingConfig(**kwargs)
+    scans = range(0, 522, 7)
+    fast = build_occupancy_map(rooms, cfg, scans=list(scans))
+    ref, count = _per_scan_reference(rooms, cfg, fast.bounds, scans)
+    assert (fast.log_odds.row0, fast.log_odds.col0) == (ref.row0, ref.col0)
+    np.testing.assert_array_equal(fast.log_odds.log_odds, ref.log_odds)
+    assert fast.stats.cell_updates == count
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"model": InverseSensorModel(alpha=0.4, max_range=6.0)}])
+def test_block_path_without_the_tail_shortcut(rooms, kwargs, monkeypatch):
+    """With no margin on the tail, nearly every ray's free run is found by testing every
+    step (the exhaustive branch, normally never needed): the same exact map."""
+    import slamkit.mapping.occupancy as occupancy
+
+    monkeypatch.setattr(occupancy, "_TAIL_MARGIN", 0)
+    cfg = OccupancyMappingConfig(**kwargs)
+    scans = range(3, 522, 11)
+    fast = build_occupancy_map(rooms, cfg, scans=list(scans))
+    ref, count = _per_scan_reference(rooms, cfg, fast.bounds, scans)
+    np.testing.assert_array_equal(fast.log_odds.log_odds, ref.log_odds)
+    assert fast.stats.cell_updates == count
+
+
+def _stats(mapper):
+    out = mapper.stats.as_dict()
+    out.pop("seconds"), out.pop("cell_updates_per_second")
+    return out
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "bounds"),
+    [
+        ({"scan_stride": 2, "min_travel": 0.3, "min_rotation_deg": 10.0}, None),
+        ({"bounds": "grow", "margin": 0.1}, None),  # grows in the middle of blocks
+        ({"margin": 0.0}, (2.0, 2.0, 12.0, 8.0)),  # fixed bounds cut many scans
+    ],
+)
+def test_offer_many_equals_offer_scan_by_scan(rooms, kwargs, bounds):
+    cfg = OccupancyMappingConfig(resolution=0.1, **kwargs)
+    scans = [ev for ev in rooms.events if isinstance(ev, LaserScan)]
+    poses = known_pose_at(rooms.truth.times, rooms.truth.poses, [ev.t for ev in scans])
+    ranges = np.stack([ev.ranges for ev in scans])
+    one, many = OccupancyMapper(rooms.laser, cfg, bounds), OccupancyMapper(rooms.laser, cfg, bounds)
+    used_one = [one.offer(p, r) for p, r in zip(poses, ranges, strict=True)]
+    used_many = np.concatenate(
+        [many.offer_many(poses[k : k + 50], ranges[k : k + 50]) for k in range(0, len(scans), 50)]
+    )
+    np.testing.assert_array_equal(used_many, used_one)
+    a, b = one.log_odds_grid(), many.log_odds_grid()
+    assert (a.row0, a.col0) == (b.row0, b.col0)
+    np.testing.assert_array_equal(a.log_odds, b.log_odds)
+    assert _stats(one) == _stats(many)
+    if bounds is not None:  # the cut scans were mapped too, up to the edge
+        assert one.stats.cell_updates > 0 and a.shape == (61, 101)
+
+
+def test_too_long_rays_take_the_general_path(rooms, monkeypatch):
+    import slamkit.mapping.occupancy as occupancy
+
+    cfg = OccupancyMappingConfig(resolution=0.1)
+    fast = build_occupancy_map(rooms, cfg, scans=slice(0, 100))
+    monkeypatch.setattr(occupancy, "MAX_SEGMENT_STEPS", 20)  # most rays now count as too long
+    general = build_occupancy_map(rooms, cfg, scans=slice(0, 100))
+    np.testing.assert_array_equal(general.log_odds.log_odds, fast.log_odds.log_odds)
+    assert general.stats.cell_updates == fast.stats.cell_updates
 
 
 # --------------------------------------------------------------------------------------------

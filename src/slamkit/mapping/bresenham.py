@@ -11,6 +11,13 @@ halves rounded away from the start. Both end cells are included; ``a == b`` give
 step, no multiplication or division), :func:`bresenham_rays` the closed form above for many
 rays at once with NumPy. They return the same cells; the tests hold them to that in all eight
 octants.
+
+:func:`bresenham_segments` is the form the mapper's hot path uses: given, per ray, its major
+and minor step as *flat* offsets in a row-major grid, it returns the flat indices of any run
+of consecutive steps ``first .. first + length - 1`` of many rays at once. It computes ``q_i``
+in floating point as ``floor(i m/n + 1/2 + eps)``, which is exact for rays of fewer than
+:data:`MAX_SEGMENT_STEPS` steps (see the function), and spreads each ray's constants with one
+``np.repeat`` per constant — about ten passes over the cells in all.
 """
 
 from __future__ import annotations
@@ -20,9 +27,27 @@ from numpy.typing import ArrayLike, NDArray
 
 from slamkit.errors import ShapeError
 
-__all__ = ["RayCells", "bresenham_line", "bresenham_rays"]
+__all__ = [
+    "MAX_SEGMENT_STEPS",
+    "RayCells",
+    "bresenham_line",
+    "bresenham_rays",
+    "bresenham_segments",
+    "minor_steps",
+]
 
 IntArray = NDArray[np.int64]
+FloatArray = NDArray[np.float64]
+
+MAX_SEGMENT_STEPS = 1 << 20
+"""Longest ray (in steps ``n``) for which :func:`minor_steps` is exact."""
+
+# q_i = floor((2 i m + n) / (2 n)) = floor(i s + 1/2) with s = m / n. The exact value i s + 1/2
+# is a multiple of 1/(2n) >= 2^-21; in floating point i * fl(s) + 1/2 is off by less than
+# 2^-31 for i <= n < 2^20. Adding eps = 2^-26 (far above the error, far below 1/(2n)) lifts
+# a value that should be an exact integer k but came out as k - 1e-10 back to k, and moves no
+# other value across an integer.
+_ROUND_UP = 0.5 + 2.0**-26
 
 
 def bresenham_line(row0: int, col0: int, row1: int, col1: int) -> IntArray:
@@ -122,3 +147,47 @@ def bresenham_rays(starts: ArrayLike, ends: ArrayLike) -> RayCells:
         rows += spread(a[:, 0])
         cols += spread(a[:, 1])
     return RayCells(rows, cols, step, n)
+
+
+def minor_steps(steps: FloatArray, slope: FloatArray) -> FloatArray:
+    """Bresenham's minor coordinate ``q_i = floor((2 i m + n) / (2 n))`` of steps ``i`` of
+    rays with ``slope = m / n`` (broadcast), as floats holding exact integers. Exact for
+    ``0 <= i <= n < MAX_SEGMENT_STEPS`` (the comment at ``_ROUND_UP`` gives the bound)."""
+    q = np.multiply(steps, slope)
+    q += _ROUND_UP
+    return np.floor(q, out=q)
+
+
+def bresenham_segments(
+    lengths: IntArray,
+    first: FloatArray,
+    slope: FloatArray,
+    major: FloatArray,
+    minor: FloatArray,
+    base: FloatArray,
+) -> IntArray:
+    """Flat indices of runs of consecutive Bresenham steps of many rays in a row-major grid.
+
+    Segment ``k`` covers steps ``first[k] .. first[k] + lengths[k] - 1`` of a ray with
+    ``slope = m / n`` (``n`` its number of steps, ``n < MAX_SEGMENT_STEPS``) that starts at
+    flat index ``base[k]`` and whose major and minor steps move the flat index by ``major[k]``
+    and ``minor[k]`` (e.g. ``±1`` and ``±n_cols`` for a ray along the columns); step ``i`` is
+    the cell ``base + i * major + q_i * minor``. Returns all the segments' cells one after the
+    other ``(sum(lengths),)``. All arguments are ``(K,)``; the floats hold exact integers
+    (flat indices below 2^53).
+    """
+    counts = np.asarray(lengths, dtype=np.int64)
+    total = int(counts.sum())
+    if total == 0:
+        return np.empty(0, dtype=np.int64)
+    # Each segment's constants spread over its cells (np.repeat is a block copy); the step i
+    # of a cell is its position in the output minus the segment's offset, plus ``first``.
+    offset = np.cumsum(counts) - counts - np.asarray(first, dtype=np.float64)
+    steps = np.arange(total, dtype=np.float64)
+    steps -= np.repeat(offset, counts)
+    q = minor_steps(steps, np.repeat(slope, counts))
+    q *= np.repeat(minor, counts)
+    steps *= np.repeat(major, counts)
+    steps += q
+    steps += np.repeat(base, counts)
+    return steps.astype(np.int64)

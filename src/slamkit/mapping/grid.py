@@ -7,9 +7,10 @@ rows ``row0 .. row0+rows-1`` and columns ``col0 .. col0+cols-1``; growing it onl
 block, so cells computed for one scan stay valid, and two maps built at the same resolution
 (say from the even and the odd scans of a log) line up cell for cell.
 
-The grid applies one scan's cell regions as a single update per cell (:meth:`apply_scan`):
-where several readings of one scan touch the same cell, "occupied" wins over "free" — a ray
-that grazes the wall cell where its neighbour's reading ended must not erase that wall.
+The grid applies one scan's cell regions as a single update per cell (:meth:`apply_scan`,
+:meth:`apply_free_occupied`): where several readings of one scan touch the same cell,
+"occupied" wins over "free" — a ray that grazes the wall cell where its neighbour's reading
+ended must not erase that wall.
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ from slamkit.maps import OccupancyGrid
 __all__ = ["LogOddsGrid", "lattice_cells"]
 
 IntArray = NDArray[np.int64]
+
+_EXPIT_BLOCK = 1 << 16  # cells converted to probabilities at a time (512 kB of float64)
 
 
 def lattice_cells(xy: FloatArray, resolution: float) -> IntArray:
@@ -51,6 +54,7 @@ class LogOddsGrid:
         self.log_odds: NDArray[np.float32] = self._prior_block(int(rows), int(cols))
         self._owner: NDArray[np.int32] | None = None  # scratch arrays of merge_scan
         self._kind: NDArray[np.int8] | None = None
+        self._positions: NDArray[np.int32] = np.arange(0, dtype=np.int32)  # 0, 1, 2, ...
 
     @classmethod
     def covering(
@@ -208,6 +212,45 @@ class LogOddsGrid:
         kind[flat] = 0
         return n
 
+    def _flat_values(self) -> NDArray[np.float32]:
+        """The log odds as a flat view (made C-contiguous first if someone replaced them)."""
+        if not self.log_odds.flags.c_contiguous:
+            self.log_odds = np.ascontiguousarray(self.log_odds)
+        return self.log_odds.reshape(-1)
+
+    def _arange(self, n: int) -> NDArray[np.int32]:
+        """``0 .. n-1`` as int32, a slice of a buffer kept between calls."""
+        if self._positions.size < n:
+            self._positions = np.arange(max(n, 2 * self._positions.size), dtype=np.int32)
+        return self._positions[:n]
+
+    def apply_free_occupied(self, flat: IntArray, n_free: int, model: ResolvedModel) -> int:
+        """One update per cell for one scan whose cells ``flat[:n_free]`` are free and
+        ``flat[n_free:]`` occupied (flat indices into this grid, repeats allowed, not checked:
+        a negative index would wrap): a cell in both gets the occupied increment only.
+        Returns the number of distinct cells updated.
+
+        The log-odds Bayes update ``l <- clamp(l + delta)`` in float32, without removing the
+        repeated cells: every copy of a cell reads the same old value and computes the same
+        new one, and the occupied cells are written after the free ones. The distinct cells
+        are counted with the grid itself as scratch: after the old values are read, each
+        position ``p`` writes the int32 ``p`` into its cell's 4 bytes (a view of the float32
+        log odds); one position per distinct cell finds its own number there afterwards. The
+        new values then overwrite every tagged cell. No grid-sized scratch array is needed.
+        """
+        values = self._flat_values()
+        new = values.take(flat)  # the old log odds, before any cell is written
+        positions = self._arange(flat.size)
+        tags = values.view(np.int32)
+        tags[flat] = positions
+        n = int(np.count_nonzero(tags.take(flat) == positions))
+        new[:n_free] += np.float32(model.delta_free)
+        new[n_free:] += np.float32(model.delta_occ)
+        np.clip(new, np.float32(model.l_min), np.float32(model.l_max), out=new)
+        values[flat[:n_free]] = new[:n_free]
+        values[flat[n_free:]] = new[n_free:]  # after the free cells: occupied wins
+        return n
+
     def apply_readings(
         self, flat: IntArray, regions: RegionArray, model: ResolvedModel, min_change: float = 0.0
     ) -> int:
@@ -222,8 +265,17 @@ class LogOddsGrid:
     # -- output ------------------------------------------------------------------------------
 
     def probabilities(self) -> FloatArray:
-        """``expit(log odds)`` of every cell, a new array."""
-        return expit(self.log_odds)
+        """``expit(log odds)`` of every cell, a new array.
+
+        Converted in blocks of :data:`_EXPIT_BLOCK` cells, so that :func:`expit`'s float64
+        temporaries stay small and in cache: on a large grid, writing fresh grid-sized
+        temporaries (page faults on first touch) costs more than the arithmetic. The same
+        numbers as ``expit(self.log_odds)``, an element-wise function."""
+        src = self.log_odds.reshape(-1)
+        out = np.empty(src.size, dtype=np.float64)
+        for k in range(0, src.size, _EXPIT_BLOCK):
+            out[k : k + _EXPIT_BLOCK] = expit(src[k : k + _EXPIT_BLOCK])
+        return out.reshape(self.log_odds.shape)
 
     def to_occupancy_grid(self) -> OccupancyGrid:
         """The map as an :class:`OccupancyGrid` of probabilities (a copy)."""

@@ -13,8 +13,8 @@ course notes' errata: the boundary is ``r_k + alpha/2``, not ``r_k``):
 A reading ``r_k >= r_max`` is a *max-range reading* (no return): it never marks a cell
 occupied, only clears the cells in front of ``r_max``. A cell that falls in none of the three
 (exactly at ``r = r_k``) gets no information. :func:`classify_cells` evaluates this for many
-cells at once; :func:`ray_extents` gives the same regions along a single ray, for the
-Bresenham path of :mod:`slamkit.mapping.occupancy`.
+cells at once; :func:`ray_extents` and :func:`ray_region_limits` give the same regions along a
+single ray, for the Bresenham path of :mod:`slamkit.mapping.occupancy`.
 
 :class:`InverseSensorModel` is the frozen configuration (probabilities, ``alpha``, ``beta``,
 usable range and the log-odds clamp); :meth:`InverseSensorModel.resolve` turns it, for a given
@@ -44,6 +44,7 @@ __all__ = [
     "classify_cells",
     "nearest_beam",
     "ray_extents",
+    "ray_region_limits",
     "regions_along_beam",
 ]
 
@@ -222,3 +223,21 @@ def ray_extents(ranges: ArrayLike, model: ResolvedModel) -> tuple[FloatArray, Fl
     d_occ = np.where(hit, np.maximum(readings - half, 0.0), model.r_max)
     d_end = np.where(hit, np.minimum(readings + half, model.r_max), model.r_max)
     return d_occ, d_end
+
+
+def ray_region_limits(
+    ranges: ArrayLike, model: ResolvedModel
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The regions along each beam's own ray as squared ranges, for ray tracing:
+    ``(d_end, free2, occ2)`` — a traced cell whose centre lies at squared range
+    ``r2 <= free2`` from the sensor is free, else occupied if ``r2 < occ2``, else it gets no
+    information; ``d_end`` is where the ray ends (:func:`ray_extents`). Free up to
+    ``r_k - alpha/2`` (a max-range ray: up to ``r_max``, and never occupied); a return nearer
+    than ``alpha/2`` frees nothing. Squared so that no cell needs a square root."""
+    readings = np.asarray(ranges, dtype=np.float64)
+    d_occ, d_end = ray_extents(readings, model)
+    hit = readings < model.r_max
+    half = 0.5 * model.alpha
+    free2 = np.where(hit, np.where(readings >= half, d_occ * d_occ, -1.0), d_end * d_end)
+    occ2 = np.where(hit, d_end * d_end, 0.0)
+    return d_end, free2, occ2
