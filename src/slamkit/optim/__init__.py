@@ -1,0 +1,49 @@
+"""Graph optimisation (the GraphSLAM back-end): sparse nonlinear least squares over SE(2) poses
+and 2D landmarks, and over SE(3) poses.
+
+* :mod:`~slamkit.optim.data`: the graph data model shared with :mod:`slamkit.io.posegraph`.
+* :mod:`~slamkit.optim.factors`: residuals and analytic Jacobians of every 2D edge kind;
+  :mod:`~slamkit.optim.factors3d`: the SE(3) relative-pose and prior edges.
+* :mod:`~slamkit.optim.graph`: validation, variable indexing, gauge, vectorised linearisation.
+* :mod:`~slamkit.optim.sparse`: the fixed normal-matrix pattern and the Cholesky back-ends.
+* :mod:`~slamkit.optim.solvers`: Gauss-Newton, Levenberg-Marquardt, Powell's dogleg.
+* :mod:`~slamkit.optim.init`: odometry spanning tree and chordal initialisation.
+* :mod:`~slamkit.optim.objectives`: the g2o χ² and SE-Sync's ``F`` of any solution.
+* :mod:`~slamkit.optim.robust`: Huber, Cauchy, Geman-McClure and DCS kernels (IRLS).
+* :mod:`~slamkit.optim.marginals`: marginal covariances from the factorisation.
+"""
+
+from slamkit.optim.data import EdgeKind, EdgeSet, GraphData
+from slamkit.optim.graph import GraphProblem, Linearization
+from slamkit.optim.init import (
+    chordal_initialization,
+    initial_values,
+    spanning_tree_initialization,
+)
+from slamkit.optim.marginals import Marginals, marginal_covariances
+from slamkit.optim.objectives import g2o_chi2, sesync_objective
+from slamkit.optim.robust import RobustKernel, robust_rho_and_weight
+from slamkit.optim.solvers import IterationInfo, OptimizerConfig, OptimizeResult, optimize
+from slamkit.optim.sparse import cholmod_available
+
+__all__ = [
+    "EdgeKind",
+    "EdgeSet",
+    "GraphData",
+    "GraphProblem",
+    "IterationInfo",
+    "Linearization",
+    "Marginals",
+    "OptimizeResult",
+    "OptimizerConfig",
+    "RobustKernel",
+    "cholmod_available",
+    "chordal_initialization",
+    "g2o_chi2",
+    "initial_values",
+    "marginal_covariances",
+    "optimize",
+    "robust_rho_and_weight",
+    "sesync_objective",
+    "spanning_tree_initialization",
+]

@@ -1,0 +1,332 @@
+"""The fixed sparsity pattern of the normal equations and the sparse Cholesky back-ends.
+
+The normal matrix ``H = Σ_k J_kᵀ J_k`` of a graph has one dense block per pair of variables
+that share an edge. Its pattern does not change between iterations, so it is computed once
+(:class:`NormalPattern`): every entry of every per-edge block product is given a *slot* in the
+lower triangle of ``H`` stored column-major (CSC, rows sorted), and an iteration's values are
+``np.bincount(slots, weights=block_products)``. Entries that touch a fixed variable, and the
+strict upper triangle of diagonal blocks, go to one extra dummy slot that is dropped.
+
+Back-ends (:func:`make_factorizer`) factor ``H + D`` for a diagonal ``D`` (the LM damping):
+
+* ``"cholmod"``: CHOLMOD's supernodal Cholesky through ``cvxopt.cholmod`` (an optional
+  dependency). The symbolic analysis (AMD fill-reducing ordering, elimination tree,
+  supernodes) runs once; each iteration only refactors numerically.
+* ``"superlu"``: SciPy's SuperLU in symmetric mode (minimum-degree ordering on ``H + Hᵀ``,
+  no pivoting since ``H`` is positive definite); SuperLU has no separate symbolic step, so the
+  ordering is recomputed inside each factorisation.
+* ``"dense"``: LAPACK Cholesky of the dense matrix, for tests and tiny graphs.
+
+``"auto"`` is CHOLMOD when ``cvxopt`` imports, SuperLU otherwise.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import Any, Literal, Protocol
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse
+import scipy.sparse.linalg
+
+from slamkit.errors import ConfigError
+from slamkit.optim.data import FloatArray, IntArray
+
+__all__ = [
+    "Factorizer",
+    "LinearSolverName",
+    "NormalPattern",
+    "SingularSystem",
+    "cholmod_available",
+    "make_factorizer",
+]
+
+LinearSolverName = Literal["auto", "cholmod", "superlu", "dense"]
+
+
+class SingularSystem(Exception):
+    """Internal: the factorisation met a zero or negative pivot (column in the message)."""
+
+
+@dataclass(frozen=True)
+class NormalPattern:
+    """Lower-triangular CSC pattern of ``H`` (``n x n``) and the slot of every block entry.
+
+    ``slots[k]`` is the position in ``data`` of the ``k``-th block-product entry (``nnz`` for
+    a dropped entry); ``grad_slots`` likewise for the gradient (``n`` when dropped);
+    ``diag`` the positions of the diagonal entries.
+    """
+
+    n: int
+    indptr: IntArray
+    indices: IntArray
+    slots: IntArray
+    grad_slots: IntArray
+    diag: IntArray
+
+    @property
+    def nnz(self) -> int:
+        return int(self.indices.shape[0])
+
+    @classmethod
+    def from_blocks(
+        cls, sizes: IntArray, products: list[tuple[IntArray, IntArray, int, int, bool]]
+    ) -> tuple[NormalPattern, list[IntArray]]:
+        """Pattern of ``H`` for variables of ``sizes`` (columns in variable order) and the slots
+        of the block products that :meth:`GraphProblem.linearize` emits.
+
+        ``products[k] = (va, vb, da, db, diagonal)``: per edge, the variables (``-1`` = fixed)
+        of the product ``A_vaᵀ A_vb`` (a diagonal block when ``diagonal``), emitted edge-last
+        as a ``(da, db, E)`` array. Returns the pattern and one ``(size_a, size_b, E)`` slot
+        array per product. Block-level bookkeeping first (one ``np.unique`` over block pairs),
+        then the scalar entries by arithmetic: column ``c = off[v] + q`` of variable ``v``
+        holds the diagonal block's rows ``q…size-1`` and then every lower block's rows.
+        """
+        sizes = np.asarray(sizes, dtype=np.int64)
+        V = sizes.shape[0]
+        off = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        n = int(off[-1])
+        keys = [np.arange(V, dtype=np.int64) * (V + 1)]
+        oks = []
+        for va, vb, _, _, _ in products:
+            ok = (va >= 0) & (vb >= 0)
+            oks.append(ok)
+            keys.append(np.minimum(va, vb)[ok] * V + np.maximum(va, vb)[ok])
+        uniq, inverse = np.unique(np.concatenate(keys), return_inverse=True)
+        bc, br = uniq // V, uniq % V  # block column (smaller var) and row
+        is_diag = bc == br
+        row_size = np.where(is_diag, 0, sizes[br])
+        excl = np.concatenate([[0], np.cumsum(row_size)[:-1]])
+        first = np.searchsorted(bc, np.arange(V))  # the diagonal block opens each column
+        pre = excl - excl[first[bc]]  # rows of earlier off-diagonal blocks in the column
+        offdiag_rows = np.bincount(bc, weights=row_size, minlength=V).astype(np.int64)
+        var_of_col = np.repeat(np.arange(V), sizes)
+        q_of_col = np.arange(n) - off[var_of_col]
+        lengths = sizes[var_of_col] - q_of_col + offdiag_rows[var_of_col]
+        indptr = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+        # base[b, pc] + pr is the position of entry (pr, pc) of block b: in column
+        # off[bc] + pc the diagonal block holds rows pc…size-1 first, then each lower block.
+        pcs = np.arange(int(sizes.max()) if V else 1)
+        colptr = indptr[np.minimum(off[bc][:, None] + pcs[None, :], n)]
+        base = colptr - pcs[None, :]
+        base = np.where(is_diag[:, None], base, base + sizes[bc][:, None] + pre[:, None])
+
+        indices = np.empty(int(indptr[-1]), dtype=np.int64)
+        for sr in np.unique(sizes):
+            for sc in np.unique(sizes):
+                sel = np.flatnonzero((sizes[br] == sr) & (sizes[bc] == sc))
+                if not sel.shape[0]:
+                    continue
+                pr, pc = np.meshgrid(np.arange(sr), np.arange(sc), indexing="ij")
+                keep = ~(is_diag[sel][:, None, None] & (pr < pc)[None])
+                b3 = np.broadcast_to(sel[:, None, None], keep.shape)[keep]
+                pr3 = np.broadcast_to(pr[None], keep.shape)[keep]
+                pc3 = np.broadcast_to(pc[None], keep.shape)[keep]
+                indices[base[b3, pc3] + pr3] = off[br[b3]] + pr3
+        nnz = indices.shape[0]
+        slots: list[IntArray] = []
+        at = V
+        for (va, vb, da, db, diagonal), ok in zip(products, oks, strict=True):
+            b = np.zeros(va.shape[0], dtype=np.int64)
+            k = int(ok.sum())
+            b[ok] = inverse[at : at + k]
+            at += k
+            p = np.arange(da)[:, None, None]
+            q = np.arange(db)[None, :, None]
+            swap = (va < vb)[None, None, :]  # the row block is vb: entry (p, q) is (q, p)
+            pr = np.where(swap, q, p)
+            pc = np.where(swap, p, q)
+            pos = base[b[None, None, :], pc] + pr
+            valid = ok[None, None, :] & ~(diagonal & (p < q))
+            slots.append(np.where(valid, pos, nnz).astype(np.int64))
+        diag = indptr[:-1].copy()  # the first entry of each column is its diagonal
+        return cls(n, indptr, indices, np.zeros(0, np.int64), np.zeros(0, np.int64), diag), slots
+
+    def values(self, weights: FloatArray) -> FloatArray:
+        """Lower-triangle values of ``H`` from the concatenated block products."""
+        out = np.bincount(self.slots, weights=weights, minlength=self.nnz + 1)
+        return out[: self.nnz].astype(np.float64, copy=False)
+
+    def gradient(self, weights: FloatArray) -> FloatArray:
+        """``g = Jᵀ r`` from the concatenated per-edge gradient blocks."""
+        out = np.bincount(self.grad_slots, weights=weights, minlength=self.n + 1)
+        return out[: self.n].astype(np.float64, copy=False)
+
+    def with_slots(self, slots: IntArray, grad_slots: IntArray) -> NormalPattern:
+        return NormalPattern(self.n, self.indptr, self.indices, slots, grad_slots, self.diag)
+
+    def lower_matrix(self, data: FloatArray) -> scipy.sparse.csc_matrix:
+        return scipy.sparse.csc_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
+
+    def full_matrix(self, data: FloatArray) -> scipy.sparse.csc_matrix:
+        """The symmetric ``H`` (both triangles) as a SciPy CSC matrix."""
+        L = self.lower_matrix(data)
+        return (L + L.T - scipy.sparse.diags(data[self.diag])).tocsc()
+
+    def matvec(self, data: FloatArray, x: FloatArray) -> FloatArray:
+        """``H x`` using the lower triangle only: ``L x + Lᵀ x - diag ⊙ x``."""
+        L = self.lower_matrix(data)
+        return np.asarray(L @ x + L.T @ x - data[self.diag] * x)
+
+
+class Factorizer(Protocol):
+    """Factor ``H`` (lower-triangle values in a fixed pattern) and solve with the factor."""
+
+    name: str
+
+    def factor(self, data: FloatArray) -> None:
+        """Factor ``H``; raise :class:`SingularSystem` when it is not positive definite."""
+        ...
+
+    def solve(self, b: FloatArray) -> FloatArray:
+        """``H⁻¹ b`` for ``b`` of shape ``(n,)`` or ``(n, k)``."""
+        ...
+
+
+def cholmod_available() -> bool:
+    """Whether ``cvxopt`` (which bundles CHOLMOD) can be imported."""
+    try:
+        importlib.import_module("cvxopt.cholmod")
+    except ImportError:
+        return False
+    return True
+
+
+class _CholmodFactorizer:
+    """CHOLMOD through cvxopt: one symbolic analysis, a numeric refactorisation per call."""
+
+    name = "cholmod"
+
+    def __init__(self, pattern: NormalPattern) -> None:
+        self._cvx: Any = importlib.import_module("cvxopt")
+        self._chol: Any = importlib.import_module("cvxopt.cholmod")
+        n = pattern.n
+        cols = np.repeat(np.arange(n), np.diff(pattern.indptr))
+        # cvxopt stores CCS with sorted rows, exactly our pattern order, so ``A.V`` can be
+        # overwritten in place on every iteration (checked below once).
+        ones = self._cvx.matrix(np.ones(pattern.nnz))
+        self._A = self._cvx.spmatrix(
+            ones,
+            self._cvx.matrix(np.ascontiguousarray(pattern.indices, dtype=np.int64)),
+            self._cvx.matrix(np.ascontiguousarray(cols, dtype=np.int64)),
+            (n, n),
+        )
+        ccs = self._A.CCS
+        if not (
+            np.array_equal(np.asarray(ccs[0]).ravel(), pattern.indptr)
+            and np.array_equal(np.asarray(ccs[1]).ravel(), pattern.indices)
+        ):
+            raise AssertionError("cvxopt changed the CCS pattern")  # internal invariant
+        self._symbolic: Any = None
+
+    def factor(self, data: FloatArray) -> None:
+        self._A.V = self._cvx.matrix(data)
+        if self._symbolic is None:
+            self._symbolic = self._chol.symbolic(self._A, uplo="L")
+        try:
+            self._chol.numeric(self._A, self._symbolic)
+        except ArithmeticError as exc:
+            raise SingularSystem(f"not positive definite (CHOLMOD column {exc})") from exc
+
+    def solve(self, b: FloatArray) -> FloatArray:
+        B = self._cvx.matrix(np.asarray(b, dtype=np.float64))
+        self._chol.solve(self._symbolic, B)
+        return np.array(B).reshape(b.shape)
+
+
+class _SuperLUFactorizer:
+    """SciPy SuperLU in symmetric mode on the full matrix (no pivoting: ``H`` is SPD)."""
+
+    name = "superlu"
+
+    def __init__(self, pattern: NormalPattern) -> None:
+        self._pattern = pattern
+        full = pattern.full_matrix(np.arange(1.0, pattern.nnz + 1.0))
+        full.sort_indices()
+        # Gather map from the lower-triangle values to the full pattern's values: the fake
+        # values 1..nnz identify each stored entry.
+        self._gather = np.rint(full.data).astype(np.int64) - 1
+        self._indices = full.indices
+        self._indptr = full.indptr
+        self._lu: Any = None
+
+    def factor(self, data: FloatArray) -> None:
+        n = self._pattern.n
+        full = scipy.sparse.csc_matrix((data[self._gather], self._indices, self._indptr), (n, n))
+        try:
+            self._lu = scipy.sparse.linalg.splu(
+                full,
+                permc_spec="MMD_AT_PLUS_A",
+                diag_pivot_thresh=0.0,
+                options={"SymmetricMode": True},
+            )
+        except RuntimeError as exc:
+            raise SingularSystem(f"singular ({exc})") from exc
+        if not np.all(self._lu.U.diagonal() > 0):
+            raise SingularSystem("not positive definite (a non-positive pivot in SuperLU)")
+
+    def solve(self, b: FloatArray) -> FloatArray:
+        return np.asarray(self._lu.solve(np.asarray(b, dtype=np.float64)))
+
+
+class _DenseFactorizer:
+    """LAPACK Cholesky of the dense ``H`` (tests and tiny graphs only)."""
+
+    name = "dense"
+
+    def __init__(self, pattern: NormalPattern) -> None:
+        self._pattern = pattern
+        self._cho: Any = None
+
+    def factor(self, data: FloatArray) -> None:
+        H = self._pattern.full_matrix(data).toarray()
+        try:
+            self._cho = scipy.linalg.cho_factor(H, lower=True)
+        except np.linalg.LinAlgError as exc:
+            raise SingularSystem(f"not positive definite ({exc})") from exc
+
+    def solve(self, b: FloatArray) -> FloatArray:
+        return np.asarray(scipy.linalg.cho_solve(self._cho, b))
+
+
+def make_factorizer(name: LinearSolverName, pattern: NormalPattern) -> Factorizer:
+    """The back-end ``name`` for ``pattern`` (``"auto"``: CHOLMOD if available, else SuperLU)."""
+    if name == "auto":
+        name = "cholmod" if cholmod_available() else "superlu"
+    if name == "cholmod":
+        if not cholmod_available():
+            raise ConfigError(
+                "linear_solver 'cholmod' needs the optional package cvxopt (pip install cvxopt)"
+            )
+        return _CholmodFactorizer(pattern)
+    if name == "superlu":
+        return _SuperLUFactorizer(pattern)
+    if name == "dense":
+        return _DenseFactorizer(pattern)
+    raise ConfigError(f"linear_solver: unknown back-end {name!r}")
+
+
+def solve_spd(
+    A: scipy.sparse.spmatrix, B: FloatArray, name: LinearSolverName = "auto"
+) -> FloatArray:
+    """``A⁻¹ B`` for a one-off sparse symmetric positive definite ``A`` (both triangles given).
+
+    Used by the linear initialisations; the same back-ends as the solvers.
+    """
+    L = scipy.sparse.tril(A, format="csc")
+    L.sort_indices()
+    n = L.shape[0]
+    cols = np.repeat(np.arange(n), np.diff(L.indptr))
+    pattern = NormalPattern(
+        n,
+        L.indptr.astype(np.int64),
+        L.indices.astype(np.int64),
+        np.zeros(0, dtype=np.int64),
+        np.zeros(0, dtype=np.int64),
+        np.flatnonzero(L.indices == cols).astype(np.int64),
+    )
+    fac = make_factorizer(name, pattern)
+    fac.factor(np.asarray(L.data, dtype=np.float64))
+    return fac.solve(B)
