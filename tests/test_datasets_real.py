@@ -127,6 +127,30 @@ def test_mrclam_known_lines(mrclam: Dataset) -> None:
     np.testing.assert_allclose(ev.z, [[1.726, -0.558], [4.247, -0.359], [2.037, 0.242]])
 
 
+def test_mrclam_swaps_the_labels_of_subjects_11_and_17(mrclam: Dataset, data_root: Path) -> None:
+    # Measurement line 29 "1248272284.671 18 2.876 0.301": barcode 18 is subject 11 in
+    # Barcodes.dat, but the landmark seen is the one surveyed as subject 17 (the evidence is
+    # in the loader's docstring and in test_localization_real.py). Line 78
+    # "1248272301.588 61 5.062 0.069": barcode 61, subject 17, is landmark 11.
+    md = mrclam.metadata["label_corrections"]
+    assert md == {"applied": {"11": 17, "17": 11}, "readings_relabelled": 776}
+    by_time = {round(e.t, 6): e for e in _readings(mrclam)}
+    np.testing.assert_array_equal(by_time[11.83].ids, [16, 17])
+    np.testing.assert_allclose(by_time[11.83].z[1], [2.876, 0.301])
+    np.testing.assert_array_equal(by_time[28.747].ids, [11])
+    raw = load_mrclam({"correct_labels": False}, seed=0, data_root=data_root)
+    assert raw.metadata["label_corrections"] == {"applied": {}, "readings_relabelled": 0}
+    raw_by_time = {round(e.t, 6): e for e in _readings(raw)}
+    np.testing.assert_array_equal(raw_by_time[11.83].ids, [16, 11])
+    np.testing.assert_array_equal(raw_by_time[28.747].ids, [17])
+    # Only the labels change: same events, same readings.
+    assert raw.counts() == mrclam.counts()
+    swap = {11: 17, 17: 11}
+    for a, b in zip(_readings(raw), _readings(mrclam), strict=True):
+        assert [swap.get(int(i), int(i)) for i in a.ids] == b.ids.tolist()
+        np.testing.assert_array_equal(a.z, b.z)
+
+
 def test_mrclam_cut_and_options(data_root: Path) -> None:
     _need(data_root, mrclam_files())
     short = load_mrclam({"max_duration_s": 60.0, "sigma_range": 0.2}, seed=0, data_root=data_root)

@@ -27,21 +27,40 @@ Conversion (:func:`load_mrclam`):
   wherever the log has gaps — 44 gaps over 0.2 s, up to 1 s, in Dataset 1). The last sample
   has no successor and gives no control.
 * **Readings.** Barcodes are mapped to subjects through ``Barcodes.dat``; the landmark id of a
-  reading is its *subject* number (6–20), the id used by the landmark map. Readings of other
-  robots (subjects 1–5), of barcodes missing from ``Barcodes.dat``, of subjects without a
-  surveyed position and readings earlier than the first odometry sample are dropped and
-  counted in ``metadata["dropped"]``. Bearings are wrapped to ``[-pi, pi)``. Readings with
-  the same time stamp form one :class:`LandmarkReadings` event, placed after the control
-  that ends at that time. A reading between two odometry samples sees the pose of the
-  earlier one: the robot moves at most 1 cm (99th percentile) and 6.6 cm (worst, in a gap)
-  in that time in Dataset 1, well below the range noise.
+  reading is its *subject* number (6–20), the id used by the landmark map, after the label
+  corrections below. Readings of other robots (subjects 1–5), of barcodes missing from
+  ``Barcodes.dat``, of subjects without a surveyed position and readings earlier than the
+  first odometry sample are dropped and counted in ``metadata["dropped"]``. Bearings are
+  wrapped to ``[-pi, pi)``. Readings with the same time stamp form one
+  :class:`LandmarkReadings` event, placed after the control that ends at that time. A
+  reading between two odometry samples sees the pose of the earlier one: the robot moves at
+  most 1 cm (99th percentile) and 6.6 cm (worst, in a gap) in that time in Dataset 1, well
+  below the range noise.
 * **Times** are seconds since the first odometry sample, rounded to the microsecond to
   drop the float rounding of the 1.2e9-second UNIX stamps (the files have millisecond
   resolution); ``metadata["start_time_unix_s"]`` keeps the absolute start.
+* **Label corrections** (:data:`LABEL_CORRECTIONS`, option ``correct_labels``). In Dataset 1
+  the readings that ``Barcodes.dat`` attributes to subject 11 (barcode 18) are of the landmark
+  that ``Landmark_Groundtruth.dat`` places at subject 17's position, and those of subject 17
+  (barcode 61) are of subject 11's: the two labels are swapped, so the loader swaps them back.
+  Evidence, against the Vicon poses of the snapshots described below (Robot 1 readings within
+  0.3 s of a snapshot): placed through the true pose, the 59 readings labelled 11 land
+  (median) at (0.11, −2.72), 0.14 m from landmark 17 and 5.9 m from landmark 11; the 16
+  labelled 17 land at (3.20, 2.39), 0.05 m from landmark 11 and 6.1 m from landmark 17 — while
+  the readings of every other landmark land within 0.15 m of it. As labelled, every one of
+  them misses by 2–4.7 m in range or 0.5–3 rad in bearing, so the snapshot conversion removed
+  them as outliers (its files hold no reading of either landmark). With the labels swapped
+  back, the median residuals of subjects 11 and 17 over the whole run (against the EKF track)
+  are 1–2 cm and at most 0.003 rad, like the other landmarks'; 776 of Robot 1's 4771 landmark
+  readings are relabelled. The Robot 1 files are the only evidence here: the correction is
+  applied to Dataset 1 only (any robot, since ``Barcodes.dat`` and the landmark file are
+  shared), and to no other data set until it has been checked there.
+  ``metadata["label_corrections"]`` records what was applied.
 * **Maps and truth.** ``known_landmarks`` and ``truth.landmarks`` are the Vicon landmark map
-  (ids = subjects). The robots' true trajectories are not part of the files here, so the data
-  set has no true trajectory, and no prior pose: the start is unknown (localize globally, or
-  from the first readings).
+  (ids = subjects); with ``landmarks_known=False`` (for SLAM) the map is ground truth only
+  and ``known_landmarks`` is ``None``. The robots' true trajectories are not part of the
+  files here, so the data set has no true trajectory, and no prior pose: the start is
+  unknown (localize globally, or from the first readings).
 
 Nominal noise — measured, not taken from the paper (which gives no such numbers). The
 Triangulation Toolbox conversion of Dataset 1 (``landmarks/utias_mrclam/triangulation_toolbox``)
@@ -53,8 +72,17 @@ Robot 1's (every one of their readings appears, with equal values, in
   −0.024 m, MAD-based sigma 0.135 m, RMS 0.148 m; bearing residual median −0.010 rad,
   standard deviation 0.031 rad, RMS 0.034 rad → ``sigma_range = 0.15`` m,
   ``sigma_bearing = 0.035`` rad (the values of :mod:`slamkit.datasets.mrclam_snapshots`).
-  The stream here is *not* cleaned: of the 706 readings Robot 1 took during those stationary
-  moments, 16 % lie more than 3 sigma from the truth in range or bearing. Gate them.
+  The stream here is *not* cleaned. Of the 641 readings of Robot 1 within 0.3 s of a
+  snapshot, 13 % lie more than 3 sigma from the truth in range or bearing with the labels of
+  the files, nearly all of them (75 of 86) readings of the swapped subjects 11 and 17; with
+  the labels corrected, 2.2 % (14). At the true poses the NIS per degree of freedom of these
+  641 readings, with these sigmas, is then 1.13 on average. Gate the remaining outliers.
+  The errors are not white, though: the range error depends on where the landmark is in the
+  image (median −0.25 m beyond 0.45 rad of bearing, +0.07 to +0.09 m within 0.15 rad of the
+  axis) and the bearing bias drifts by up to ±0.04 rad from one stretch of the run to the
+  next. A filter that treats them as white follows them: the EKF on this stream has a NIS
+  per degree of freedom of about 0.5 while its pose NEES at the snapshot poses is about 11
+  (3 dof).
 * controls: the commanded motion integrated between two true poses 0.5–40 s apart (about
   77,000 pairs) misses the true relative motion by an RMS of 0.008–0.085 m along the path and
   0.016–0.10 rad in heading. Treating the velocity error as white noise on each 10 ms
@@ -71,6 +99,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -93,6 +122,7 @@ from slamkit.maps import LandmarkMap
 from slamkit.models import UnicycleArc
 
 __all__ = [
+    "LABEL_CORRECTIONS",
     "ROBOT_SUBJECTS",
     "MrclamOptions",
     "load_mrclam",
@@ -101,6 +131,13 @@ __all__ = [
 
 ROBOT_SUBJECTS = frozenset(range(1, 6))
 """Subject numbers of the five robots; every other subject is a landmark."""
+
+LABEL_CORRECTIONS: Mapping[int, Mapping[int, int]] = MappingProxyType(
+    {1: MappingProxyType({11: 17, 17: 11})}
+)
+"""Per data set, ``subject as labelled through Barcodes.dat -> subject actually seen``, applied
+to the readings when ``correct_labels`` is set (Dataset 1: subjects 11 and 17 swapped; the
+evidence is in the module docstring)."""
 
 _TIME_DECIMALS = 6
 
@@ -123,6 +160,12 @@ class MrclamOptions:
     """Nominal bearing noise [rad] (measured against Vicon poses)."""
     max_duration_s: float | None = None
     """Keep only the events of the first this many seconds (all when ``None``)."""
+    correct_labels: bool = True
+    """Apply :data:`LABEL_CORRECTIONS` for this data set (Dataset 1: subjects 11 and 17 swapped
+    back). ``False`` keeps the labels of ``Barcodes.dat`` as they are."""
+    landmarks_known: bool = True
+    """Give estimators the Vicon map as ``known_landmarks`` (localization). ``False``: the map
+    is only ground truth (``truth.landmarks``), for SLAM."""
 
     def __post_init__(self) -> None:
         if not 1 <= self.dataset <= 9:
@@ -257,6 +300,9 @@ def load_mrclam(
             "expected an integer barcode", p_readings, int(meas.line_numbers[r])
         )
     subjects = np.array([barcode_to_subject.get(int(b), -1) for b in barcodes], dtype=np.int64)
+    corrections = dict(LABEL_CORRECTIONS.get(opts.dataset, {})) if opts.correct_labels else {}
+    relabelled = np.isin(subjects, list(corrections))
+    subjects[relabelled] = [corrections[int(s)] for s in subjects[relabelled]]
     unknown = subjects < 0
     robots = np.isin(subjects, list(ROBOT_SUBJECTS))
     not_mapped = ~unknown & ~robots & ~np.isin(subjects, world.ids)
@@ -307,6 +353,10 @@ def load_mrclam(
         "readings_kept": int(group_end[-1]) if group_t.size else 0,
         "reading_events": int(group_t.size),
         "dropped": dropped,
+        "label_corrections": {
+            "applied": {str(k): v for k, v in sorted(corrections.items())},
+            "readings_relabelled": int(relabelled[keep].sum()),
+        },
         "cut_at_s": None if opts.max_duration_s is None else cut,
         "options": config_to_dict(opts),
     }
@@ -315,7 +365,7 @@ def load_mrclam(
         events=tuple(events),
         motion=MotionSpec(UnicycleArc(), np.diag([opts.sigma_v**2, opts.sigma_omega**2])),
         landmark_sensor=sensor,
-        known_landmarks=world,
+        known_landmarks=world if opts.landmarks_known else None,
         truth=GroundTruth(landmarks=world),
         description=(
             f"UTIAS MRCLAM data set {opts.dataset}, robot {opts.robot}: commanded velocities "

@@ -161,6 +161,14 @@ DATASETS: dict[str, DatasetEntry] = {
             files=("laser/corrected_carmen/intel-corrected.log.gz",),
         ),
         DatasetEntry(
+            "intel-mcl",
+            "real",
+            "Intel Research Lab in the 5 cm occupancy map slamkit builds from the corrected "
+            "poses (known_grid); odometry = truth + known noise; no prior (global localization)",
+            "slamkit.mapping.built_maps:load_intel_mcl",
+            files=("laser/corrected_carmen/intel-corrected.log.gz",),
+        ),
+        DatasetEntry(
             "aces",
             "real",
             "ACES building, corrected CARMEN log: 440 scans × 180 beams (50 m clip), corrected "

@@ -11,6 +11,15 @@ from slamkit.localization.dead_reckoning import DeadReckoning, DeadReckoningConf
 from slamkit.localization.ekf import EkfConfig, EkfLocalization, ekf_predict, ekf_update
 from slamkit.localization.kalman import Gaussian, KalmanFilter, UpdateInfo, kf_predict, kf_update
 from slamkit.localization.least_squares import LeastSquaresConfig, LeastSquaresLocalization
+from slamkit.localization.likelihood_field import LikelihoodField
+from slamkit.localization.mcl import MclConfig, MonteCarloLocalization
+from slamkit.localization.particles import (
+    ParticleSet,
+    effective_sample_size,
+    low_variance_resample,
+    normalize_log_weights,
+    particle_estimate,
+)
 from slamkit.localization.static import (
     LeastSquaresResult,
     PoseFix,
@@ -44,6 +53,10 @@ __all__ = [
     "LeastSquaresConfig",
     "LeastSquaresLocalization",
     "LeastSquaresResult",
+    "LikelihoodField",
+    "MclConfig",
+    "MonteCarloLocalization",
+    "ParticleSet",
     "PoseFix",
     "PositionFix",
     "SigmaPointParams",
@@ -51,12 +64,16 @@ __all__ = [
     "UkfLocalization",
     "UpdateInfo",
     "associate_ml",
+    "effective_sample_size",
     "ekf_predict",
     "ekf_update",
     "kf_predict",
     "kf_update",
     "localize_from_readings",
     "localize_range_bearing",
+    "low_variance_resample",
+    "normalize_log_weights",
+    "particle_estimate",
     "predict",
     "predict_unchecked",
     "rls_from_first",

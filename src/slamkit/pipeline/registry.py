@@ -114,6 +114,14 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             requires=("motion", "landmark_sensor", "known_landmarks"),
         ),
         EstimatorEntry(
+            "mcl",
+            "Monte Carlo localization in a known map (landmarks or laser likelihood field); "
+            "augmented MCL, KLD-sampling, global localization without a prior",
+            "slamkit.localization.mcl:MonteCarloLocalization",
+            "slamkit.localization.mcl:MclConfig",
+            requires=("motion",),
+        ),
+        EstimatorEntry(
             "occupancy-mapping",
             "occupancy grid with known (true) poses: log-odds, α/β inverse laser model, "
             "Bresenham rays",
