@@ -87,6 +87,18 @@ DATASETS: dict[str, DatasetEntry] = {
             "slamkit.sim.scenarios:build_landmark_loop",
         ),
         DatasetEntry(
+            "landmark-clutter",
+            "simulated",
+            "150 landmarks 1.2 m apart, readings without ids (data association)",
+            "slamkit.sim.scenarios:build_landmark_clutter",
+        ),
+        DatasetEntry(
+            "landmark-loop-closure",
+            "simulated",
+            "100 landmarks along a 180 m loop driven round and on: first landmarks re-seen",
+            "slamkit.sim.scenarios:build_landmark_loop_closure",
+        ),
+        DatasetEntry(
             "rooms-laser",
             "simulated",
             "laser tour of four rooms off a corridor, walls as ground truth",
@@ -151,6 +163,18 @@ DATASETS: dict[str, DatasetEntry] = {
             "position readings, true poses",
             "slamkit.datasets.isam_landmarks:load_citytrees10000",
             files=("isam/cityTrees10000.txt", "isam/groundtruth/cityTrees10000_groundtruth.txt"),
+        ),
+        DatasetEntry(
+            "victoria-park",
+            "real",
+            "Victoria Park truck: 40 Hz Ackermann odometry, laser range-bearing readings of "
+            "299 trees (ids unknown), GPS positions as reference; start at the origin",
+            "slamkit.datasets.victoria_park:load_victoria_park",
+            files=(
+                "landmarks/victoria_park/original_acfr/aa3_dr.csv.gz",
+                "landmarks/victoria_park/original_acfr/aa3_gpsx.csv",
+                "landmarks/victoria_park/slsjf/data_sensor_clean_clean.csv.gz",
+            ),
         ),
         DatasetEntry(
             "intel",

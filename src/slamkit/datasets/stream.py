@@ -200,6 +200,15 @@ class GroundTruth:
     landmarks: LandmarkMap | None = None
     walls: SegmentMap | None = None
     occupancy: OccupancyGrid | None = None
+    position_times: FloatArray | None = None
+    positions: FloatArray | None = None
+    """A position-only reference track ``(N, 2)`` at ``position_times (N,)``, e.g. GPS: no
+    heading, and it may hold outliers and gaps. Scored by :mod:`slamkit.eval.gps` (outlier
+    rejection, alignment at its times), not by the pose metrics."""
+    reading_ids: tuple[NDArray[np.int64], ...] | None = None
+    """The true landmark id of every reading, one array per :class:`LandmarkReadings` event
+    in stream order (``-1`` = unknown): the data association, for scoring an estimator that
+    was given no ids."""
 
     def __post_init__(self) -> None:
         if (self.times is None) != (self.poses is None):
@@ -211,6 +220,18 @@ class GroundTruth:
                 raise InputError("truth times: expected non-decreasing times")
             object.__setattr__(self, "times", times)
             object.__setattr__(self, "poses", poses)
+        if (self.position_times is None) != (self.positions is None):
+            raise InputError("ground truth: position_times and positions go together")
+        if self.position_times is not None and self.positions is not None:
+            pt = as_array(self.position_times, "truth position_times", (None,))
+            xy = as_array(self.positions, "truth positions", (pt.size, 2))
+            if np.any(np.diff(pt) < 0):
+                raise InputError("truth position_times: expected non-decreasing times")
+            object.__setattr__(self, "position_times", pt)
+            object.__setattr__(self, "positions", xy)
+        if self.reading_ids is not None:
+            ids = tuple(np.asarray(a, dtype=np.int64).reshape(-1) for a in self.reading_ids)
+            object.__setattr__(self, "reading_ids", ids)
 
     @property
     def has_trajectory(self) -> bool:
@@ -250,6 +271,8 @@ class Dataset:
             object.__setattr__(self, "initial_cov", cov)
         object.__setattr__(self, "events", tuple(self.events))
         self._validate_events()
+        if self.truth.reading_ids is not None:
+            self._check_reading_ids(self.truth.reading_ids)
 
     def _validate_events(self) -> None:
         """Check the whole stream once: times finite and non-decreasing, every event's arrays
@@ -284,6 +307,19 @@ class Dataset:
                 self._check_rows(idx, "ranges", (self.laser.n_beams,))
             else:
                 self._fail(idx[0], "unknown event type")
+
+    def _check_reading_ids(self, truth_ids: tuple[NDArray[np.int64], ...]) -> None:
+        """``truth.reading_ids`` holds one id per reading of every readings event, in order."""
+        idx = [i for i, ev in enumerate(self.events) if isinstance(ev, LandmarkReadings)]
+        if len(truth_ids) != len(idx):
+            raise ShapeError(
+                f"truth reading_ids: expected {len(idx)} arrays (one per LandmarkReadings "
+                f"event), got {len(truth_ids)}"
+            )
+        for i, ids in zip(idx, truth_ids, strict=True):
+            n = np.size(self.events[i].ids)  # type: ignore[union-attr]
+            if ids.shape != (n,):
+                self._fail(i, f"truth reading_ids: expected {n} ids, got {ids.size}", ShapeError)
 
     def _fail(self, i: int, message: str, error: type[InputError] = InputError) -> NoReturn:
         ev = self.events[i]
@@ -370,6 +406,7 @@ class Dataset:
                 "landmarks": self.truth.landmarks is not None,
                 "walls": self.truth.walls is not None,
                 "occupancy": self.truth.occupancy is not None,
+                "positions": self.truth.positions is not None,
             },
             **self.metadata,
         }

@@ -8,6 +8,7 @@ from slamkit.eval.consistency import (
     nees,
     nis,
 )
+from slamkit.eval.gps import GpsError, GpsOutliers, GpsScoreConfig, gps_error, gps_outliers
 from slamkit.eval.innovations import NisSummary, nis_summary
 from slamkit.eval.landmarks import LandmarkError, landmark_map_error
 from slamkit.eval.trajectory import (
@@ -24,6 +25,9 @@ from slamkit.eval.trajectory import (
 __all__ = [
     "AlignMode",
     "ConsistencyReport",
+    "GpsError",
+    "GpsOutliers",
+    "GpsScoreConfig",
     "LandmarkError",
     "NisSummary",
     "RelativeError",
@@ -33,6 +37,8 @@ __all__ = [
     "associate",
     "chi2_bounds",
     "consistency_report",
+    "gps_error",
+    "gps_outliers",
     "landmark_map_error",
     "nees",
     "nis",

@@ -43,7 +43,9 @@ __all__ = [
     "LandmarkScenarioConfig",
     "LaserScenarioConfig",
     "build_five_features",
+    "build_landmark_clutter",
     "build_landmark_loop",
+    "build_landmark_loop_closure",
     "build_rooms_laser",
 ]
 
@@ -293,6 +295,54 @@ def build_landmark_loop(
         "60 random landmarks along a 180 m rectangular loop that closes",
         cfg,
         world,
+        np.array([0.0, 0.0, 0.0]),
+        waypoints,
+        rng,
+    )
+
+
+def build_landmark_clutter(
+    options: Mapping[str, Any], *, seed: int, data_root: Path | None = None
+) -> Dataset:
+    """A cluttered field for data-association tests: 150 random landmarks at least 1.2 m
+    apart in a 30 m × 30 m square (about 13 in view, 6 m range), an 80 m square route that
+    closes, and readings WITHOUT identities (ids ``-1``, shuffled) at 2 Hz. Pass
+    ``identities=True`` for the same world with labels (to score an association)."""
+    defaults = {"identities": False, "max_range": 6.0, "observe_every": 5}
+    cfg = config_from_mapping(LandmarkScenarioConfig, {**defaults, **options}, "scenario")
+    rng = np.random.default_rng(seed)
+    world = random_landmarks(rng, 150, (-5.0, -5.0, 25.0, 25.0), min_separation=1.2)
+    waypoints = np.array([[20.0, 0.0], [20.0, 20.0], [0.0, 20.0], [0.0, 0.0]])
+    return _landmark_dataset(
+        "landmark-clutter",
+        "150 landmarks 1.2 m apart around an 80 m square route, readings without ids",
+        cfg,
+        world,
+        np.array([0.0, 0.0, 0.0]),
+        waypoints,
+        rng,
+    )
+
+
+def build_landmark_loop_closure(
+    options: Mapping[str, Any], *, seed: int, data_root: Path | None = None
+) -> Dataset:
+    """Loop closure: 100 landmarks (2.5 m apart) only in a 10 m wide band along a
+    60 m × 30 m rectangular route, so each is seen from one stretch of road; the robot
+    drives round once and 20 m on, re-observing its first landmarks after ~115 s."""
+    defaults = {"max_range": 6.0, "speed": 1.5}
+    cfg = config_from_mapping(LandmarkScenarioConfig, {**defaults, **options}, "scenario")
+    rng = np.random.default_rng(seed)
+    bands = [(-5.0, -5.0, 65.0, 5.0), (55.0, 5.0, 65.0, 25.0), (-5.0, 25.0, 65.0, 35.0),
+             (-5.0, 5.0, 5.0, 25.0)]  # fmt: skip
+    parts = [random_landmarks(rng, n, b, min_separation=2.5).positions
+             for n, b in zip((33, 17, 33, 17), bands, strict=True)]  # fmt: skip
+    waypoints = np.array([[60.0, 0.0], [60.0, 30.0], [0.0, 30.0], [0.0, 0.0], [20.0, 0.0]])
+    return _landmark_dataset(
+        "landmark-loop-closure",
+        "100 landmarks along a 180 m rectangular loop, driven round and 20 m on",
+        cfg,
+        LandmarkMap.from_positions(np.concatenate(parts)),
         np.array([0.0, 0.0, 0.0]),
         waypoints,
         rng,
