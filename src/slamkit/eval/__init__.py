@@ -1,6 +1,7 @@
 """Evaluation: trajectory accuracy (ATE, RPE), filter consistency (NEES/NIS) and landmark-map
 accuracy. Numerics only; plotting lives in :mod:`slamkit.viz`."""
 
+from slamkit.eval.association import AssociationScores, association_scores
 from slamkit.eval.consistency import (
     ConsistencyReport,
     chi2_bounds,
@@ -10,7 +11,12 @@ from slamkit.eval.consistency import (
 )
 from slamkit.eval.gps import GpsError, GpsOutliers, GpsScoreConfig, gps_error, gps_outliers
 from slamkit.eval.innovations import NisSummary, nis_summary
-from slamkit.eval.landmarks import LandmarkError, landmark_map_error
+from slamkit.eval.landmarks import (
+    LandmarkError,
+    LandmarkMatch,
+    landmark_map_error,
+    match_landmarks,
+)
 from slamkit.eval.trajectory import (
     AlignMode,
     RelativeError,
@@ -24,22 +30,26 @@ from slamkit.eval.trajectory import (
 
 __all__ = [
     "AlignMode",
+    "AssociationScores",
     "ConsistencyReport",
     "GpsError",
     "GpsOutliers",
     "GpsScoreConfig",
     "LandmarkError",
+    "LandmarkMatch",
     "NisSummary",
     "RelativeError",
     "RpeUnit",
     "TrajectoryError",
     "absolute_trajectory_error",
     "associate",
+    "association_scores",
     "chi2_bounds",
     "consistency_report",
     "gps_error",
     "gps_outliers",
     "landmark_map_error",
+    "match_landmarks",
     "nees",
     "nis",
     "nis_summary",

@@ -79,6 +79,11 @@ class EstimatorOutput:
     """JSON-able numbers and short lists (counts, statistics) merged into ``metrics.json``."""
     innovations: InnovationLog | None = None
     particle_snapshots: tuple[ParticleSnapshot, ...] = ()
+    reading_landmarks: NDArray[np.int64] | None = None
+    """The data association an estimator chose: the id of the landmark every reading updated
+    or started, concatenated over the :class:`~slamkit.datasets.LandmarkReadings` events in
+    stream order (``-1``: the reading was not used). Scored against
+    ``truth.reading_ids`` by :func:`slamkit.eval.association_scores`."""
 
 
 class Estimator(Protocol):

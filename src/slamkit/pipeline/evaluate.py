@@ -4,17 +4,19 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Literal, Protocol
 
 import numpy as np
 
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset
-from slamkit.errors import CovarianceError, SlamkitError
+from slamkit.errors import CovarianceError, InputError, SlamkitError
 from slamkit.eval import (
     absolute_trajectory_error,
     associate,
+    association_scores,
     chi2_bounds,
+    gps_error,
     landmark_map_error,
     nees,
     nis_summary,
@@ -54,9 +56,12 @@ def _metric(metrics: dict[str, Any], name: str, compute: Callable[[], _HasDict])
 
 def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -> Evaluation:
     """ATE (SE(2)-aligned and unaligned), RPE over one step and over 10 m, NEES against the
-    true trajectory, NIS statistics of the innovation log (windows of 50 updates),
-    landmark-map error, and run times. Steps are matched by time stamp
-    within ``max_dt`` (default: half the median step of the result)."""
+    true trajectory, the error against a position-only reference track (GPS, outliers
+    rejected, SE(2)-aligned at its times), NIS statistics of the innovation log (windows of
+    50 updates), landmark-map error (landmarks matched by id, or by position when the
+    estimator numbered its own), data-association scores against the true association of
+    the readings, and run times. Steps are matched by time stamp within ``max_dt``
+    (default: half the median step of the result)."""
     metrics: dict[str, Any] = {
         "estimator": result.estimator,
         "dataset": result.dataset,
@@ -111,10 +116,31 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
                         "steps": int(ok.sum()),
                     }
             ev = Evaluation(metrics, result.times[ia], err, sig, nees_vals)
+    if truth.positions is not None and truth.position_times is not None and len(result) > 1:
+        gps_t, gps_xy = truth.position_times, truth.positions
+        _metric(metrics, "gps", lambda: gps_error(result.times, result.poses, gps_t, gps_xy))
     log = result.output.innovations
     if log is not None and len(log) > 0:
         _metric(metrics, "nis", lambda: nis_summary(log.times, log.nis, log.dof, window=50))
     if result.output.landmarks is not None and truth.landmarks is not None:
         est_map, true_map = result.output.landmarks.landmarks, truth.landmarks
-        _metric(metrics, "landmarks", lambda: landmark_map_error(est_map, true_map, align=True))
+        by: Literal["id", "position"] = (
+            "id" if np.intersect1d(est_map.ids, true_map.ids).size else "position"
+        )
+        metrics["landmarks_matched_by"] = by
+        _metric(metrics, "landmarks", lambda: landmark_map_error(est_map, true_map, match=by))
+    chosen = result.output.reading_landmarks
+    if chosen is not None and truth.reading_ids is not None:
+        _metric(metrics, "association", lambda: _association(chosen, dataset))
     return ev
+
+
+def _association(chosen: np.ndarray, dataset: Dataset) -> _HasDict:
+    assert dataset.truth.reading_ids is not None
+    true = np.concatenate([np.zeros(0, np.int64), *dataset.truth.reading_ids])
+    if true.size != chosen.size:
+        raise InputError(
+            f"association: the estimator reported {chosen.size} readings, the data set has "
+            f"{true.size}"
+        )
+    return association_scores(chosen, true)

@@ -137,6 +137,38 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.mapping.ekf_mapping:EkfMappingConfig",
             requires=("landmark_sensor", "true_poses"),
         ),
+        EstimatorEntry(
+            "ekf-slam",
+            "EKF-SLAM: pose and point landmarks with the full covariance; known ids, nearest "
+            "neighbour or JCBB association; provisional feature list",
+            "slamkit.slam.ekf_slam:EkfSlam",
+            "slamkit.slam.ekf_slam:EkfSlamConfig",
+            requires=("motion", "landmark_sensor"),
+        ),
+        EstimatorEntry(
+            "fastslam1",
+            "FastSLAM 1.0: particles over paths, a 2×2 EKF per landmark and particle, "
+            "per-particle maximum-likelihood association",
+            "slamkit.slam.fastslam:FastSlam1",
+            "slamkit.slam.fastslam:FastSlamConfig",
+            requires=("motion", "landmark_sensor"),
+        ),
+        EstimatorEntry(
+            "fastslam2",
+            "FastSLAM 2.0: as fastslam1, poses drawn from the proposal that includes the "
+            "measurement",
+            "slamkit.slam.fastslam:FastSlam2",
+            "slamkit.slam.fastslam:FastSlamConfig",
+            requires=("motion", "landmark_sensor"),
+        ),
+        EstimatorEntry(
+            "seif",
+            "sparse extended information filter SLAM: constant-time motion update, bounded "
+            "active landmarks, sparsification, amortised mean recovery",
+            "slamkit.slam.seif:Seif",
+            "slamkit.slam.seif:SeifConfig",
+            requires=("motion", "landmark_sensor"),
+        ),
     )
 }
 

@@ -7,7 +7,7 @@ from slamkit.sim.scenarios import (
     build_landmark_loop,
     build_rooms_laser,
 )
-from slamkit.sim.sensors import observe_landmarks, simulate_scan
+from slamkit.sim.sensors import observe_landmarks, observe_landmarks_labelled, simulate_scan
 from slamkit.sim.trajectory import Drive, follow_waypoints, simulate_motion, waypoint_controls
 from slamkit.sim.worlds import (
     five_feature_world,
@@ -27,6 +27,7 @@ __all__ = [
     "five_feature_world",
     "follow_waypoints",
     "observe_landmarks",
+    "observe_landmarks_labelled",
     "random_landmarks",
     "rasterize_segments",
     "rectangle_segments",

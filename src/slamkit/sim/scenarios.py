@@ -30,7 +30,7 @@ from slamkit.datasets.stream import (
 from slamkit.errors import ConfigError, InputError
 from slamkit.maps import LandmarkMap, SegmentMap
 from slamkit.models import UnicycleEuler
-from slamkit.sim.sensors import observe_landmarks, simulate_scan
+from slamkit.sim.sensors import observe_landmarks_labelled, simulate_scan
 from slamkit.sim.trajectory import follow_waypoints
 from slamkit.sim.worlds import (
     five_feature_world,
@@ -241,13 +241,15 @@ def _landmark_dataset(
     prior = prior + np.array([*cfg.prior_error_xy, np.deg2rad(cfg.prior_error_theta_deg)])
     sensor = cfg.sensor_spec()
     events: list[Event] = []
+    reading_ids: list[np.ndarray] = []  # the true association, for scoring an estimator
     for k in range(truth.shape[0]):
         if k > 0:
             events.append(Control(float(times[k]), controls[k - 1], cfg.dt))
         if k % cfg.observe_every == 0:
-            z, ids = observe_landmarks(truth[k], world, sensor, rng)
+            z, ids, true_ids = observe_landmarks_labelled(truth[k], world, sensor, rng)
             if ids.size:
                 events.append(LandmarkReadings(float(times[k]), z, ids))
+                reading_ids.append(true_ids)
     return Dataset(
         name=name,
         events=tuple(events),
@@ -256,7 +258,9 @@ def _landmark_dataset(
         initial_pose=prior if cfg.known_start else None,
         initial_cov=cfg.initial_cov() if cfg.known_start else None,
         known_landmarks=world,
-        truth=GroundTruth(times=times, poses=truth, landmarks=world),
+        truth=GroundTruth(
+            times=times, poses=truth, landmarks=world, reading_ids=tuple(reading_ids)
+        ),
         description=description,
         metadata={"kind": "simulated", "config": config_to_dict(cfg)},
     )

@@ -11,7 +11,7 @@ from slamkit.geometry import wrap_angle
 from slamkit.maps import LandmarkMap, OccupancyGrid, SegmentMap
 from slamkit.models import LaserScanner, RangeBearing
 
-__all__ = ["observe_landmarks", "simulate_scan"]
+__all__ = ["observe_landmarks", "observe_landmarks_labelled", "simulate_scan"]
 
 
 def observe_landmarks(
@@ -23,6 +23,19 @@ def observe_landmarks(
     """Readings ``z (K, m)`` and ids ``(K,)`` of the landmarks within ``[min_range,
     max_range]`` and the field of view of ``pose``; noise ``N(0, sensor.noise_cov)``; ids
     are ``-1`` (and the order shuffled) when the sensor gives no identities."""
+    z, ids, _ = observe_landmarks_labelled(pose, landmarks, sensor, rng)
+    return z, ids
+
+
+def observe_landmarks_labelled(
+    pose: ArrayLike,
+    landmarks: LandmarkMap,
+    sensor: LandmarkSensorSpec,
+    rng: np.random.Generator,
+) -> tuple[FloatArray, NDArray[np.int64], NDArray[np.int64]]:
+    """:func:`observe_landmarks` plus the true id of every reading (in the order of the
+    readings), which a sensor without identities does not report: the ground truth of the
+    data association. Draws the same random numbers."""
     x = as_array(pose, "pose", (3,))
     # Visibility is decided on the noise-free range and bearing.
     rb = RangeBearing().predict(x, landmarks.positions)
@@ -40,11 +53,11 @@ def observe_landmarks(
             z[:, j] = wrap_angle(z[:, j])
     if sensor.kind in ("range-bearing", "range"):
         z[:, 0] = np.abs(z[:, 0])  # a range reading is never negative
-    ids = landmarks.ids[visible].copy()
-    if not sensor.identities:
-        order = rng.permutation(ids.size)
-        z, ids = z[order], np.full(ids.size, -1, dtype=np.int64)
-    return z, ids
+    true_ids = landmarks.ids[visible].copy()
+    if sensor.identities:
+        return z, true_ids.copy(), true_ids
+    order = rng.permutation(true_ids.size)
+    return z[order], np.full(true_ids.size, -1, dtype=np.int64), true_ids[order]
 
 
 def simulate_scan(

@@ -1039,7 +1039,12 @@ class EkfSlam:
                 dof=np.full(nis.size, self._m, dtype=np.int64),
                 landmark_ids=np.asarray(self._nis_id, dtype=np.int64),
             )
-        return EstimatorOutput(landmarks=landmarks, diagnostics=diagnostics, innovations=log)
+        return EstimatorOutput(
+            landmarks=landmarks,
+            diagnostics=diagnostics,
+            innovations=log,
+            reading_landmarks=np.asarray(self._log_id, dtype=np.int64),
+        )
 
     # -- internals ------------------------------------------------------------------------
 

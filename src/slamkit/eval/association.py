@@ -1,0 +1,98 @@
+"""How well an estimator associated readings with landmarks, against the true association.
+
+An estimator that is given no landmark ids numbers its landmarks itself, so its ids cannot be
+compared with the true ones directly. Each true landmark's *estimate* is taken to be the
+estimated landmark that holds most of its readings; a reading is then correctly associated
+when it updated (or started) exactly that one. This scores a map that splits one true
+landmark into two (a duplicate: the smaller part's readings count as wrong) and one that
+merges two true landmarks (the smaller one's readings count as wrong), without a separate
+matching step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from slamkit.errors import InputError, ShapeError
+
+__all__ = ["AssociationScores", "association_scores"]
+
+
+@dataclass(frozen=True)
+class AssociationScores:
+    """Association quality over the readings whose true landmark is known."""
+
+    readings: int
+    """Readings with a known true landmark (true id ``>= 0``)."""
+    used: int
+    """Of those, readings the estimator used (estimated id ``>= 0``)."""
+    accuracy: float
+    """Correct readings over all scored readings (an unused reading counts as wrong)."""
+    precision: float
+    """Correct readings over the used ones (nan when none were used)."""
+    duplicates: int
+    """Estimated landmarks that are the estimate of no true landmark (a landmark mapped twice,
+    a failed loop closure, clutter turned into a landmark)."""
+    merged: int
+    """Estimated landmarks that are the estimate of more than one true landmark."""
+    true_landmarks: int
+    estimated_landmarks: int
+
+    def as_dict(self) -> dict[str, float | int]:
+        return {
+            "readings": self.readings,
+            "used": self.used,
+            "accuracy": self.accuracy,
+            "precision": self.precision,
+            "duplicates": self.duplicates,
+            "merged": self.merged,
+            "true_landmarks": self.true_landmarks,
+            "estimated_landmarks": self.estimated_landmarks,
+        }
+
+
+def association_scores(estimated_ids: ArrayLike, true_ids: ArrayLike) -> AssociationScores:
+    """Score the landmark ``estimated_ids (N,)`` an estimator gave each reading (``-1``:
+    unused) against the ``true_ids (N,)`` of the same readings (``-1``: unknown, not
+    scored). See the module docstring for the definitions."""
+    est = np.asarray(estimated_ids)
+    true = np.asarray(true_ids)
+    if est.ndim != 1 or true.shape != est.shape:
+        raise ShapeError(
+            f"association_scores: expected two (N,) id arrays of one length, got shapes "
+            f"{est.shape} and {true.shape}"
+        )
+    if not (np.issubdtype(est.dtype, np.integer) and np.issubdtype(true.dtype, np.integer)):
+        raise InputError("association_scores: expected integer landmark ids")
+    scored = true >= 0
+    if not np.any(scored):
+        raise InputError("association_scores: no reading has a known true landmark")
+    est, true = est[scored].astype(np.int64), true[scored].astype(np.int64)
+    used = est >= 0
+    # primary[t] = the estimated landmark holding most readings of true landmark t
+    pairs, counts = np.unique(np.stack([true[used], est[used]]), axis=1, return_counts=True)
+    order = np.lexsort((-counts, pairs[0]))  # by true id, then most readings first
+    pairs = pairs[:, order]
+    first = np.r_[True, pairs[0, 1:] != pairs[0, :-1]] if pairs.size else np.zeros(0, bool)
+    primary_true, primary_est = pairs[0, first], pairs[1, first]
+    expected = np.full(true.size, -2, dtype=np.int64)
+    pos = np.searchsorted(primary_true, true)
+    known = (pos < primary_true.size) & (primary_true[np.minimum(pos, primary_true.size - 1)]
+                                         == true)  # fmt: skip
+    expected[known] = primary_est[pos[known]]
+    correct = used & (est == expected)
+    estimated = np.unique(est[used])
+    primaries, times = np.unique(primary_est, return_counts=True)
+    return AssociationScores(
+        readings=int(true.size),
+        used=int(used.sum()),
+        accuracy=float(correct.mean()),
+        precision=float(correct[used].mean()) if np.any(used) else float("nan"),
+        duplicates=int(np.setdiff1d(estimated, primaries).size),
+        merged=int(np.sum(times > 1)),
+        true_landmarks=int(np.unique(true).size),
+        estimated_landmarks=int(estimated.size),
+    )
