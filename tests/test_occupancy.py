@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from slamkit.datasets import LaserScan, load_dataset
-from slamkit.errors import ConfigError, InputError
+from slamkit.datasets import LaserScan, LaserSpec, load_dataset
+from slamkit.errors import ConfigError, InputError, NonFiniteError, ShapeError
 from slamkit.io.rosmap import read_ros_map
 from slamkit.mapping import (
     FREE,
@@ -43,6 +43,7 @@ from slamkit.mapping import (
     scan_cells_table,
 )
 from slamkit.mapping.bresenham import MAX_SEGMENT_STEPS, bresenham_segments, minor_steps
+from slamkit.mapping.occupancy import check_ranges
 from slamkit.maps import UNKNOWN, OccupancyGrid
 from slamkit.pipeline.registry import EstimatorEntry
 from slamkit.pipeline.runner import run
@@ -605,6 +606,73 @@ def test_known_pose_lookup():
     np.testing.assert_allclose(known_pose_at(times, poses, 2.0), [2.0, 2.0, (-np.pi + 0.1) / 2])
     with pytest.raises(InputError, match="outside"):
         known_pose_at(times, poses, 3.5)
+
+
+# --------------------------------------------------------------------------------------------
+# bad input
+# --------------------------------------------------------------------------------------------
+
+
+def _mapper(beam_stride: int = 1) -> OccupancyMapper:
+    laser = LaserSpec(np.linspace(-np.pi / 2, np.pi / 2, 181), 30.0)
+    return OccupancyMapper(laser, OccupancyMappingConfig(resolution=0.1, beam_stride=beam_stride))
+
+
+def test_nan_and_negative_ranges_are_rejected_before_anything_is_mapped():
+    """An all-NaN scan once gave 34,837 cell updates (NaN compared like a max-range reading);
+    now it, a negative reading, an infinite one and a wrong beam count raise typed errors that
+    name the scan and the beam, and the mapper counts and writes nothing."""
+    mapper = _mapper(beam_stride=2)
+    ok = np.full(181, 5.0)
+    with pytest.raises(NonFiniteError, match=r"scan 0, beam 0: expected a finite range >= 0"):
+        mapper.offer(np.zeros(3), np.full(181, np.nan))
+    bad = np.stack([ok, ok, ok])
+    bad[2, 7] = -0.5
+    with pytest.raises(InputError, match=r"scan 2, beam 7: .* got -0\.5") as err:
+        mapper.offer_many(np.zeros((3, 3)), bad)
+    assert not isinstance(err.value, NonFiniteError)
+    with pytest.raises(NonFiniteError, match=r"scan 0, beam 90: .* got inf"):
+        mapper.integrate(np.zeros(3), np.where(np.arange(181) == 90, np.inf, ok))
+    # 182 readings leave 91 after the stride, as 181 do: the count is checked before it
+    with pytest.raises(ShapeError, match=r"expected 181 ranges \(the laser's beams\), got 182"):
+        mapper.integrate(np.zeros(3), np.full(182, 5.0))
+    assert mapper.grid is None
+    stats = mapper.stats
+    assert stats.scans_seen == stats.scans_used == stats.cell_updates == 0
+    # after two good scans the next bad one is numbered in the order offered
+    mapper.offer_many(np.zeros((2, 3)), np.stack([ok, ok]))
+    with pytest.raises(NonFiniteError, match=r"scan 2, beam 3"):
+        mapper.offer(np.zeros(3), np.where(np.arange(181) == 3, np.nan, ok))
+    assert mapper.stats.scans_seen == 2
+
+
+def test_check_ranges_names_scan_time_and_beam():
+    R = np.ones((4, 5))
+    assert check_ranges(R) is R  # a good float64 array passes through, uncopied
+    R[3, 1] = np.nan
+    with pytest.raises(NonFiniteError, match=r"scan 13 \(t=2\.500000 s\), beam 1: .* got nan"):
+        check_ranges(R, first_scan=10, times=[1.0, 1.5, 2.0, 2.5])
+    with pytest.raises(ShapeError, match="expected"):
+        check_ranges(np.ones((2, 2, 2)))
+    for fn in (scan_cells_ray, scan_cells_cell):  # the one-scan paths check too
+        with pytest.raises(InputError, match="beam 1"):
+            fn(np.zeros(3), [1.0, -1.0], [0.0, 0.1], _mapper().model, 0.1)
+
+
+def test_build_rejects_a_negative_reading_in_a_data_set(rooms):
+    """A negative range names the data set's scan and its time (or, if the data set checks
+    its stream itself, the event)."""
+    import dataclasses
+
+    events = list(rooms.events)
+    scan_events = [i for i, ev in enumerate(events) if isinstance(ev, LaserScan)]
+    i = scan_events[3]
+    ranges = events[i].ranges.copy()  # type: ignore[union-attr]
+    ranges[7] = -0.25
+    events[i] = LaserScan(events[i].t, ranges)
+    t = events[i].t
+    with pytest.raises(InputError, match=rf"scan 3 \(t={t:.6f} s\), beam 7|event {i} \("):
+        build_occupancy_map(dataclasses.replace(rooms, events=tuple(events)))
 
 
 # --------------------------------------------------------------------------------------------

@@ -62,7 +62,7 @@ from numpy.typing import ArrayLike, NDArray
 from slamkit._validation import FloatArray, as_array
 from slamkit.config import config_to_dict
 from slamkit.datasets.stream import Dataset, Event, LaserScan, LaserSpec, Odometry
-from slamkit.errors import ConfigError, InputError
+from slamkit.errors import ConfigError, InputError, NonFiniteError, ShapeError
 from slamkit.geometry.angles import wrap_angle
 from slamkit.mapping.bresenham import (
     MAX_SEGMENT_STEPS,
@@ -94,6 +94,7 @@ __all__ = [
     "OccupancyMappingConfig",
     "PolarTable",
     "build_occupancy_map",
+    "check_ranges",
     "data_bounds",
     "known_pose_at",
     "laser_scans",
@@ -173,6 +174,43 @@ class OccupancyMappingConfig:
             )
         if self.precompute and self.method != "cell":
             raise ConfigError("precompute: the pre-computed model belongs to method 'cell'")
+
+
+# --------------------------------------------------------------------------------------------
+# input: range readings
+# --------------------------------------------------------------------------------------------
+
+
+def check_ranges(
+    ranges: ArrayLike, *, first_scan: int = 0, times: ArrayLike | None = None
+) -> FloatArray:
+    """``ranges (B,)`` (one scan) or ``(S, B)`` as float64, every reading a finite number
+    ``>= 0`` [m]; a reading ``>= max range`` is the "no return" mark. A NaN or infinite
+    reading raises :class:`~slamkit.errors.NonFiniteError`, a negative one
+    :class:`~slamkit.errors.InputError`, naming the scan (``first_scan`` + its row, and its
+    time if ``times (S,)`` is given), the beam and the value. Two reductions over the array
+    when all is well (NaN propagates through ``min``); the culprit is searched only on
+    failure."""
+    R = np.asarray(ranges, dtype=np.float64)
+    if R.ndim not in (1, 2):
+        raise ShapeError(f"ranges: expected (B,) or (S, B), got shape {R.shape}")
+    if R.size == 0:
+        return R
+    low, high = float(R.min()), float(R.max())
+    if low >= 0.0 and high < math.inf:
+        return R
+    rows = R.reshape(-1, R.shape[-1])
+    non_finite = ~np.isfinite(rows)
+    bad = non_finite | (rows < 0.0)
+    k, j = divmod(int(np.argmax(bad)), rows.shape[1])
+    where = f"scan {first_scan + k}"
+    if times is not None:
+        where += f" (t={float(np.asarray(times, dtype=np.float64).reshape(-1)[k]):.6f} s)"
+    message = (
+        f"{where}, beam {j}: expected a finite range >= 0 m (a reading at the max range "
+        f"means no return), got {float(rows[k, j])}"
+    )
+    raise (NonFiniteError if non_finite[k, j] else InputError)(message)
 
 
 # --------------------------------------------------------------------------------------------
@@ -264,7 +302,7 @@ def scan_cells_ray(
     own reading. A cell appears once per ray that crosses it (see
     :meth:`LogOddsGrid.merge_scan`)."""
     p = as_array(pose, "pose", (3,))
-    readings = np.asarray(ranges, dtype=np.float64)
+    readings = check_ranges(ranges)
     beams = np.asarray(beam_angles, dtype=np.float64)
     rays = _scan_rays(p, readings, beams, model, resolution)
     rows, cols, regions, n_steps = _trace(rays, resolution, 0, 0)
@@ -508,7 +546,7 @@ def scan_cells_cell(
     bearing."""
     p = np.asarray(pose, dtype=np.float64)
     beams = np.asarray(beam_angles, dtype=np.float64)
-    readings = np.asarray(ranges, dtype=np.float64)
+    readings = check_ranges(ranges)
     _, d_end = ray_extents(readings, model)
     pts = _window_points(p, beams, d_end, min(model.beta, math.pi))
     lo = lattice_cells(pts.min(axis=0), resolution) - 1
@@ -598,7 +636,7 @@ def scan_cells_table(
     reach are classified."""
     p = np.asarray(pose, dtype=np.float64)
     beams = np.asarray(beam_angles, dtype=np.float64)
-    readings = np.asarray(ranges, dtype=np.float64)
+    readings = check_ranges(ranges)
     _, d_end = ray_extents(readings, model)
     width = 2.0 * math.pi / table.n_bins
     edges = -math.pi + width * np.arange(table.n_bins + 1) - p[2]
@@ -631,7 +669,8 @@ def scan_bounds(
     by the beam width's spread at the longest ray. Works through the scans in blocks, so
     memory stays small for long logs."""
     P = as_array(poses, "poses", (None, 3))
-    R = as_array(ranges, "ranges", (P.shape[0], None))
+    R = as_array(ranges, "ranges", (P.shape[0], None), finite=False)
+    check_ranges(R)
     beams = np.asarray(beam_angles, dtype=np.float64)
     lo = np.full(2, np.inf)
     hi = np.full(2, -np.inf)
@@ -781,6 +820,8 @@ class OccupancyMapper:
         bounds: tuple[float, float, float, float] | None = None,
     ) -> None:
         self.config = config
+        self.n_beams = laser.n_beams
+        """Readings per scan (every beam of the laser; the beam stride picks from them)."""
         self.beam_angles = laser.beam_angles[:: config.beam_stride].copy()
         self.model = config.model.resolve(config.resolution, self.beam_angles, laser.max_range)
         self.stats = MappingStats()
@@ -826,28 +867,42 @@ class OccupancyMapper:
                 last = poses[k]
         return used
 
+    def _checked(
+        self, poses: ArrayLike, ranges: ArrayLike, first_scan: int
+    ) -> tuple[FloatArray, FloatArray]:
+        """Poses ``(S, 3)`` and ranges ``(S, B)`` checked: shapes, one reading per beam of the
+        laser (before the beam stride), finite poses, finite non-negative readings
+        (:func:`check_ranges`, naming scan ``first_scan + k``)."""
+        P = as_array(poses, "poses", (None, 3))
+        R = np.asarray(ranges, dtype=np.float64)
+        if R.ndim != 2 or R.shape[0] != P.shape[0]:
+            raise ShapeError(
+                f"scans: expected ranges (S, B) for {P.shape[0]} poses, got shape {R.shape}"
+            )
+        if R.shape[1] != self.n_beams:
+            raise ShapeError(
+                f"scan {first_scan}: expected {self.n_beams} ranges (the laser's beams), "
+                f"got {R.shape[1]}"
+            )
+        return P, check_ranges(R, first_scan=first_scan)
+
     def offer(self, pose: ArrayLike, ranges: ArrayLike) -> bool:
         """Integrate the scan unless scan subsampling or selective updating skips it;
-        returns whether it was used."""
-        p = as_array(pose, "pose", (3,))
-        if not self._select(p[None])[0]:
-            return False
-        self.integrate(p, ranges)
-        return True
+        returns whether it was used. Bad input raises before anything is counted."""
+        readings = np.asarray(ranges, dtype=np.float64)
+        if readings.ndim != 1:
+            raise ShapeError(f"scan: expected ranges (B,), got shape {readings.shape}")
+        return bool(self.offer_many(as_array(pose, "pose", (3,))[None], readings[None])[0])
 
     def offer_many(self, poses: ArrayLike, ranges: ArrayLike) -> NDArray[np.bool_]:
         """:meth:`offer` for scans ``ranges (S, B)`` taken from ``poses (S, 3)``, in order (the
         same map and statistics as ``S`` calls, several times faster: the scans used are traced
-        in blocks); returns which scans were used ``(S,)``."""
-        P = as_array(poses, "poses", (None, 3))
-        R = np.asarray(ranges, dtype=np.float64)
-        if R.ndim != 2 or R.shape[0] != P.shape[0]:
-            raise InputError(
-                f"scans: expected ranges (S, B) for {P.shape[0]} poses, got shape {R.shape}"
-            )
+        in blocks); returns which scans were used ``(S,)``. Errors number the scans in the
+        order they were offered (``stats.scans_seen`` before the call, + row)."""
+        P, R = self._checked(poses, ranges, self.stats.scans_seen)
         used = self._select(P)
         if np.any(used):
-            self.integrate_many(P[used], R[used])
+            self._integrate_checked(P[used], R[used])
         return used
 
     def _ensure(self, lo: IntArray, hi: IntArray) -> LogOddsGrid:
@@ -914,25 +969,21 @@ class OccupancyMapper:
         p = as_array(pose, "pose", (3,))
         readings = np.asarray(ranges, dtype=np.float64)
         if readings.ndim != 1:
-            raise InputError(f"scan: expected ranges (B,), got shape {readings.shape}")
+            raise ShapeError(f"scan: expected ranges (B,), got shape {readings.shape}")
         return self.integrate_many(p[None], readings[None])
 
     def integrate_many(self, poses: ArrayLike, ranges: ArrayLike) -> int:
         """Update the grid with scans ``ranges (S, B)`` from ``poses (S, 3)``, in order — the
-        same as ``S`` calls of :meth:`integrate`; returns the number of cells written."""
+        same as ``S`` calls of :meth:`integrate`; returns the number of cells written. Errors
+        number the scans in the order they were integrated (``stats.scans_used`` before the
+        call, + row)."""
+        P, R = self._checked(poses, ranges, self.stats.scans_used)
+        return self._integrate_checked(P, R)
+
+    def _integrate_checked(self, P: FloatArray, ranges: FloatArray) -> int:
+        """:meth:`integrate_many` of checked scans (all beams, before the beam stride)."""
         tic = time.perf_counter()
-        P = as_array(poses, "poses", (None, 3))
-        R = np.asarray(ranges, dtype=np.float64)
-        if R.ndim != 2 or R.shape[0] != P.shape[0]:
-            raise InputError(
-                f"scans: expected ranges (S, B) for {P.shape[0]} poses, got shape {R.shape}"
-            )
-        R = R[:, :: self.config.beam_stride]
-        if R.shape[1] != self.beam_angles.size:
-            raise InputError(
-                f"scan: expected {self.beam_angles.size} ranges after the beam stride, "
-                f"got {R.shape[1]}"
-            )
+        R = ranges[:, :: self.config.beam_stride]
         cfg = self.config
         if cfg.method == "ray" and cfg.merge == "per-scan" and cfg.min_change == 0.0:
             n = self._ray_scans(P, R)
@@ -1079,6 +1130,7 @@ def build_occupancy_map(
     if dataset.laser is None:
         raise InputError(f"occupancy mapping needs laser scans; {dataset.name!r} has none")
     times, ranges = laser_scans(dataset)
+    check_ranges(ranges, times=times)  # numbered as the data set's scans
     if scans is not None:
         pick = (
             np.arange(times.size)[scans]
