@@ -123,3 +123,12 @@ def test_bad_values_in_a_config_file_are_one_line_errors(tmp_path, toml, message
     assert res.exit_code == 1, res.output
     assert message in res.output and "Traceback" not in res.output
     assert not (tmp_path / "x").exists()
+
+
+def test_help_shows_config_table_names_and_the_optimize_command():
+    """Rich markup would read "[estimator]" and "[dataset]" as tags and drop them."""
+    res = runner.invoke(app, ["run", "--help"])
+    assert res.exit_code == 0
+    assert "[estimator]" in res.output and "[dataset]" in res.output
+    res = runner.invoke(app, ["--help"])
+    assert res.exit_code == 0 and "optimize" in res.output

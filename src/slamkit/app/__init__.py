@@ -5,5 +5,13 @@ Unlike the numerical packages, this layer may import :mod:`slamkit.viz` (lazily)
 """
 
 from slamkit.app.jobs import RunReport, RunRequest, run_job
+from slamkit.app.optimize import OptimizeReport, OptimizeRequest, optimize_graph_job
 
-__all__ = ["RunReport", "RunRequest", "run_job"]
+__all__ = [
+    "OptimizeReport",
+    "OptimizeRequest",
+    "RunReport",
+    "RunRequest",
+    "optimize_graph_job",
+    "run_job",
+]

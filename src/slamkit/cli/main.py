@@ -1,4 +1,4 @@
-"""``slamkit``: run estimators on data sets, list data sets, run the demo.
+"""``slamkit``: run estimators on data sets, optimise graph files, list data sets, run the demo.
 
 Every command parses its options, calls one library function and renders what it returns.
 Known errors (:class:`~slamkit.errors.SlamkitError`) become one red line and exit code 1.
@@ -16,6 +16,7 @@ from rich.table import Table
 
 from slamkit.cli._common import console, known_errors, progress_bar, split_config
 from slamkit.cli.map_cmd import map_app
+from slamkit.cli.optimize_cmd import optimize_command
 
 app = typer.Typer(
     name="slamkit",
@@ -95,7 +96,8 @@ def run_command(
     data: Annotated[str, typer.Option("--data", "-d", help="Data set name.")] = "five-features",
     config: Annotated[
         Path | None,
-        typer.Option(help="TOML/JSON file with [estimator] and [dataset] tables and a seed."),
+        # "\[" keeps rich markup from swallowing the table names in the help text.
+        typer.Option(help=r"TOML/JSON file with \[estimator] and \[dataset] tables and a seed."),
     ] = None,
     seed: Annotated[int | None, typer.Option(help="Seed of the simulator and estimator.")] = None,
     out: Annotated[
@@ -143,6 +145,9 @@ def demo_command(
         plots=True,
         overwrite=True,
     )
+
+
+app.command("optimize")(optimize_command)
 
 
 @app.command("estimators")

@@ -11,6 +11,7 @@ except ImportError as exc:  # pragma: no cover - depends on the environment
         'slamkit.viz needs matplotlib; install it with: pip install "slamkit[plot]"'
     ) from exc
 
+from slamkit.viz.graphs import plot_pose_graph, pose_graph_figure
 from slamkit.viz.plots import (
     new_figure,
     plot_consistency,
@@ -37,8 +38,10 @@ __all__ = [
     "plot_occupancy_grid",
     "plot_particles",
     "plot_pose_errors",
+    "plot_pose_graph",
     "plot_segments",
     "plot_trajectories",
     "plot_trajectory",
+    "pose_graph_figure",
     "save_figure",
 ]

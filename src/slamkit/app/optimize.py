@@ -1,0 +1,385 @@
+"""``optimize_graph_job``: a pose-graph or landmark-graph file → the optimised graph, plots,
+metrics and the resolved configuration, in one folder written completely or not at all.
+
+Files written (``OUT`` the output folder):
+
+* ``optimized.g2o`` or ``optimized.graph`` — the graph with its vertices set to the optimum,
+  in the input's format family: g2o in → g2o out, TORO/hog-man in → TORO out. iSAM and
+  GTSAM files have no vertex lines, so their graphs are written as g2o; g2o has one id space
+  for poses and landmarks, so when landmark ids collide with pose ids every landmark id is
+  shifted by ``landmark_id_offset`` (the largest pose id + 1), in its vertex and its edges.
+  A TORO file has no landmark vertices: the landmarks of a TORO graph (``BR`` lines) go to
+  ``landmarks.csv`` (``id,x,y``). ``metrics.json`` and ``config.json`` say which of these
+  happened (``output``).
+* ``graph.png`` — the graph at its initial values and optimised, side by side (x-y
+  projection for 3D graphs), with the loop closures and landmarks.
+* ``metrics.json`` — ``chi2_initial``/``chi2_final`` (g2o's χ² of every edge, whatever the
+  objective minimised), ``sesync_objective_initial``/``_final`` (SE-Sync's F over the
+  relative-pose edges), ``cost_initial``/``cost_final`` (the objective minimised, with the
+  robust kernel), ``iterations``, ``factorizations``, ``converged``, ``reason``, counts,
+  solver and linear solver, the per-iteration history and the times: ``solve_seconds`` is
+  the optimiser alone (sparsity pattern, symbolic analysis and iterations; not reading,
+  validating or initialising, which are ``read_seconds``, ``validate_seconds`` and
+  ``init_seconds``).
+* ``config.json`` — the resolved options and the full optimiser configuration.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from slamkit.config import config_from_mapping, config_to_dict
+from slamkit.errors import ConfigError, InputError
+from slamkit.io import atomic_folder, write_json
+from slamkit.io.graphfiles.families import FAMILIES, LANDMARK_KINDS, POSE_PAIR_KINDS
+from slamkit.io.posegraph import read_graph, write_graph
+from slamkit.optim import (
+    GraphData,
+    GraphProblem,
+    IterationInfo,
+    OptimizerConfig,
+    OptimizeResult,
+    g2o_chi2,
+    initial_values,
+    optimize,
+    sesync_objective,
+)
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from slamkit.optim.data import GraphFamily
+    from slamkit.optim.solvers import InitName
+
+__all__ = ["OptimizeReport", "OptimizeRequest", "optimize_graph_job"]
+
+SOLVERS = ("lm", "gn", "dogleg")
+INITS = ("file", "odometry", "chordal")
+OBJECTIVES = ("g2o", "sesync")
+KERNELS = ("none", "huber", "cauchy", "geman_mcclure", "dcs")
+_INIT_METHOD: dict[str, InitName] = {
+    "file": "vertices",
+    "odometry": "odometry",
+    "chordal": "chordal",
+}
+_SUFFIX = {"g2o": ".g2o", "toro": ".graph"}
+_FAMILY_TITLE = {"g2o": "g2o", "toro": "TORO", "isam": "iSAM", "gtsam": "GTSAM"}
+
+
+@dataclass(frozen=True)
+class OptimizeRequest:
+    """The options of one ``slamkit optimize`` run."""
+
+    path: Path
+    """The graph file (g2o, TORO/hog-man ``.graph``, iSAM/GTSAM ``.txt``; ``.gz`` allowed)."""
+    out_dir: Path
+    """The output folder (written atomically; an existing non-empty one needs ``overwrite``)."""
+    solver: str = "lm"
+    """``"lm"``, ``"gn"`` or ``"dogleg"``."""
+    init: str | None = None
+    """``"file"`` (the file's vertices), ``"odometry"`` (spanning tree) or ``"chordal"``;
+    ``None``: the file's vertices when it has them, else chordal."""
+    robust_kernel: str = "none"
+    """``"none"``, ``"huber"``, ``"cauchy"``, ``"geman_mcclure"`` (or ``geman-mcclure``),
+    ``"dcs"``."""
+    robust_width: float | None = None
+    """Kernel width (``None``: the optimiser's default, 1.0; units in
+    :mod:`slamkit.optim.robust`)."""
+    objective: str = "g2o"
+    """``"g2o"`` (the file's χ²) or ``"sesync"`` (SE-Sync's F on the relative-pose edges)."""
+    max_iterations: int | None = None
+    """Linearisations at most (``None``: the optimiser's default, 100)."""
+    plots: bool = True
+    overwrite: bool = False
+
+
+@dataclass(frozen=True)
+class OptimizeReport:
+    """What :func:`optimize_graph_job` wrote and measured."""
+
+    out_dir: Path
+    files: tuple[str, ...]
+    graph_file: str
+    metrics: dict[str, Any]
+    config: dict[str, Any]
+    result: OptimizeResult
+
+
+def _choice(value: str, name: str, allowed: tuple[str, ...]) -> str:
+    if value not in allowed:
+        raise ConfigError(f"{name}: expected one of {', '.join(allowed)}, got {value!r}")
+    return value
+
+
+def _optimizer_config(request: OptimizeRequest) -> OptimizerConfig:
+    """Check the request's options and build the optimiser's configuration (errors name the
+    option)."""
+    settings: dict[str, Any] = {
+        "method": _choice(request.solver, "solver", SOLVERS),
+        "objective": _choice(request.objective, "objective", OBJECTIVES),
+        "robust_kernel": _choice(request.robust_kernel.replace("-", "_"), "robust kernel", KERNELS),
+    }
+    if request.init is not None:
+        _choice(request.init, "init", INITS)
+    if request.robust_width is not None:
+        settings["robust_width"] = request.robust_width
+    if request.max_iterations is not None:
+        settings["max_iterations"] = request.max_iterations
+    return config_from_mapping(OptimizerConfig, settings, "optimize")
+
+
+@dataclass(frozen=True)
+class _Output:
+    graph: GraphData  # what goes into the graph file
+    family: GraphFamily
+    name: str
+    landmarks_csv: bool
+    landmark_id_offset: int
+    notes: tuple[str, ...]
+
+
+def _family_holds(graph: GraphData, family: str) -> bool:
+    """Whether a file of ``family`` can hold the optimised graph's poses, edges, fixed poses
+    and equivalences (landmark vertices may go to a side file)."""
+    spec = FAMILIES[family]
+    if spec.pose_vertex(graph.dim) is None:
+        return False
+    if any(e.kind not in spec.write_edge for e in graph.edges):
+        return False
+    if graph.fixed_ids.size and spec.fix_tag is None:
+        return False
+    return not (graph.equivalences.size and spec.equiv_tag is None)
+
+
+def _output(data: GraphData, result: OptimizeResult) -> _Output:
+    """Choose the output family (the input's, else g2o, else TORO) and make the graph fit."""
+    graph = result.as_graph(data)
+    candidates: list[GraphFamily] = list(dict.fromkeys([data.family, "g2o", "toro"]))
+    family = next((f for f in candidates if f in FAMILIES and _family_holds(graph, f)), None)
+    if family is None:
+        kinds = ", ".join(sorted({e.kind for e in graph.edges}))
+        raise InputError(
+            f"{data.source or 'the graph'}: no graph-file family holds vertices and edges of "
+            f"kinds {kinds}"
+        )
+    notes: list[str] = []
+    if family != data.family:
+        notes.append(
+            f"{_FAMILY_TITLE.get(data.family, data.family)} files cannot hold vertices: "
+            f"the optimised graph is written as {_FAMILY_TITLE[family]}"
+        )
+    offset = 0
+    landmarks_csv = graph.landmark_ids.size > 0 and FAMILIES[family].landmark_vertex() is None
+    if landmarks_csv:
+        notes.append(
+            f"{_FAMILY_TITLE[family]} files have no landmark vertices: the optimised landmarks "
+            "are in landmarks.csv"
+        )
+        graph = dataclasses.replace(
+            graph, landmark_ids=np.zeros(0, dtype=np.int64), landmarks=np.zeros((0, 2))
+        )
+    elif np.intersect1d(graph.pose_ids, graph.landmark_ids).size:
+        # One id space for poses and landmarks in the file: shift every landmark id.
+        offset = int(graph.pose_ids.max()) + 1
+        edges = tuple(
+            dataclasses.replace(e, j=e.j + offset) if e.kind in LANDMARK_KINDS else e
+            for e in graph.edges
+        )
+        graph = dataclasses.replace(graph, landmark_ids=graph.landmark_ids + offset, edges=edges)
+        notes.append(
+            f"landmark ids collide with pose ids: every landmark id is written as id + {offset}"
+        )
+    return _Output(
+        graph, family, "optimized" + _SUFFIX[family], landmarks_csv, offset, tuple(notes)
+    )
+
+
+def _pose_edge_rows(data: GraphData, pose_ids: np.ndarray) -> np.ndarray:
+    """``(E, 2)`` rows (into ``pose_ids``) of the relative-pose edges, for the plot."""
+    order = np.argsort(pose_ids, kind="stable")
+    sorted_ids = pose_ids[order]
+    pairs = [np.column_stack([e.i, e.j]) for e in data.edges if e.kind in POSE_PAIR_KINDS]
+    if not pairs:
+        return np.zeros((0, 2), dtype=np.int64)
+    ids = np.concatenate(pairs)
+    return order[np.searchsorted(sorted_ids, ids)]
+
+
+def _write_landmarks_csv(path: Path, ids: np.ndarray, landmarks: np.ndarray) -> None:
+    rows = [f"{int(k)},{float(x)!r},{float(y)!r}" for k, (x, y) in zip(ids, landmarks, strict=True)]
+    path.write_text("id,x,y\n" + "".join(r + "\n" for r in rows), encoding="utf-8")
+
+
+def _history(history: tuple[IterationInfo, ...]) -> list[dict[str, Any]]:
+    return [
+        {
+            "iteration": h.iteration,
+            "cost": h.cost,
+            "chi2": h.chi2,
+            "step_norm": h.step_norm,
+            "accepted": h.accepted,
+            "damping": h.damping,
+        }
+        for h in history
+    ]
+
+
+def _resolve_init(init: str | None, data: GraphData) -> str:
+    has_vertices = data.poses.shape[0] > 0
+    if init is None:
+        return "file" if has_vertices else "chordal"
+    if init == "file" and not has_vertices:
+        raise ConfigError(
+            f"init 'file': {data.source or 'the graph'} has no vertex lines; use odometry or "
+            "chordal"
+        )
+    return init
+
+
+def _metrics(
+    data: GraphData,
+    path: Path,
+    init: str,
+    cfg: OptimizerConfig,
+    start: tuple[np.ndarray, np.ndarray],
+    result: OptimizeResult,
+    output: _Output,
+    seconds: dict[str, float],
+) -> dict[str, Any]:
+    p0, l0 = start
+    return {
+        "chi2_initial": g2o_chi2(data, p0, l0),
+        "chi2_final": g2o_chi2(data, result.poses, result.landmarks),
+        "sesync_objective_initial": sesync_objective(data, p0),
+        "sesync_objective_final": sesync_objective(data, result.poses),
+        "cost_initial": result.initial_cost,
+        "cost_final": result.cost,
+        "iterations": result.iterations,
+        "factorizations": result.factorizations,
+        "converged": result.converged,
+        "reason": result.reason,
+        "solve_seconds": result.total_seconds,
+        **seconds,
+        "setup_seconds": result.setup_seconds,
+        "assembly_seconds": result.assembly_seconds,
+        "factor_seconds": result.factor_seconds,
+        "solver": result.method,
+        "objective": result.objective,
+        "initialization": init,
+        "robust_kernel": cfg.robust_kernel,
+        "linear_solver": result.linear_solver,
+        "anchored_first_pose": result.anchored_first,
+        "dim": data.dim,
+        "poses": int(result.pose_ids.shape[0]),
+        "landmarks": int(result.landmark_ids.shape[0]),
+        "edges": data.n_edges,
+        "edges_by_kind": {e.kind: len(e) for e in data.edges},
+        "fixed_poses": int(data.fixed_ids.shape[0]),
+        "equivalences": int(data.equivalences.shape[0]),
+        "input": {"file": str(path), "family": data.family},
+        "output": {
+            "graph_file": output.name,
+            "family": output.family,
+            "landmarks_file": "landmarks.csv" if output.landmarks_csv else None,
+            "landmark_id_offset": output.landmark_id_offset,
+            "notes": list(output.notes),
+        },
+        "history": _history(result.history),
+    }
+
+
+def _figure(
+    data: GraphData,
+    path: Path,
+    start: tuple[np.ndarray, np.ndarray],
+    result: OptimizeResult,
+    metrics: dict[str, Any],
+) -> Figure:
+    from slamkit.viz.graphs import pose_graph_figure  # plotting only when asked for
+
+    p0, l0 = start
+    lm = result.landmark_ids.shape[0] > 0
+    what = f"{metrics['poses']} poses, {metrics['landmarks']} landmarks, {metrics['edges']} edges"
+    return pose_graph_figure(
+        p0[:, :2],  # 3D: the x-y projection
+        result.poses[:, :2],
+        edges=_pose_edge_rows(data, result.pose_ids),
+        initial_landmarks=l0 if lm else None,
+        optimized_landmarks=result.landmarks if lm else None,
+        titles=(
+            f"initial ({metrics['initialization']}): χ² = {metrics['chi2_initial']:.6g}",
+            f"optimised ({result.method}, {result.iterations} iterations): "
+            f"χ² = {metrics['chi2_final']:.6g}",
+        ),
+        suptitle=f"{path.name}: {what}" + (" (x-y projection)" if data.dim == 3 else ""),
+    )
+
+
+def optimize_graph_job(
+    request: OptimizeRequest, progress: Callable[[int, int], None] | None = None
+) -> OptimizeReport:
+    """Read ``request.path``, optimise it and write the files of the module docstring into
+    ``request.out_dir``. ``progress(iteration, max_iterations)`` runs after every iteration.
+
+    Bad options raise :class:`~slamkit.errors.ConfigError` before the file is read; a
+    malformed file raises :class:`~slamkit.errors.DatasetFormatError` naming the file and
+    line; a graph the optimiser cannot take (missing vertices, no gauge, disconnected, bad
+    information) raises the typed error of :class:`~slamkit.optim.GraphProblem`; an existing
+    non-empty output folder without ``overwrite`` is an :class:`~slamkit.errors.InputError`.
+    Nothing is written then.
+    """
+    cfg = _optimizer_config(request)
+    path = Path(request.path)
+    t0 = time.perf_counter()
+    data = read_graph(path)
+    t1 = time.perf_counter()
+    problem = GraphProblem.from_data(data, objective=cfg.objective, gauge=cfg.gauge)
+    t2 = time.perf_counter()
+    init = _resolve_init(request.init, data)
+    method = _INIT_METHOD[init]
+    cfg = dataclasses.replace(cfg, initialization=method)
+
+    def on_iteration(info: IterationInfo) -> None:
+        if progress is not None:
+            progress(info.iteration, cfg.max_iterations)
+
+    # The folder check comes before the work; on any error the partial folder is removed.
+    with atomic_folder(request.out_dir, overwrite=request.overwrite) as tmp:
+        p0, l0 = initial_values(problem, method, cfg.linear_solver)
+        t3 = time.perf_counter()
+        result = optimize(
+            data, cfg, initial_poses=p0, initial_landmarks=l0, callback=on_iteration,
+            problem=problem,
+        )  # fmt: skip
+        output = _output(data, result)
+        seconds = {"read_seconds": t1 - t0, "validate_seconds": t2 - t1, "init_seconds": t3 - t2}
+        metrics = _metrics(data, path, init, cfg, (p0, l0), result, output, seconds)
+        resolved = {
+            "file": str(path),
+            "solver": result.method,
+            "init": init,
+            "robust_kernel": cfg.robust_kernel,
+            "robust_width": cfg.robust_width,
+            "objective": cfg.objective,
+            "max_iterations": cfg.max_iterations,
+            "output": metrics["output"],
+            "optimizer": config_to_dict(cfg),
+        }
+        write_graph(output.graph, tmp / output.name, family=output.family)
+        if output.landmarks_csv:
+            _write_landmarks_csv(tmp / "landmarks.csv", result.landmark_ids, result.landmarks)
+        write_json(tmp / "metrics.json", metrics)
+        write_json(tmp / "config.json", resolved)
+        if request.plots:
+            from slamkit.viz import save_figure
+
+            save_figure(_figure(data, path, (p0, l0), result, metrics), tmp / "graph.png")
+        files = tuple(sorted(p.name for p in tmp.iterdir()))
+    return OptimizeReport(Path(request.out_dir), files, output.name, metrics, resolved, result)
