@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from slamkit.geometry import pose2
+from slamkit.geometry.se2 import SE2
 from slamkit.optim import factors
 from slamkit.optim.graph import sesync_row_weights
 from slamkit.optim.robust import RobustKernel, robust_rho_and_weight
@@ -142,10 +143,23 @@ def test_chordal_residual_jacobians_and_objective() -> None:
         assert np.sum((w[k] * r[k]) ** 2) == pytest.approx(F, rel=1e-12)
 
 
-def test_retract_poses_is_compose() -> None:
+def test_retract_poses_is_right_multiplication_by_the_exponential() -> None:
     rng = np.random.default_rng(6)
     x, d = _random_poses(rng, 10), _random_poses(rng, 10) * 0.1
-    np.testing.assert_allclose(factors.retract_poses(x, d), pose2.compose(x, d), atol=1e-12)
+    np.testing.assert_allclose(
+        factors.retract_poses(x, d), pose2.compose(x, SE2.exp(d).xy_theta()), atol=1e-12
+    )
+    # A pure turn leaves the position; a pure translation is g2o's oplus.
+    turn = d * np.array([0.0, 0.0, 1.0])
+    np.testing.assert_allclose(factors.retract_poses(x, turn)[:, :2], x[:, :2], atol=1e-12)
+    move = d * np.array([1.0, 1.0, 0.0])
+    np.testing.assert_allclose(factors.retract_poses(x, move), pose2.compose(x, move), atol=1e-12)
+    # A constant twist along a circle: one step of angle 2π·k/n in n steps closes the loop.
+    step = np.array([[2 * np.pi / 8, 0.0, 2 * np.pi / 8]])
+    p = np.zeros((1, 3))
+    for _ in range(8):
+        p = factors.retract_poses(p, step)
+    np.testing.assert_allclose(p, 0.0, atol=1e-12)
 
 
 @pytest.mark.parametrize("name", ["huber", "cauchy", "geman_mcclure", "dcs"])

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from slamkit.geometry.se3 import SE3
 from slamkit.geometry.so3 import matrix_to_quat, quat_exp, quat_to_matrix
 from slamkit.optim import factors3d as f3
 
@@ -36,15 +37,25 @@ def test_internal_external_round_trip() -> None:
     np.testing.assert_allclose(f3.poses_to_internal(ext), x, atol=1e-12)
 
 
-def test_retract_composes_on_the_right() -> None:
+def test_retract_is_right_multiplication_by_the_exponential() -> None:
     rng = np.random.default_rng(1)
     x = _random_internal(rng, 5)
     d = rng.normal(size=(5, 6)) * 0.3
     out = f3.retract_poses3(x, d)
     R = x[:, 3:].reshape(-1, 3, 3)
+    inc = SE3.exp(d).as_matrix()
+    T = np.zeros((5, 4, 4))
+    T[:, :3, :3], T[:, :3, 3], T[:, 3, 3] = R, x[:, :3], 1.0
+    expected = T @ inc
+    np.testing.assert_allclose(out[:, 3:].reshape(-1, 3, 3), expected[:, :3, :3], atol=1e-12)
+    np.testing.assert_allclose(out[:, :3], expected[:, :3, 3], atol=1e-12)
+    # The rotation part is R Exp(δω); a step without rotation is g2o's t + R δv.
     dR = quat_to_matrix(quat_exp(d[:, 3:]))
     np.testing.assert_allclose(out[:, 3:].reshape(-1, 3, 3), R @ dR, atol=1e-12)
-    np.testing.assert_allclose(out[:, :3], x[:, :3] + np.einsum("nij,nj->ni", R, d[:, :3]))
+    move = d * np.array([1.0, 1, 1, 0, 0, 0])
+    np.testing.assert_allclose(
+        f3.retract_poses3(x, move)[:, :3], x[:, :3] + np.einsum("nij,nj->ni", R, move[:, :3])
+    )
 
 
 @pytest.mark.parametrize("seed", [2, 3])

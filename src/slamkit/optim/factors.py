@@ -7,9 +7,14 @@ tangent perturbations of its variables. No Python loop runs per edge.
 
 Perturbations (the retraction used by the solvers, :func:`retract_poses`):
 
-* an SE(2) pose ``X = (R, t)`` moves on the right, ``X ⊕ δ = X · (δx, δy, δθ)``, i.e.
-  ``t ← t + R (δx, δy)``, ``θ ← θ + δθ`` (g2o's ``oplus``; its differential at ``δ = 0`` is
-  the identity, like the exponential map's);
+* an SE(2) pose ``X`` moves on the right by the group exponential, ``X ⊕ δ = X · Exp(δ)``:
+  ``θ ← θ + δθ`` and ``t ← t + R V(δθ) (δx, δy)`` with ``V`` the arc matrix of
+  :meth:`slamkit.geometry.se2.SE2.exp`. Its differential at ``δ = 0`` is the identity, so the
+  Jacobians below are those of any first-order retraction (g2o's ``oplus``, which adds
+  ``R (δx, δy)`` without ``V``, included); the exponential matters for long steps: a rigid
+  motion of a weakly tied part of the graph is one tangent step for which every edge inside
+  the part keeps its error exactly, so Gauss-Newton steps along such soft modes are not
+  spoilt by the second-order stretching that a straight-line translation update causes;
 * a 2D landmark ``l`` moves additively, ``l ← l + δ``.
 
 Notation below: ``R(θ)`` the 2x2 rotation, ``S = R(π/2) = [[0, -1], [1, 0]]`` (so
@@ -21,7 +26,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from slamkit.geometry import pose2
 from slamkit.geometry.angles import wrap_angle
+from slamkit.geometry.se2 import SE2
 from slamkit.optim.data import FloatArray
 
 __all__ = [
@@ -44,16 +51,9 @@ def _bf(a: FloatArray) -> FloatArray:
 
 
 def retract_poses(poses: FloatArray, delta: FloatArray) -> FloatArray:
-    """``X ⊕ δ = X · (δx, δy, δθ)`` for ``(N, 3)`` poses and tangent steps (right update).
-
-    ``t ← t + R(θ) (δx, δy)``, ``θ ← wrap(θ + δθ)``.
-    """
-    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    out = np.empty_like(poses)
-    out[:, 0] = poses[:, 0] + c * delta[:, 0] - s * delta[:, 1]
-    out[:, 1] = poses[:, 1] + s * delta[:, 0] + c * delta[:, 1]
-    out[:, 2] = wrap_angle(poses[:, 2] + delta[:, 2])
-    return out
+    """``X ⊕ δ = X · Exp(δ)`` for ``(N, 3)`` poses and tangent steps ``(δx, δy, δθ)`` (right
+    update by the SE(2) exponential; θ wrapped)."""
+    return pose2.compose(poses, SE2.exp(delta).xy_theta())
 
 
 def se2_between_error(

@@ -3,8 +3,13 @@
 Inside the optimiser a 3D pose is one row of 12 numbers ``(t (3), R (9, row-major))``;
 files and results use ``(x, y, z, qw, qx, qy, qz)`` (:func:`poses_to_internal`,
 :func:`poses_to_external`). The tangent order is ``(δv, δω)``, translation first, as g2o's
-information matrices; a pose moves on the right: ``t ← t + R δv``, ``R ← R Exp(δω)``
-(:func:`retract_poses3`).
+information matrices; a pose moves on the right by the SE(3) exponential,
+``X ← X · Exp(δv, δω)``: ``R ← R Exp(δω)``, ``t ← t + R V(δω) δv`` (:func:`retract_poses3`).
+At ``δ = 0`` this agrees to first order with the decoupled update ``t ← t + R δv`` (g2o's),
+so the Jacobians below serve both; the exponential keeps rigid motions of weakly tied parts
+of a graph exact, which the decoupled update does not: on parking-garage, whose soft modes
+are such motions, LM from the file's vertices takes 7 iterations with it and 35 (66
+factorisations, a higher final χ²) with the decoupled update.
 
 Notation: ``[a]×`` the cross-product matrix, ``e_k`` the unit vectors; for a 3x3 ``Q`` with
 unit quaternion ``(w, v)``, chosen with ``w ≥ 0``.
@@ -14,7 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from slamkit.geometry.so3 import matrix_to_quat, quat_exp, quat_to_matrix
+from slamkit.geometry.se3 import SE3
+from slamkit.geometry.so3 import matrix_to_quat, quat_to_matrix
 from slamkit.optim.data import FloatArray
 
 __all__ = [
@@ -59,12 +65,13 @@ def poses_to_external(x: FloatArray) -> FloatArray:
 
 
 def retract_poses3(x: FloatArray, delta: FloatArray) -> FloatArray:
-    """``X · (δv, Exp(δω))``: ``t ← t + R δv``, ``R ← R Exp(δω)``, for ``(N, 12)`` poses."""
+    """``X · Exp(δv, δω)`` for ``(N, 12)`` poses: ``R ← R Exp(δω)``, ``t ← t + R V(δω) δv``
+    (:meth:`slamkit.geometry.se3.SE3.exp`)."""
     t, R = _split(x)
-    dR = quat_to_matrix(quat_exp(delta[:, 3:]))
+    inc = SE3.exp(delta).wxyz_xyz  # (qw, qx, qy, qz, x, y, z)
     out = np.empty_like(x)
-    out[:, :3] = t + np.einsum("nij,nj->ni", R, delta[:, :3])
-    out[:, 3:] = (R @ dR).reshape(-1, 9)
+    out[:, :3] = t + np.einsum("nij,nj->ni", R, inc[:, 4:])
+    out[:, 3:] = (R @ quat_to_matrix(inc[:, :4])).reshape(-1, 9)
     return out
 
 
