@@ -12,7 +12,15 @@ from slamkit.errors import (
     NonFiniteError,
     ShapeError,
 )
-from slamkit.optim import EdgeSet, GraphData, GraphProblem, OptimizerConfig, optimize
+from slamkit.optim import (
+    EdgeSet,
+    GraphData,
+    GraphProblem,
+    OptimizerConfig,
+    cholmod_available,
+    marginal_covariances,
+    optimize,
+)
 
 
 def _graph(
@@ -105,11 +113,65 @@ def test_self_loop_is_rejected() -> None:
         optimize(_graph(j=(1, 2, 2)))
 
 
-def test_no_gauge_says_so() -> None:
-    with pytest.raises(GeometryError, match="gauge is not fixed"):
+def test_no_gauge_says_so_and_names_the_poses() -> None:
+    with pytest.raises(GeometryError, match=r"gauge is not fixed.*pose 0, pose 1, pose 2 are"):
         optimize(_graph(), OptimizerConfig(gauge="none"))
     # With a fixed pose the same setting is fine.
     assert optimize(_graph(fixed=(1,)), OptimizerConfig(gauge="none")).cost < 1e-12
+    with pytest.raises(InputError, match="gauge: expected"):
+        GraphProblem.from_data(_graph(), gauge="first")  # type: ignore[arg-type]
+
+
+def _triangle_3d(prior: bool) -> GraphData:
+    """The triangle of :func:`_graph` lifted to SE(3) (turns about z), optionally with an
+    ``se3_prior`` on pose 2."""
+    g = _graph()
+    es = g.edges[0]
+    th = es.measurement[:, 2]
+    z = np.zeros((3, 7))
+    z[:, 0], z[:, 1] = es.measurement[:, 0], es.measurement[:, 1]
+    z[:, 3], z[:, 6] = np.cos(th / 2), np.sin(th / 2)
+    edges = [EdgeSet("se3", es.i, es.j, z, np.tile(np.eye(6) * 10.0, (3, 1, 1)), es.lines)]
+    start = np.zeros((3, 7))
+    start[:, :2] = g.poses[:, :2]
+    start[:, 3], start[:, 6] = np.cos(g.poses[:, 2] / 2), np.sin(g.poses[:, 2] / 2)
+    if prior:
+        p = start[2:3].copy()
+        edges.append(
+            EdgeSet(
+                "se3_prior", np.array([2]), np.array([-1]), p, np.eye(6)[None] * 1e3, es.lines[:1]
+            )
+        )
+    return GraphData(dim=3, pose_ids=g.pose_ids, poses=start, edges=tuple(edges))
+
+
+def test_se3_prior_fixes_the_gauge() -> None:
+    """A prior fixes the gauge in 3D as in 2D: no pose is anchored, and gauge="none" works."""
+    with_prior = _triangle_3d(prior=True)
+    problem = GraphProblem.from_data(with_prior, gauge="none")
+    assert not problem.anchored_first and problem.n == 18  # all three poses free
+    res = optimize(with_prior, OptimizerConfig(gauge="none"))
+    assert res.converged and not res.anchored_first and res.cost < 1e-12
+    assert not GraphProblem.from_data(with_prior).anchored_first  # the default agrees
+    with pytest.raises(GeometryError, match=r"gauge is not fixed.*pose 0, pose 1, pose 2"):
+        GraphProblem.from_data(_triangle_3d(prior=False), gauge="none")
+    assert GraphProblem.from_data(_triangle_3d(prior=False)).anchored_first
+
+
+def test_duplicate_ids_name_the_id() -> None:
+    g = _graph(pose_ids=(0, 1, 1))
+    with pytest.raises(InputError, match=r"pose_ids: pose 1 appears 2 times \(rows 1, 2\)"):
+        GraphProblem.from_data(g)
+    lm = GraphData(
+        dim=2,
+        pose_ids=g.pose_ids[:2],
+        poses=g.poses[:2],
+        landmark_ids=np.array([4, 9, 4], dtype=np.int64),
+        landmarks=np.zeros((3, 2)),
+        edges=(),
+    )
+    with pytest.raises(InputError, match=r"landmark 4 appears 2 times"):
+        GraphProblem.from_data(lm)
 
 
 def test_disconnected_graph_names_the_variables() -> None:
@@ -171,8 +233,54 @@ def test_singular_normal_equations_raise_geometry_error() -> None:
         landmarks=np.array([[2.0, 1.0]]),
         edges=g.edges,
     )
-    with pytest.raises(GeometryError, match="singular"):
+    solvers = ["dense", "superlu"] + (["cholmod"] if cholmod_available() else [])
+    for solver in solvers:
+        with pytest.raises(GeometryError, match=r"singular.*landmark 7 is not determined"):
+            optimize(g, OptimizerConfig(method="gn", linear_solver=solver))  # type: ignore[arg-type]
+    # The dense back-end eliminates in variable order: the landmark's pivot is the one that fails.
+    with pytest.raises(GeometryError, match=r"failed at landmark 7 \(y\)"):
         optimize(g, OptimizerConfig(method="gn", linear_solver="dense"))
+    with pytest.raises(GeometryError, match=r"marginals: .*landmark 7"):
+        res = optimize(g, OptimizerConfig(method="lm"))  # damping keeps LM going
+        marginal_covariances(g, res, landmark_ids=[7])
+
+
+def test_singular_pivot_is_named_in_the_original_order() -> None:
+    """Pose 3 hangs off the triangle by one range reading to a landmark fixed by the triangle:
+    its heading is free. Every back-end names pose 3 (its block is singular); the pivot that
+    fails is mapped back through the fill-reducing permutation to a column of pose 3 (dense
+    and CHOLMOD)."""
+    xy = EdgeSet(
+        "se2_xy",
+        np.array([0, 1], dtype=np.int64),
+        np.array([7, 7], dtype=np.int64),
+        np.array([[1.0, 1.0], [0.5, 1.5]]),
+        np.tile(np.eye(2) * 5.0, (2, 1, 1)),
+        np.zeros(2, dtype=np.int64),
+    )
+    rng_edge = EdgeSet(
+        "range",
+        np.array([3], dtype=np.int64),
+        np.array([7], dtype=np.int64),
+        np.array([[2.0]]),
+        np.eye(1)[None] * 5.0,
+        np.zeros(1, dtype=np.int64),
+    )
+    g = _graph(extra=(xy, rng_edge), pose_ids=(0, 1, 2, 3))
+    g = GraphData(
+        dim=2,
+        pose_ids=g.pose_ids,
+        poses=np.vstack([g.poses[:3], [[3.0, 2.0, 0.4]]]),
+        landmark_ids=np.array([7], dtype=np.int64),
+        landmarks=np.array([[1.0, 1.5]]),
+        edges=g.edges,
+    )
+    solvers = ["dense", "superlu"] + (["cholmod"] if cholmod_available() else [])
+    for solver in solvers:
+        with pytest.raises(GeometryError, match=r"pose 3 is not determined") as info:
+            optimize(g, OptimizerConfig(method="gn", linear_solver=solver))  # type: ignore[arg-type]
+        if solver != "superlu":  # SuperLU reports an exactly singular factor without a column
+            assert "failed at pose 3 (" in str(info.value), (solver, str(info.value))
 
 
 def test_edge_kind_must_match_the_dimension() -> None:

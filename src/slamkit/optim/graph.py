@@ -16,7 +16,8 @@ value (the smaller row's), and edges between them are dropped.
 **Gauge.** A pose graph's cost is invariant to moving the whole graph, so something must fix
 it: the ids in ``GraphData.fixed_ids``, or ``se2_prior``/``se3_prior`` edges. When the file
 has neither, the first pose (the first of ``pose_ids``; the smallest id when the file has no
-vertices) is held fixed at its initial value (``gauge="anchor_first"``, the default). Every
+vertices) is held fixed at its initial value (``gauge="anchor_first"``, the default);
+``gauge="none"`` never anchors, so such a graph raises. Every
 connected component of the graph must contain a fixed pose or a prior; otherwise
 :class:`~slamkit.errors.GeometryError` names the variables of the first component that has
 none.
@@ -55,6 +56,7 @@ _KINDS: dict[str, tuple[int, int, str | None]] = {
     "bearing": (1, 1, "landmark"),
 }
 _KINDS_3D = ["se3", "se3_prior"]
+_PRIOR_KINDS = ("se2_prior", "se3_prior")
 
 
 def edge_location(data: GraphData, edges: EdgeSet, k: int) -> str:
@@ -78,6 +80,17 @@ def _lookup(ids: IntArray, query: IntArray) -> tuple[IntArray, IntArray]:
     )
     rows = order[pos] if sorted_ids.shape[0] else np.zeros(query.shape[0], dtype=np.int64)
     return rows.astype(np.int64), found
+
+
+def _check_unique(ids: IntArray, what: str) -> None:
+    """``InputError`` naming the first id that appears more than once."""
+    uniq, counts = np.unique(ids, return_counts=True)
+    if (counts > 1).any():
+        k = int(np.flatnonzero(counts > 1)[0])
+        raise InputError(
+            f"{what}_ids: {what} {int(uniq[k])} appears {int(counts[k])} times "
+            f"(rows {', '.join(str(int(r)) for r in np.flatnonzero(ids == uniq[k]))})"
+        )
 
 
 def _check_edge_set(data: GraphData, es: EdgeSet) -> None:
@@ -270,19 +283,14 @@ class GraphProblem:
                 bad = int(data.fixed_ids[np.flatnonzero(~found)[0]])
                 raise InputError(f"fixed pose {bad} has no vertex")
             fixed[alias[rows]] = True
-        has_prior = any(es.kind == "se2_prior" and len(es) for es in data.edges)
+        if gauge not in ("anchor_first", "none"):
+            raise InputError(f"gauge: expected 'anchor_first' or 'none', got {gauge!r}")
+        has_prior = any(es.kind in _PRIOR_KINDS and len(es) for es in data.edges)
         anchored_first = False
-        if not fixed.any() and not has_prior and n_poses:
-            if gauge == "none":
-                raise GeometryError(
-                    "the gauge is not fixed: the graph has no fixed pose and no prior, so the "
-                    "optimum is only determined up to a rigid motion; add a prior or fix a "
-                    "pose (or use gauge='anchor_first')"
-                )
-            if gauge != "anchor_first":
-                raise InputError(f"gauge: expected 'anchor_first' or 'none', got {gauge!r}")
+        if not fixed.any() and not has_prior and n_poses and gauge == "anchor_first":
             fixed[alias[0]] = True
             anchored_first = True
+        # With gauge="none" and neither a fixed pose nor a prior, this raises naming the poses.
         cls._check_connected(data, pose_ids, landmark_ids, alias, fixed, blocks_raw)
         problem = cls(data, pose_ids, landmark_ids, [], fixed, alias, objective, anchored_first)
         problem.blocks = [problem._make_block(data, *raw) for raw in blocks_raw]
@@ -297,8 +305,7 @@ class GraphProblem:
                 raise ShapeError(
                     f"poses: expected shape ({ids.shape[0]}, {width}), got {data.poses.shape}"
                 )
-            if np.unique(ids).shape[0] != ids.shape[0]:
-                raise InputError("pose_ids: the same pose id appears twice")
+            _check_unique(ids, "pose")
             if not np.isfinite(data.poses).all():
                 k = int(np.flatnonzero(~np.isfinite(data.poses).all(axis=1))[0])
                 raise NonFiniteError(f"pose {int(ids[k])}: NaN or infinity in its vertex")
@@ -320,8 +327,7 @@ class GraphProblem:
                 raise ShapeError(
                     f"landmarks: expected shape ({ids.shape[0]}, 2), got {data.landmarks.shape}"
                 )
-            if np.unique(ids).shape[0] != ids.shape[0]:
-                raise InputError("landmark_ids: the same landmark id appears twice")
+            _check_unique(ids, "landmark")
             if not np.isfinite(data.landmarks).all():
                 k = int(np.flatnonzero(~np.isfinite(data.landmarks).all(axis=1))[0])
                 raise NonFiniteError(f"landmark {int(ids[k])}: NaN or infinity in its vertex")
@@ -393,6 +399,12 @@ class GraphProblem:
             for m in members[:8]
         ]
         more = f" and {members.shape[0] - 8} more" if members.shape[0] > 8 else ""
+        if n_comp == 1:
+            raise GeometryError(
+                f"the gauge is not fixed: the graph has no fixed pose and no prior, so "
+                f"{', '.join(names)}{more} are only determined up to a rigid motion; add a "
+                "prior or fix a pose (or use gauge='anchor_first')"
+            )
         raise GeometryError(
             f"the graph is disconnected: {n_comp} pieces; {', '.join(names)}{more} are not "
             "connected to a fixed pose or a prior, so their position is not determined"
@@ -624,6 +636,31 @@ class GraphProblem:
             new_poses = new_poses[self.alias]
         new_lm = landmarks + delta[dof * self.n_free_poses :].reshape(-1, 2)
         return new_poses, new_lm
+
+    def singular_blocks(self, H: FloatArray, rtol: float = 1e-9) -> list[str]:
+        """Names of the variables whose own diagonal block of ``H`` (lower-triangle values in
+        :attr:`pattern`) is singular: smallest eigenvalue ``≤ rtol ·`` the largest diagonal
+        entry of ``H``. Such a variable is not determined by its edges even with all others
+        held (a landmark seen by one bearing, one range, or one reading of either)."""
+        pat = self.pattern
+        scale = float(np.max(H[pat.diag])) if pat.n else 0.0
+        dof = self.pose_dof
+        groups = [
+            (np.arange(self.n_free_poses) * dof, dof),
+            (dof * self.n_free_poses + 2 * np.arange(self.landmark_ids.shape[0]), 2),
+        ]
+        bad_cols: list[int] = []
+        for starts, d in groups:
+            if not starts.shape[0]:
+                continue
+            # Column c = start + q stores the block's rows q … d-1 first (NormalPattern).
+            B = np.zeros((starts.shape[0], d, d))
+            for q in range(d):
+                for r in range(q, d):
+                    B[:, r, q] = B[:, q, r] = H[pat.indptr[starts + q] + (r - q)]
+            low = np.linalg.eigvalsh(B)[:, 0] <= rtol * max(scale, 1e-300)
+            bad_cols.extend(int(c) for c in starts[low])
+        return [self.variable_of_column(c).split(" (")[0] for c in bad_cols]
 
     def variable_of_column(self, col: int) -> str:
         """``"pose 17 (θ)"`` / ``"landmark 3 (y)"`` for a column of ``H``."""

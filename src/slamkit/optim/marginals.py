@@ -20,7 +20,7 @@ from slamkit.errors import GeometryError, InputError
 from slamkit.optim.data import FloatArray, GraphData, IntArray
 from slamkit.optim.graph import GraphProblem, _lookup
 from slamkit.optim.robust import RobustKernel
-from slamkit.optim.solvers import OptimizerConfig, OptimizeResult
+from slamkit.optim.solvers import OptimizerConfig, OptimizeResult, _indeterminate
 from slamkit.optim.sparse import SingularSystem, make_factorizer
 
 __all__ = ["Marginals", "marginal_covariances"]
@@ -62,7 +62,7 @@ def marginal_covariances(
     try:
         fac.factor(lin.H)
     except SingularSystem as exc:
-        raise GeometryError(f"marginals: the information matrix is singular ({exc})") from None
+        raise GeometryError(f"marginals: {_indeterminate(problem, exc, lin.H)}") from None
 
     p_ids = np.asarray(pose_ids, dtype=np.int64).reshape(-1)
     l_ids = np.asarray(landmark_ids, dtype=np.int64).reshape(-1)

@@ -209,10 +209,24 @@ class _Solver:
         return delta
 
 
-def _indeterminate(problem: GraphProblem, exc: Exception) -> GeometryError:
+def _indeterminate(problem: GraphProblem, exc: SingularSystem, H: FloatArray) -> GeometryError:
+    """The error for a singular ``H``, naming the variable of the failed pivot and every
+    variable whose own diagonal block is singular."""
+    parts = []
+    if exc.column is not None and 0 <= exc.column < problem.n:
+        parts.append(f"the factorisation failed at {problem.variable_of_column(exc.column)}")
+    alone = problem.singular_blocks(H)
+    if alone:
+        more = f" and {len(alone) - 8} more" if len(alone) > 8 else ""
+        parts.append(
+            f"{', '.join(alone[:8])}{more} "
+            + ("is not determined by its" if len(alone) == 1 else "are not determined by their")
+            + " own edges (too few readings)"
+        )
+    detail = "; ".join(parts) if parts else f"{exc}"
     return GeometryError(
-        f"the normal equations are singular, so some variable is not determined by its edges "
-        f"({exc}); check for landmarks seen by too few readings ({problem.n} unknowns)"
+        f"the normal equations are singular ({problem.n} unknowns), so some variable is not "
+        f"determined by its edges: {detail}"
     )
 
 
@@ -344,7 +358,7 @@ def _gauss_newton(
         try:
             delta = s.solve(lin.H, lin.g, None)
         except SingularSystem as exc:
-            raise _indeterminate(s.problem, exc) from None
+            raise _indeterminate(s.problem, exc, lin.H) from None
         poses, landmarks = s.problem.retract(poses, landmarks, delta)
         new = s.linearize(poses, landmarks)
         if not np.isfinite(new.cost):
@@ -463,7 +477,7 @@ def _dogleg(
         try:
             h_gn = s.solve(H, g, None)
         except SingularSystem as exc:
-            raise _indeterminate(s.problem, exc) from None
+            raise _indeterminate(s.problem, exc, H) from None
         Hg = s.pattern.matvec(H, g)
         gg = float(g @ g)
         gHg = float(g @ Hg)

@@ -47,7 +47,16 @@ LinearSolverName = Literal["auto", "cholmod", "superlu", "dense"]
 
 
 class SingularSystem(Exception):
-    """Internal: the factorisation met a zero or negative pivot (column in the message)."""
+    """Internal: the factorisation met a zero or negative pivot.
+
+    ``column`` is the column of ``H`` (in the problem's variable order, before the
+    fill-reducing permutation) whose pivot failed, when the back-end says which: that column
+    depends linearly on the columns eliminated before it.
+    """
+
+    def __init__(self, message: str, column: int | None = None) -> None:
+        super().__init__(message)
+        self.column = column
 
 
 @dataclass(frozen=True)
@@ -220,6 +229,8 @@ class _CholmodFactorizer:
         ):
             raise AssertionError("cvxopt changed the CCS pattern")  # internal invariant
         self._symbolic: Any = None
+        self._diag = pattern.diag
+        self._perm: IntArray | None = None
 
     def factor(self, data: FloatArray) -> None:
         self._A.V = self._cvx.matrix(data)
@@ -228,7 +239,25 @@ class _CholmodFactorizer:
         try:
             self._chol.numeric(self._A, self._symbolic)
         except ArithmeticError as exc:
-            raise SingularSystem(f"not positive definite (CHOLMOD column {exc})") from exc
+            minor = exc.args[0] if exc.args and isinstance(exc.args[0], int) else None
+            column = None if minor is None else int(self._permutation()[minor])
+            raise SingularSystem(
+                f"not positive definite (CHOLMOD pivot {minor} of the permuted matrix)", column
+            ) from exc
+
+    def _permutation(self) -> IntArray:
+        """CHOLMOD's fill-reducing permutation ``p`` (row ``k`` of ``P H Pᵀ`` is row ``p[k]``
+        of ``H``), read once by factoring the identity in the same pattern and applying ``P``
+        to ``0 … n-1``; only needed to name the column of a failed pivot."""
+        if self._perm is None:
+            eye = np.zeros(self._A.V.size[0])
+            eye[self._diag] = 1.0
+            self._A.V = self._cvx.matrix(eye)
+            self._chol.numeric(self._A, self._symbolic)
+            B = self._cvx.matrix(np.arange(float(self._A.size[0])))
+            self._chol.solve(self._symbolic, B, sys=7)  # B ← P B
+            self._perm = np.rint(np.array(B).ravel()).astype(np.int64)
+        return self._perm
 
     def solve(self, b: FloatArray) -> FloatArray:
         B = self._cvx.matrix(np.asarray(b, dtype=np.float64))
@@ -264,8 +293,14 @@ class _SuperLUFactorizer:
             )
         except RuntimeError as exc:
             raise SingularSystem(f"singular ({exc})") from exc
-        if not np.all(self._lu.U.diagonal() > 0):
-            raise SingularSystem("not positive definite (a non-positive pivot in SuperLU)")
+        pivots = self._lu.U.diagonal()
+        if not np.all(pivots > 0):
+            # Pr H Pc = L U: column k of U is column perm_c[k] of H.
+            k = int(np.flatnonzero(~(pivots > 0))[0])
+            raise SingularSystem(
+                "not positive definite (a non-positive pivot in SuperLU)",
+                int(self._lu.perm_c[k]),
+            )
 
     def solve(self, b: FloatArray) -> FloatArray:
         return np.asarray(self._lu.solve(np.asarray(b, dtype=np.float64)))
@@ -285,7 +320,10 @@ class _DenseFactorizer:
         try:
             self._cho = scipy.linalg.cho_factor(H, lower=True)
         except np.linalg.LinAlgError as exc:
-            raise SingularSystem(f"not positive definite ({exc})") from exc
+            # LAPACK: "k-th leading minor of the array is not positive definite" (1-based).
+            head = str(exc).split("-", 1)[0]
+            column = int(head) - 1 if head.isdigit() else None
+            raise SingularSystem(f"not positive definite ({exc})", column) from exc
 
     def solve(self, b: FloatArray) -> FloatArray:
         return np.asarray(scipy.linalg.cho_solve(self._cho, b))
