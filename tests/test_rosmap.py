@@ -5,8 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slamkit.errors import DatasetFormatError
+from slamkit.errors import DatasetFormatError, InputError
 from slamkit.io.rosmap import read_ros_map, trinary_pixels, write_ros_map
+from slamkit.mapping.quality import (
+    FREE_THRESHOLD,
+    OCCUPIED_THRESHOLD,
+    classify_grid,
+    map_quality,
+)
 from slamkit.maps import UNKNOWN, OccupancyGrid
 
 
@@ -43,13 +49,34 @@ def test_pgm_bytes_header_and_row_order(tmp_path):
     header_end = data.index(b"\n3 2\n255\n") + len(b"\n3 2\n255\n")
     pixels = np.frombuffer(data[header_end:], dtype=np.uint8).reshape(2, 3)
     # Image rows go down: the grid's top row comes first.
-    np.testing.assert_array_equal(pixels, [[205, 205, 255], [0, 205, 205]])
+    np.testing.assert_array_equal(pixels, [[128, 128, 255], [0, 128, 128]])
     text = yml.read_text()
     assert "image: a.pgm\n" in text
     assert "resolution: 0.5\n" in text
     assert "origin: [2.0, -1.0, 0.0]\n" in text
     assert "negate: 0\n" in text and "occupied_thresh: 0.65\n" in text
-    assert "free_thresh: 0.196\n" in text
+    assert "free_thresh: 0.35\n" in text
+
+
+def test_yaml_thresholds_are_the_quality_report_thresholds(tmp_path, rng):
+    """One convention: the YAML carries the thresholds the cells were classified with (those
+    of ``quality.json``), and a map_server reading the file back with them finds the same
+    occupied, free and unknown cells as :func:`classify_grid`."""
+    grid = OccupancyGrid(rng.uniform(0.0, 1.0, size=(40, 30)), 0.05)
+    _, yml = write_ros_map(grid, tmp_path / "q.pgm")
+    fields = dict(line.split(": ", 1) for line in yml.read_text().splitlines())
+    q = map_quality(grid)
+    assert float(fields["occupied_thresh"]) == q.occupied_threshold == OCCUPIED_THRESHOLD
+    assert float(fields["free_thresh"]) == q.free_threshold == FREE_THRESHOLD
+    back = read_ros_map(yml)
+    cls = classify_grid(grid)
+    np.testing.assert_array_equal(back.prob == 1.0, cls == 2)
+    np.testing.assert_array_equal(back.prob == 0.0, cls == 1)
+    np.testing.assert_array_equal(back.prob == UNKNOWN, cls == 0)
+    # other thresholds are written too, and still decode the three pixels
+    _, yml = write_ros_map(grid, tmp_path / "t.pgm", occupied_threshold=0.9, free_threshold=0.1)
+    assert "occupied_thresh: 0.9\n" in yml.read_text() and "free_thresh: 0.1\n" in yml.read_text()
+    np.testing.assert_array_equal(read_ros_map(yml).prob == 0.0, grid.prob <= 0.1)
 
 
 def test_reader_follows_map_server_thresholds(tmp_path):
@@ -87,8 +114,11 @@ def test_reader_errors_name_the_file(tmp_path, yaml, pgm, message, line):
 
 def test_trinary_pixels_checks_thresholds():
     grid = OccupancyGrid(np.zeros((1, 1)), 1.0)
-    with pytest.raises(ValueError, match="thresholds"):
+    with pytest.raises(InputError, match="thresholds"):
         trinary_pixels(grid, occupied_threshold=0.3, free_threshold=0.4)
+    # the unknown grey (p = 0.498) would decode as free under free_thresh 0.6
+    with pytest.raises(InputError, match=r"0\.498 < occupied"):
+        trinary_pixels(grid, occupied_threshold=0.8, free_threshold=0.6)
 
 
 def test_map_image_png_orientation_and_axes(tmp_path):

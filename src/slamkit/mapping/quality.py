@@ -29,7 +29,10 @@ from slamkit.mapping.occupancy import OccupancyMappingConfig, build_occupancy_ma
 from slamkit.maps import OccupancyGrid
 
 __all__ = [
+    "FREE_THRESHOLD",
+    "OCCUPIED_THRESHOLD",
     "MapQuality",
+    "check_thresholds",
     "classify_grid",
     "even_odd_agreement",
     "map_agreement",
@@ -39,9 +42,24 @@ __all__ = [
 ]
 
 OCCUPIED_THRESHOLD = 0.65
-"""A cell with probability at least this is occupied (as :meth:`OccupancyGrid.occupied`)."""
+"""A map cell with probability at least this is occupied. With :data:`FREE_THRESHOLD` the one
+classification of built maps: the quality report, the map agreement, precision/recall and the
+ROS export (:mod:`slamkit.io.rosmap` writes these numbers into ``map.yaml``) use it; the
+defaults of :meth:`OccupancyGrid.occupied` / :meth:`~OccupancyGrid.free` are the same
+numbers. With the default inverse model (``p_occ`` 0.75, ``p_free`` 0.45) one occupied
+reading makes a prior cell occupied, while it takes four free readings (net) to make it free
+(0.45, 0.40, 0.354, 0.309)."""
 FREE_THRESHOLD = 0.35
-"""A cell with probability at most this is free (as :meth:`OccupancyGrid.free`)."""
+"""A map cell with probability at most this is free (see :data:`OCCUPIED_THRESHOLD`)."""
+
+
+def check_thresholds(occupied_threshold: float, free_threshold: float) -> None:
+    """Raise :class:`InputError` unless ``0 <= free < occupied <= 1``."""
+    if not 0.0 <= free_threshold < occupied_threshold <= 1.0:
+        raise InputError(
+            f"thresholds: expected 0 <= free < occupied <= 1, got free {free_threshold}, "
+            f"occupied {occupied_threshold}"
+        )
 
 
 def classify_grid(
@@ -51,11 +69,7 @@ def classify_grid(
 ) -> NDArray[np.int8]:
     """Cell classes: 2 occupied (``p >= occupied_threshold``), 1 free
     (``p <= free_threshold``), 0 unknown."""
-    if not 0.0 <= free_threshold < occupied_threshold <= 1.0:
-        raise InputError(
-            f"thresholds: expected 0 <= free < occupied <= 1, got {free_threshold}, "
-            f"{occupied_threshold}"
-        )
+    check_thresholds(occupied_threshold, free_threshold)
     out = np.zeros(grid.shape, dtype=np.int8)
     out[grid.prob <= free_threshold] = 1
     out[grid.prob >= occupied_threshold] = 2
