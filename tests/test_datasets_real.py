@@ -405,3 +405,107 @@ def test_registry_entries_load(data_root: Path, name: str, target: str, files: t
     assert ds.name == name
     summary = json.loads(json.dumps(ds.summary()))
     assert summary["kind"] == "real" and summary["events"]["LandmarkReadings"] > 0
+
+
+# ------------------------------------------------------------------ Plaza: malformed rows
+# The first rows of the four files, laid out as in the real files (DR and TD: tab-separated
+# with leading blanks and a trailing tab; GT and TL: one comment line, then space-separated).
+_PLAZA_HEAD = {
+    "Plaza1_DR.txt": [
+        "  3.8570532019138336e+003\t  2.3483858154428326e-004\t -5.2000000000163027e-005\t",
+        "  3.8572534408569336e+003\t  2.7240746312308210e-004\t  2.6000000000081510e-005\t",
+        "  3.8574533009529114e+003\t  2.3057904745266982e-004\t -7.4000000000573607e-005\t",
+        "  3.8576528358459473e+003\t  2.4512843424856311e-004\t -4.8999999999743693e-005\t",
+        "  3.8578526110649109e+003\t  2.1071781958270869e-004\t -3.6999999999842714e-005\t",
+    ],
+    "Plaza1_TD.txt": [
+        "  3.8580620000362396e+003\t  2.0000000000000000e+000\t  5.0000000000000000e+000\t"
+        "  6.5466007843625079e+001\t",
+        "  3.8583120000362396e+003\t  2.0000000000000000e+000\t  5.0000000000000000e+000\t"
+        "  6.6120147867149058e+001\t",
+        "  3.8585460000038147e+003\t  2.0000000000000000e+000\t  6.0000000000000000e+000\t"
+        "  3.5872649691111221e+001\t",
+        "  3.8587809998989105e+003\t  2.0000000000000000e+000\t  6.0000000000000000e+000\t"
+        "  3.4338759262723272e+001\t",
+    ],
+    "Plaza1_GT.csv": [
+        "# time_s x_m y_m heading_rad  (ground truth from laser scan matching; derived from "
+        "Plaza1_.mat)",
+        "3856.857346 0 0 4.222432",
+        "3857.053202 2.99999956e-05 2.699997276e-05 4.22238",
+        "3857.253441 5.699996836e-05 0.000115999952 4.222406",
+        "3857.453301 5.799997598e-05 0.0001039998606 4.222332",
+    ],
+    "Plaza1_TL.csv": [
+        "# beacon_id x_m y_m  (surveyed beacon locations; derived from Plaza1_.mat)",
+        "0 -46.623234 11.025549",
+        "1 11.036124 -6.958689",
+        "6 22.053129 23.848482",
+        "5 -17.664893 59.009181",
+    ],
+}
+
+
+def _write_plaza(root: Path, changes: dict[tuple[str, int], str] | None = None) -> Path:
+    """The small Plaza 1 folder under ``root`` with line ``n`` (1-based) of ``file`` replaced
+    by ``changes[(file, n)]``; returns the folder."""
+    folder = root / "landmarks" / "plaza"
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, lines in _PLAZA_HEAD.items():
+        out = list(lines)
+        for (file, n), text in (changes or {}).items():
+            if file == name:
+                out[n - 1] = text
+        (folder / name).write_text("\n".join(out) + "\n")
+    return folder
+
+
+def test_plaza_small_copy_loads(tmp_path: Path) -> None:
+    """The hand-made head of the files is a valid Plaza 1 (the cases below break one row)."""
+    _write_plaza(tmp_path)
+    ds = load_plaza1({}, seed=0, data_root=tmp_path)
+    assert ds.metadata["odometry_rows"] == 5 and ds.metadata["readings_kept"] == 4
+    assert ds.truth.times is not None and ds.truth.times.size == 4
+    assert ds.known_landmarks is not None and sorted(ds.known_landmarks.ids) == [0, 1, 5, 6]
+
+
+_DR, _TD, _GT, _TL = "Plaza1_DR.txt", "Plaza1_TD.txt", "Plaza1_GT.csv", "Plaza1_TL.csv"
+
+
+@pytest.mark.parametrize(
+    "file,line,text,match",
+    [
+        (_DR, 3, "  3.8574533009529114e+003\t  2.3057904745266982e-004\t", "column"),
+        (_DR, 2, "  3.8572534408569336e+003\t  0.27x\t  2.6e-005\t", "number"),
+        (_DR, 4, "  3.8572534408569336e+003\t  2.4e-004\t -4.8e-005\t", "increasing times"),
+        (_DR, 1, "  3.8560000000000000e+003\t  2.3e-004\t -5.2e-005\t", "not after"),
+        (_TD, 2, "  3.8583120000362396e+003\t  2.0\t  5.0\t -6.6120147867149058e+001\t", "pos"),
+        (_TD, 3, "  3.8585460000038147e+003\t  2.0\t  5.5\t  3.5872649691111221e+001\t", "integer"),
+        (_TD, 4, "  3.8587809998989105e+003\t  2.0\t  6.0\t  nan\t", "finite"),
+        (_GT, 4, "3857.253441 5.699996836e-05 0.000115999952", "column"),
+        (_GT, 5, "3857.0 5.799997598e-05 0.0001039998606 4.222332", "non-decreasing"),
+        (_TL, 3, "1.5 11.036124 -6.958689", "integer beacon id"),
+    ],
+)
+def test_plaza_malformed_row_names_file_and_line(
+    tmp_path: Path, file: str, line: int, text: str, match: str
+) -> None:
+    folder = _write_plaza(tmp_path, {(file, line): text})
+    with pytest.raises(DatasetFormatError, match=match) as err:
+        load_plaza1({}, seed=0, data_root=tmp_path)
+    assert err.value.path == folder / file
+    assert err.value.line == line
+    assert f"{file}:{line}" in str(err.value)
+
+
+def test_plaza_malformed_files_without_a_line(tmp_path: Path) -> None:
+    """Errors about a whole file name the file (there is no single line to blame)."""
+    folder = _write_plaza(tmp_path, {(_TL, 5): "1 -17.664893 59.009181"})  # id 1 twice
+    with pytest.raises(DatasetFormatError, match="listed twice") as err:
+        load_plaza1({}, seed=0, data_root=tmp_path)
+    assert err.value.path == folder / _TL and err.value.line is None
+    (folder / _GT).write_text(_PLAZA_HEAD[_GT][0] + "\n" + _PLAZA_HEAD[_GT][1] + "\n")
+    (folder / _TL).write_text("\n".join(_PLAZA_HEAD[_TL]) + "\n")
+    with pytest.raises(DatasetFormatError, match="at least 2 rows") as err:
+        load_plaza1({}, seed=0, data_root=tmp_path)
+    assert err.value.path == folder / _GT
