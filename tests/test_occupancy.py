@@ -1,8 +1,10 @@
 """Occupancy-grid mapping with known poses: log odds, the inverse model, Bresenham, the two
-update paths, the computational options, map quality, the estimator, the app and real logs."""
+update paths, the computational options, map quality, the estimator, the app and the command
+(the maps of real buildings: tests/test_building_maps.py)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -43,7 +45,8 @@ from slamkit.mapping import (
     scan_cells_table,
 )
 from slamkit.mapping.bresenham import MAX_SEGMENT_STEPS, bresenham_segments, minor_steps
-from slamkit.mapping.occupancy import check_ranges
+from slamkit.mapping.occupancy import check_ranges, data_bounds
+from slamkit.mapping.quality import even_odd_maps
 from slamkit.maps import UNKNOWN, OccupancyGrid
 from slamkit.pipeline.registry import EstimatorEntry
 from slamkit.pipeline.runner import run
@@ -662,7 +665,6 @@ def test_check_ranges_names_scan_time_and_beam():
 def test_build_rejects_a_negative_reading_in_a_data_set(rooms):
     """A negative range names the data set's scan and its time (or, if the data set checks
     its stream itself, the event)."""
-    import dataclasses
 
     events = list(rooms.events)
     scan_events = [i for i, ev in enumerate(events) if isinstance(ev, LaserScan)]
@@ -699,6 +701,26 @@ def test_map_agreement_on_shifted_grids():
     assert out["occupied_agreement"] == pytest.approx(1 / 2)
     with pytest.raises(InputError, match="line up"):
         map_agreement(a, OccupancyGrid(np.zeros((2, 2)), 1.0, np.array([0.5, 0.0])))
+
+
+def test_even_odd_maps_share_one_grid_and_the_even_map_is_the_stride_2_map(rooms_10cm):
+    cfg = OccupancyMappingConfig(resolution=0.1)
+    even, odd = even_odd_maps(rooms_10cm, cfg)
+    assert even.grid.shape == odd.grid.shape and even.bounds == odd.bounds
+    assert even.bounds == data_bounds(rooms_10cm, cfg)
+    n_scans = sum(isinstance(ev, LaserScan) for ev in rooms_10cm.events)
+    assert (even.stats.scans_used, odd.stats.scans_used) == ((n_scans + 1) // 2, n_scans // 2)
+    strided = build_occupancy_map(
+        rooms_10cm, dataclasses.replace(cfg, scan_stride=2), bounds=even.bounds
+    )
+    np.testing.assert_array_equal(strided.grid.prob, even.grid.prob)
+    agree = even_odd_agreement(rooms_10cm, cfg, bounds=even.bounds)
+    assert agree == {
+        **map_agreement(even.grid, odd.grid),
+        "scans_even": even.stats.scans_used,
+        "scans_odd": odd.stats.scans_used,
+    }
+    assert agree["agreement"] >= 0.98
 
 
 def test_precision_recall_hand_case():
@@ -744,8 +766,6 @@ def test_estimator_reports_known_poses_and_returns_the_map(rooms):
 
 
 def test_estimator_needs_truth_or_odometry(rooms):
-    import dataclasses
-
     from slamkit.datasets import GroundTruth
 
     blind = dataclasses.replace(rooms, truth=GroundTruth())
@@ -778,9 +798,8 @@ def test_occupancy_map_job_writes_files(tmp_path, rooms_10cm):
         occupancy_map_job(rooms_10cm, -1.0, tmp_path / "bad")
 
 
-def test_map_command(tmp_path):
+def _map_cli():
     import typer
-    from typer.testing import CliRunner
 
     from slamkit.cli.map_cmd import map_app
 
@@ -790,32 +809,60 @@ def test_map_command(tmp_path):
     @app.callback()
     def _main() -> None: ...
 
+    return app
+
+
+def test_map_command(tmp_path):
+    from typer.testing import CliRunner
+
+    app = _map_cli()
     out = tmp_path / "cli"
     args = ["map", "occupancy", "--data", "rooms-laser", "--resolution", "0.2", "--out", str(out)]
     res = CliRunner().invoke(app, [*args, "--no-agreement"])
     assert res.exit_code == 0, res.output
     assert (out / "map.pgm").exists() and "occupied cells" in res.output
+    # the command's usable range, 30 m, is recorded (the simulated laser's 8 m is shorter)
+    config = json.loads((out / "config.json").read_text())
+    assert config["mapping"]["model"]["max_range"] == 30.0
     res = CliRunner().invoke(app, ["map", "occupancy", "--data", "nowhere", "--out", str(out)])
     assert res.exit_code == 1
     assert "unknown dataset 'nowhere'" in res.output
 
 
-# --------------------------------------------------------------------------------------------
-# real logs (skipped without SLAMKIT_DATA)
-# --------------------------------------------------------------------------------------------
+def test_map_command_usable_range_options(tmp_path):
+    """``--max-range`` beats the config file, which beats the 30 m default; ``sensor`` leaves
+    the sensor's own range (null in config.json); anything else is a one-line error."""
+    from typer.testing import CliRunner
+
+    app = _map_cli()
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[mapping]\nresolution = 0.25\n[mapping.model]\nmax_range = 5.0\n")
+    base = ["map", "occupancy", "--data", "rooms-laser", "--no-agreement", "--config", str(cfg)]
+    for flag, expected in (
+        ([], 5.0),
+        (["--max-range", "6.5"], 6.5),
+        (["--max-range", "sensor"], None),
+    ):
+        out = tmp_path / f"m{expected}"
+        res = CliRunner().invoke(app, [*base, *flag, "--out", str(out)])
+        assert res.exit_code == 0, res.output
+        config = json.loads((out / "config.json").read_text())
+        assert config["mapping"]["model"]["max_range"] == expected
+        assert config["mapping"]["resolution"] == 0.25
+    res = CliRunner().invoke(app, [*base, "--max-range", "-3", "--out", str(tmp_path / "x")])
+    assert res.exit_code == 1
+    assert "--max-range: expected metres > 0 or 'sensor', got '-3'" in res.output
 
 
-@pytest.mark.realdata
-def test_intel_map_at_5cm(data_root):
-    from slamkit.datasets.carmen import load_intel
+def test_map_command_help_shows_units_and_tables():
+    """typer renders help as rich markup, which swallowed "[m]" and "[mapping]" ("Cell size
+    ."); the help must show them."""
+    from typer.testing import CliRunner
 
-    ds = load_intel({}, seed=0, data_root=data_root)
-    cfg = OccupancyMappingConfig(resolution=0.05, model=InverseSensorModel(max_range=30.0))
-    res = build_occupancy_map(ds, cfg)
-    q = map_quality(res.grid)
-    assert res.stats.scans_used == 910
-    assert 0.004 < q.occupied_fraction < 0.008  # measured 0.0059
-    assert res.grid.shape == (1607, 1667)
-    agree = even_odd_agreement(ds, cfg)
-    assert agree["agreement"] >= 0.99  # measured 0.993
-    assert agree["occupied_agreement"] >= 0.85  # measured 0.88
+    res = CliRunner().invoke(_map_cli(), ["map", "occupancy", "--help"], env={"COLUMNS": "200"})
+    assert res.exit_code == 0, res.output
+    text = " ".join(res.output.split())  # undo rich's line wrapping
+    assert "Cell size [m]" in text
+    assert "TOML/JSON file with [mapping] and [dataset] tables" in text
+    assert "Usable range r_max of the laser [m], or 'sensor'" in text
+    assert "Default 30 m (unless the config file sets [mapping.model] max_range)" in text

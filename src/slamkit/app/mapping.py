@@ -91,7 +91,7 @@ def occupancy_map_job(
     result = build_occupancy_map(data, cfg, progress)
     quality: dict[str, Any] = {"map": map_quality(result.grid).as_dict()}
     if agreement:
-        quality["even_odd"] = even_odd_agreement(data, cfg)
+        quality["even_odd"] = even_odd_agreement(data, cfg, bounds=result.bounds)
     truth = data.truth.occupancy
     if truth is not None:
         quality["truth"] = {

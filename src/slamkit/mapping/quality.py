@@ -6,8 +6,8 @@
 * :func:`map_agreement` — how two maps of the same place agree: over the cells *both*
   classify as known (occupied or free), the fraction they classify the same.
   :func:`even_odd_agreement` builds one map from the even and one from the odd scans of a log
-  (on the same grid) and compares them: a self-consistency check of poses and model, since
-  the two halves share no scan.
+  (on the same grid, :func:`even_odd_maps`) and compares them: a self-consistency check of
+  poses and model, since the two halves share no scan.
 * :func:`occupied_precision_recall` — against a true occupancy grid: the fraction of mapped
   occupied cells that lie on (or within ``tolerance_cells`` of) a true occupied cell, and
   the fraction of true occupied cells with a mapped occupied cell that close.
@@ -25,7 +25,12 @@ from scipy import ndimage
 
 from slamkit.datasets.stream import Dataset
 from slamkit.errors import InputError
-from slamkit.mapping.occupancy import OccupancyMappingConfig, build_occupancy_map, data_bounds
+from slamkit.mapping.occupancy import (
+    OccupancyMappingConfig,
+    OccupancyMapResult,
+    build_occupancy_map,
+    data_bounds,
+)
 from slamkit.maps import OccupancyGrid
 
 __all__ = [
@@ -35,6 +40,7 @@ __all__ = [
     "check_thresholds",
     "classify_grid",
     "even_odd_agreement",
+    "even_odd_maps",
     "map_agreement",
     "map_entropy",
     "map_quality",
@@ -175,16 +181,37 @@ def map_agreement(
     }
 
 
-def even_odd_agreement(
-    dataset: Dataset, config: OccupancyMappingConfig | None = None
-) -> dict[str, Any]:
-    """Build maps from the even and from the odd scans of ``dataset`` on one grid (the bounds
-    of all scans) and return :func:`map_agreement` of the two, plus how many scans each
-    used."""
+def even_odd_maps(
+    dataset: Dataset,
+    config: OccupancyMappingConfig | None = None,
+    *,
+    bounds: tuple[float, float, float, float] | None = None,
+) -> tuple[OccupancyMapResult, OccupancyMapResult]:
+    """The maps of the even and of the odd scans of ``dataset`` (index in the data set's
+    scans; ``config.scan_stride`` then applies within each half) on one grid: ``bounds``,
+    default the bounds of all scans (:func:`data_bounds`).
+
+    Together they cost about what the map of all scans costs: the two halves trace the same
+    rays between them, each on a grid of the full size (pass the full map's
+    :attr:`OccupancyMapResult.bounds` to skip recomputing the bounds). The even map is the
+    map with ``scan_stride=2``."""
     cfg = config if config is not None else OccupancyMappingConfig()
-    bounds = data_bounds(dataset, cfg)
+    if bounds is None:
+        bounds = data_bounds(dataset, cfg)
     even = build_occupancy_map(dataset, cfg, scans=slice(0, None, 2), bounds=bounds)
     odd = build_occupancy_map(dataset, cfg, scans=slice(1, None, 2), bounds=bounds)
+    return even, odd
+
+
+def even_odd_agreement(
+    dataset: Dataset,
+    config: OccupancyMappingConfig | None = None,
+    *,
+    bounds: tuple[float, float, float, float] | None = None,
+) -> dict[str, Any]:
+    """:func:`map_agreement` of the :func:`even_odd_maps` of ``dataset``, plus how many scans
+    each used."""
+    even, odd = even_odd_maps(dataset, config, bounds=bounds)
     out = map_agreement(even.grid, odd.grid)
     out["scans_even"] = even.stats.scans_used
     out["scans_odd"] = odd.stats.scans_used
