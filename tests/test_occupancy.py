@@ -852,6 +852,11 @@ def test_map_command_usable_range_options(tmp_path):
     res = CliRunner().invoke(app, [*base, "--max-range", "-3", "--out", str(tmp_path / "x")])
     assert res.exit_code == 1
     assert "--max-range: expected metres > 0 or 'sensor', got '-3'" in res.output
+    # an error message naming a table keeps its brackets (rich markup would swallow them)
+    cfg.write_text("mapping = 3\n")
+    res = CliRunner().invoke(app, [*base, "--out", str(tmp_path / "y")])
+    assert res.exit_code == 1
+    assert "[mapping] must be a table of settings" in res.output
 
 
 def test_map_command_help_shows_units_and_tables():
