@@ -132,3 +132,31 @@ def test_help_shows_config_table_names_and_the_optimize_command():
     assert "[estimator]" in res.output and "[dataset]" in res.output
     res = runner.invoke(app, ["--help"])
     assert res.exit_code == 0 and "optimize" in res.output
+
+
+def test_animate_writes_a_gif_of_the_estimate_over_time(tmp_path):
+    """`--animate` on EKF-SLAM: a GIF with one image per runner frame (about
+    ANIMATION_FRAMES, evenly spaced in time, the last at the end of the run); the last
+    frame's map is the final map; the table shows the SLAM scores."""
+    from PIL import Image
+
+    from slamkit.app.jobs import ANIMATION_FRAMES
+    from slamkit.pipeline import run
+
+    out = tmp_path / "slam"
+    res = runner.invoke(
+        app, ["run", "ekf-slam", "--data", "five-features", "--out", str(out), "--animate"]
+    )
+    assert res.exit_code == 0, res.output
+    with Image.open(out / "animation.gif") as gif:
+        n_images = gif.n_frames
+    assert ANIMATION_FRAMES <= n_images <= ANIMATION_FRAMES + 2
+    assert "landmarks mapped / true" in res.output and "5 / 5" in res.output
+    result = run("ekf-slam", load_dataset("five-features", seed=0), frames=10)
+    assert 10 <= len(result.frames) <= 12
+    t = np.array([f.t for f in result.frames])
+    assert np.all(np.diff(t) > 0) and t[-1] == result.times[-1]
+    last, final = result.frames[-1].landmarks, result.output.landmarks
+    assert last is not None and final is not None
+    np.testing.assert_array_equal(last.landmarks.positions, final.landmarks.positions)
+    np.testing.assert_array_equal(result.frames[-1].pose, result.poses[-1])

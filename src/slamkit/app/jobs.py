@@ -13,7 +13,10 @@ from slamkit.io import atomic_folder, write_json, write_tum
 from slamkit.pipeline import Progress, Result, get_estimator_entry, run
 from slamkit.pipeline.evaluate import evaluate
 
-__all__ = ["RunReport", "RunRequest", "run_job"]
+__all__ = ["ANIMATION_FRAMES", "RunReport", "RunRequest", "run_job"]
+
+ANIMATION_FRAMES = 120
+"""Frames of the GIF that ``animate`` writes (about 15 s at 8 frames per second)."""
 
 
 @dataclass(frozen=True)
@@ -30,6 +33,8 @@ class RunRequest:
     data_root: Path | None = None
     plots: bool = True
     overwrite: bool = False
+    animate: bool = False
+    """Also write ``animation.gif``: the estimate over time (:data:`ANIMATION_FRAMES` frames)."""
 
 
 @dataclass(frozen=True)
@@ -54,7 +59,8 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         options=request.dataset_options,
         data_root=request.data_root,
     )
-    result = run(entry, dataset, config=cfg, seed=request.seed, progress=progress)
+    frames = ANIMATION_FRAMES if request.animate else 0
+    result = run(entry, dataset, config=cfg, seed=request.seed, progress=progress, frames=frames)
     evaluation = evaluate(result, dataset)
     figures = {}
     if request.plots:
@@ -75,5 +81,13 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
 
             for name, fig in figures.items():
                 save_figure(fig, tmp / name)
+        if request.animate:
+            from slamkit.viz.animation import save_animation
+
+            gps = evaluation.metrics.get("gps", {})
+            alignment = None
+            if "alignment_tx" in gps:
+                alignment = (gps["alignment_tx"], gps["alignment_ty"], gps["alignment_angle"])
+            save_animation(result, dataset, tmp / "animation.gif", gps_alignment=alignment)
         files = tuple(sorted(p.name for p in tmp.iterdir()))
     return RunReport(Path(request.out_dir), files, evaluation.metrics, result)

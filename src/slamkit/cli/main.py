@@ -35,7 +35,7 @@ def _render_metrics(metrics: dict[str, Any]) -> Table:
     table.add_column("metric")
     table.add_column("value", justify="right")
 
-    def add(name: str, value: float | None, fmt: str) -> None:
+    def add(name: str, value: float | str | None, fmt: str) -> None:
         if value is not None:  # escape: "[m]" would otherwise be read as rich markup
             table.add_row(escape(name), format(value, fmt))
 
@@ -47,8 +47,17 @@ def _render_metrics(metrics: dict[str, Any]) -> Table:
     add("mean NEES (3 dof)", metrics.get("nees", {}).get("mean"), ".2f")
     lm = metrics.get("landmarks", {})
     add("landmark RMSE [m]", lm.get("rmse"), ".3f")
+    add("landmarks mapped / true", _ratio(lm.get("n_matched"), lm.get("n_missing")), "s")
+    add("GPS RMSE, SE(2)-aligned [m]", metrics.get("gps", {}).get("rmse"), ".3f")
+    assoc = metrics.get("association", {})
+    add("association accuracy", assoc.get("accuracy"), ".4f")
+    add("duplicate landmarks", assoc.get("duplicates"), "d")
     add("run time [s]", metrics.get("runtime", {}).get("total_seconds"), ".3f")
     return table
+
+
+def _ratio(matched: int | None, missing: int | None) -> str | None:
+    return None if matched is None or missing is None else f"{matched} / {matched + missing}"
 
 
 def _deg(ate: dict[str, Any]) -> float | None:
@@ -68,6 +77,7 @@ def _run(
     data_root: Path | None,
     plots: bool,
     overwrite: bool,
+    animate: bool = False,
 ) -> None:
     from slamkit.app import RunRequest, run_job
 
@@ -82,6 +92,7 @@ def _run(
         data_root=data_root,
         plots=plots,
         overwrite=overwrite,
+        animate=animate,
     )
     with progress_bar(f"{estimator} on {data}") as progress:
         report = run_job(request, progress)
@@ -108,6 +119,9 @@ def run_command(
     ] = None,
     plots: Annotated[bool, typer.Option(help="Write PNG plots.")] = True,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
+    animate: Annotated[
+        bool, typer.Option(help="Also write animation.gif: the estimate and its map over time.")
+    ] = False,
 ) -> None:
     """Run ESTIMATOR on a data set; write trajectory, metrics, config and plots."""
     target = out if out is not None else Path("results") / f"{estimator}-{data}"
@@ -120,6 +134,7 @@ def run_command(
         data_root=data_root,
         plots=plots,
         overwrite=overwrite,
+        animate=animate,
     )
 
 

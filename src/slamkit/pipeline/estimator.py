@@ -22,6 +22,7 @@ from slamkit.maps import LandmarkMap, OccupancyGrid
 __all__ = [
     "Estimator",
     "EstimatorOutput",
+    "Frame",
     "InnovationLog",
     "LandmarkEstimate",
     "ParticleSnapshot",
@@ -86,8 +87,26 @@ class EstimatorOutput:
     ``truth.reading_ids`` by :func:`slamkit.eval.association_scores`."""
 
 
+@dataclass(frozen=True)
+class Frame:
+    """The estimate at one moment of a run (for animations): the pose and its covariance,
+    and what the estimator offers of its map and particles at that moment."""
+
+    t: float
+    pose: FloatArray
+    cov: FloatArray | None = None
+    landmarks: LandmarkEstimate | None = None
+    particles: FloatArray | None = None
+    """Particle poses ``(P, 3)`` of a particle filter."""
+
+
 class Estimator(Protocol):
-    """What the runner needs of an estimator (see the module docstring)."""
+    """What the runner needs of an estimator (see the module docstring).
+
+    Two optional methods feed the frames of an animation (:func:`slamkit.pipeline.run` with
+    ``frames``): ``landmark_estimate() -> LandmarkEstimate | None``, the current map, and
+    ``particle_poses() -> FloatArray | None``, the current particle poses ``(P, 3)``.
+    """
 
     def handle(self, event: Event) -> None: ...
 

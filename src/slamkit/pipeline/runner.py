@@ -13,8 +13,8 @@ import numpy as np
 from slamkit._validation import FloatArray
 from slamkit.config import config_to_dict
 from slamkit.datasets.stream import Dataset, group_by_time
-from slamkit.errors import ConvergenceError
-from slamkit.pipeline.estimator import EstimatorOutput, PoseEstimate
+from slamkit.errors import ConvergenceError, InputError
+from slamkit.pipeline.estimator import Estimator, EstimatorOutput, Frame, PoseEstimate
 from slamkit.pipeline.registry import EstimatorEntry, get_estimator_entry
 
 __all__ = ["Progress", "Result", "run"]
@@ -40,6 +40,8 @@ class Result:
     covariances: FloatArray | None
     step_seconds: FloatArray
     output: EstimatorOutput
+    frames: tuple[Frame, ...] = ()
+    """Snapshots of the estimate at evenly spaced times (``run(..., frames=N)``)."""
 
     @property
     def total_seconds(self) -> float:
@@ -59,6 +61,19 @@ def _record(est: PoseEstimate, step: int) -> tuple[np.ndarray, np.ndarray | None
     return pose, cov
 
 
+def _frame(est: Estimator, t: float, pose: np.ndarray, cov: np.ndarray | None) -> Frame:
+    """A snapshot through the estimator's optional ``landmark_estimate``/``particle_poses``."""
+    landmarks = getattr(est, "landmark_estimate", None)
+    particles = getattr(est, "particle_poses", None)
+    return Frame(
+        t,
+        pose,
+        cov,
+        landmarks() if callable(landmarks) else None,
+        None if not callable(particles) else np.array(particles(), dtype=float),
+    )
+
+
 def run(
     estimator: str | EstimatorEntry,
     dataset: Dataset,
@@ -66,12 +81,17 @@ def run(
     config: Mapping[str, Any] | Any | None = None,
     seed: int = 0,
     progress: Progress | None = None,
+    frames: int = 0,
 ) -> Result:
     """Run ``estimator`` (a registered name or entry) over ``dataset``.
 
     The estimate is recorded at the start and after every group of events that share a time
     stamp. ``seed`` seeds the estimator's own ``np.random.Generator`` (particle filters).
+    ``frames > 0`` also keeps about that many :class:`Frame` snapshots (pose, map,
+    particles), evenly spaced in time, the last one at the end of the run.
     """
+    if not (isinstance(frames, int) and frames >= 0):
+        raise InputError(f"frames: expected an integer >= 0, got {frames!r}")
     entry = get_estimator_entry(estimator) if isinstance(estimator, str) else estimator
     cfg = entry.make_config(config)
     rng = np.random.default_rng(seed)
@@ -90,6 +110,9 @@ def run(
 
     pose, cov = _record(est.estimate(), 0)
     first_t = events[0].t if events else dataset.start_time
+    snapshots: list[Frame] = []
+    frame_dt = (events[-1].t - first_t) / frames if frames and events else 0.0
+    last_slot = -1  # frames are taken on the time grid first_t + k frame_dt
     if dataset.start_time < first_t:
         times.append(dataset.start_time)
         poses.append(pose)
@@ -108,6 +131,10 @@ def run(
         times.append(t)
         poses.append(pose)
         covs.append(cov)
+        slot = int((t - first_t) // frame_dt) if frame_dt > 0 else last_slot + 1
+        if frames and (slot > last_slot or done + len(group) == total):
+            snapshots.append(_frame(est, t, pose, cov))
+            last_slot = slot
         done += len(group)
         if progress is not None and done >= next_report:
             progress(done, total)
@@ -126,4 +153,5 @@ def run(
         covariances=np.asarray(covs, dtype=float) if have_cov else None,
         step_seconds=np.asarray(seconds, dtype=float),
         output=output,
+        frames=tuple(snapshots),
     )

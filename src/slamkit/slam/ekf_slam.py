@@ -1007,15 +1007,21 @@ class EkfSlam:
             np.asarray(self._log_status, dtype=np.int64),
         )
 
-    def finish(self) -> EstimatorOutput:
+    def landmark_estimate(self) -> LandmarkEstimate:
+        """The confirmed landmarks now, with their marginal covariances ``(M, 2, 2)``."""
         L = self._L
         mean, cov = self._views()
         keep = np.flatnonzero(~self._provisional[:L])
         covs = _diagonal_blocks(cov, L)[keep]
         covs = 0.5 * (covs + np.swapaxes(covs, -1, -2))
-        landmarks = LandmarkEstimate(
+        return LandmarkEstimate(
             LandmarkMap(mean[3:].reshape(-1, 2)[keep].copy(), self._ids[:L][keep].copy()), covs
         )
+
+    def finish(self) -> EstimatorOutput:
+        L = self._L
+        landmarks = self.landmark_estimate()
+        keep = np.flatnonzero(~self._provisional[:L])
         nis = np.asarray(self._nis, dtype=float)
         nis_p = np.asarray(self._nis_provisional, dtype=float)
         q95 = chi2_gate(self._m, 0.95)

@@ -48,6 +48,14 @@ def run_figures(
     if truth.landmarks is not None:
         plot_landmarks(ax, truth.landmarks, label="true landmarks")
     plot_trajectories(ax, truth=truth.poses, estimate=result.poses, legend=False)
+    gps = evaluation.metrics.get("gps", {})
+    if truth.positions is not None and "alignment_tx" in gps:
+        from slamkit.viz.animation import _to_estimate_frame
+
+        xy = _to_estimate_frame(
+            truth.positions, (gps["alignment_tx"], gps["alignment_ty"], gps["alignment_angle"])
+        )
+        ax.plot(xy[:, 0], xy[:, 1], ".", ms=1.5, color="0.55", label="GPS (aligned)", zorder=1)
     if result.covariances is not None and len(result) > 1:
         every = max(1, len(result) // 25)
         plot_covariance_ellipses(
