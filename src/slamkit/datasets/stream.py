@@ -304,7 +304,13 @@ class Dataset:
             elif kind is LaserScan:
                 if self.laser is None:
                     self._fail(idx[0], "a laser scan needs a LaserSpec")
-                self._check_rows(idx, "ranges", (self.laser.n_beams,))
+                rows = self._check_rows(idx, "ranges", (self.laser.n_beams,))
+                negative = (rows < 0).any(axis=1)
+                if negative.any():
+                    self._fail(
+                        idx[int(np.argmax(negative))],
+                        "ranges: expected ranges >= 0 m (max_range marks no return)",
+                    )
             else:
                 self._fail(idx[0], "unknown event type")
 
