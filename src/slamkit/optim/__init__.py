@@ -6,7 +6,8 @@ and 2D landmarks, and over SE(3) poses.
   :mod:`~slamkit.optim.factors3d`: the SE(3) relative-pose and prior edges.
 * :mod:`~slamkit.optim.graph`: validation, variable indexing, gauge, vectorised linearisation.
 * :mod:`~slamkit.optim.sparse`: the fixed normal-matrix pattern and the Cholesky back-ends.
-* :mod:`~slamkit.optim.solvers`: Gauss-Newton, Levenberg-Marquardt, Powell's dogleg.
+* :mod:`~slamkit.optim.solvers`: Gauss-Newton, Levenberg-Marquardt, Powell's dogleg, and the
+  grown-prefix start of long landmark graphs.
 * :mod:`~slamkit.optim.init`: odometry spanning tree and chordal initialisation.
 * :mod:`~slamkit.optim.objectives`: the g2o χ² and SE-Sync's ``F`` of any solution.
 * :mod:`~slamkit.optim.robust`: Huber, Cauchy, Geman-McClure and DCS kernels (IRLS).
@@ -23,7 +24,13 @@ from slamkit.optim.init import (
 from slamkit.optim.marginals import Marginals, marginal_covariances
 from slamkit.optim.objectives import g2o_chi2, sesync_objective
 from slamkit.optim.robust import RobustKernel, robust_rho_and_weight
-from slamkit.optim.solvers import IterationInfo, OptimizerConfig, OptimizeResult, optimize
+from slamkit.optim.solvers import (
+    IterationInfo,
+    OptimizerConfig,
+    OptimizeResult,
+    grow_initialization,
+    optimize,
+)
 from slamkit.optim.sparse import cholmod_available
 
 __all__ = [
@@ -40,6 +47,7 @@ __all__ = [
     "cholmod_available",
     "chordal_initialization",
     "g2o_chi2",
+    "grow_initialization",
     "initial_values",
     "marginal_covariances",
     "optimize",
