@@ -589,7 +589,9 @@ class Seif:
             cfg.blanket_hops if hops is None else hops,
             cfg.max_blanket if max_blanket is None else max_blanket,
         )
-        return self._blanket_solve(B, sel.size)
+        Y = self._blanket_factor(B, sel.size)
+        cov = Y.T @ Y
+        return np.asarray(0.5 * (cov + cov.T), dtype=np.float64)
 
     def recover_mean(self) -> FloatArray:
         """The exact mean ``Ω⁻¹ ξ`` (a dense solve, ``O(n³)``)."""
@@ -774,7 +776,7 @@ class Seif:
         self._counts["association_scans"] += 1
         B = self._blanket(cand, self._config.blanket_hops, self._config.max_blanket)
         self._max_blanket = max(self._max_blanket, 3 + 2 * B.size)
-        Sig = self._blanket_solve(B, cand.size)  # robot, then the candidates
+        Y = self._blanket_factor(B, cand.size)  # Yᵀ Y: robot, then the candidates
         U = cand.size
         lm = self._mu[3 : self._n].reshape(-1, 2)[cand]
         pose = np.broadcast_to(x, (U, 3))
@@ -783,15 +785,14 @@ class Seif:
             z_hat, (Hr, Hj) = model._h(pose, lm), model._jac(pose, lm)
         else:
             z_hat, (Hr, Hj) = model.predict(pose, lm), model.jacobians(pose, lm)
-        # H = [H_r H_j] over (x, m_j): S = H Σ_(x,j) Hᵀ + R
+        # H = [H_r H_j] over (x, m_j): S = H Σ_(x,j) Hᵀ + R, Σ_(x,j) = Y_selᵀ Y_sel
         H = np.concatenate([Hr, Hj], axis=-1)  # (U, m, 5)
         sel = np.concatenate(
             [np.broadcast_to(np.arange(3), (U, 3)), 3 + 2 * np.arange(U)[:, None] + np.arange(2)],
             axis=1,
-        )  # (U, 5) positions in Sig
-        Sj = Sig[sel[:, :, None], sel[:, None, :]]  # (U, 5, 5)
-        S = H @ Sj @ np.swapaxes(H, -1, -2) + self._R
-        S = 0.5 * (S + np.swapaxes(S, -1, -2))
+        )  # (U, 5) columns of Y
+        HY = np.einsum("umi,rui->urm", H, Y[:, sel])  # (U, c, m): (Y_sel Hᵀ) per candidate
+        S = np.einsum("urm,urn->umn", HY, HY) + self._R  # symmetric by construction
         nu = z[:, None, :] - z_hat[None, :, :]  # ν = z ⊖ ẑ, angles wrapped
         for i in self._angular:
             nu[..., i] = wrap_angle(nu[..., i])
@@ -854,23 +855,26 @@ class Seif:
             fresh = sorted(ring - inside)
         return np.asarray(members, dtype=np.int64)
 
-    def _blanket_solve(self, B: NDArray[np.int64], k: int) -> FloatArray:
-        """The block over the robot and the first ``k`` landmarks of ``B`` of
-        ``Ω_BB⁻¹`` (state order: pose, then ``B``): one Cholesky factorisation, solved for
-        those columns only."""
-        idx = np.concatenate([_pose_idx(), _lm_idx(B)])
-        O = self._Om[np.ix_(idx, idx)]
+    def _blanket_factor(self, B: NDArray[np.int64], k: int) -> FloatArray:
+        """``Y (c, c)``, ``c = 3 + 2k``, with ``Yᵀ Y`` the block of ``Ω_BB⁻¹`` over the
+        robot and the first ``k`` landmarks of ``B`` (columns: pose, then those landmarks).
+
+        Ordered with those ``c`` variables LAST, ``Ω_BB = L Lᵀ`` (Cholesky, ``L`` lower)
+        gives ``Ω_BB⁻¹ = L⁻ᵀ L⁻¹``; ``L⁻¹`` is lower triangular, so its last ``c`` columns
+        are zero above the last ``c`` rows, where they are ``L_cc⁻¹`` (the inverse of a
+        block-triangular matrix has the inverses of its diagonal blocks on its diagonal).
+        Hence the block is ``L_cc⁻ᵀ L_cc⁻¹``: one factorisation and a ``c × c`` triangular
+        inverse, no solve with the whole blanket."""
+        idx = np.concatenate([_lm_idx(B[k:]), _pose_idx(), _lm_idx(B[:k])])
         try:
-            factor = scipy.linalg.cho_factor(O, lower=True, check_finite=False)
+            chol = np.linalg.cholesky(self._Om[np.ix_(idx, idx)])
         except np.linalg.LinAlgError:
             raise ConvergenceError(
                 "the information over an association blanket is not positive definite"
             ) from None
-        cols = 3 + 2 * k
-        E = np.zeros((idx.size, cols))
-        E[np.arange(cols), np.arange(cols)] = 1.0
-        X = scipy.linalg.cho_solve(factor, E, check_finite=False)[:cols]
-        return np.asarray(0.5 * (X + X.T), dtype=np.float64)
+        c = 3 + 2 * k
+        Y = scipy.linalg.solve_triangular(chol[-c:, -c:], np.eye(c), lower=True, check_finite=False)
+        return np.asarray(Y, dtype=np.float64)
 
     def _nis(self, nu: FloatArray, H: FloatArray, s: int) -> float:
         """``νᵀ S⁻¹ ν`` with ``S = H Σ_b Hᵀ + R``, ``Σ_b`` the covariance of the robot and
