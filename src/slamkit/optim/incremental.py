@@ -692,25 +692,23 @@ class IncrementalOptimizer:
         la = self._local[a]
         lb = np.where(prior, -1, self._local[np.maximum(b, 0)])
         self._local[rows] = -1
-        ar = np.arange(3)
-        cols = np.concatenate(
-            [
-                np.where(la[:, None] >= 0, 3 * la[:, None] + ar, -1),
-                np.where(lb[:, None] >= 0, 3 * lb[:, None] + ar, -1),
-            ],
-            axis=1,
-        )
+        l6 = np.repeat(np.concatenate([la[:, None], lb[:, None]], axis=1), 3, axis=1)
+        cols = np.where(l6 >= 0, 3 * l6 + np.tile(np.arange(3), 2), -1)  # (E, 6)
+        any_prior = bool(prior.any())
         bw = ~prior
         first_step = 0.0
         for it in range(self.config.window_iterations):
             X = self._X
-            e = np.empty((eidx.shape[0], 3))
-            J = np.zeros((eidx.shape[0], 3, 6))  # ∂e/∂(δ_a, δ_b)
-            if bw.any():
-                e[bw], J[bw, :, :3], J[bw, :, 3:] = factors.se2_between_error(
-                    X[a[bw]], X[b[bw]], z[bw]
-                )
-            if prior.any():
+            if not any_prior:  # the common case: relative-pose edges only
+                e, Ja, Jb = factors.se2_between_error(X[a], X[b], z)
+                J = np.concatenate([Ja, Jb], axis=2)  # ∂e/∂(δ_a, δ_b)
+            else:
+                e = np.empty((eidx.shape[0], 3))
+                J = np.zeros((eidx.shape[0], 3, 6))
+                if bw.any():
+                    e[bw], J[bw, :, :3], J[bw, :, 3:] = factors.se2_between_error(
+                        X[a[bw]], X[b[bw]], z[bw]
+                    )
                 e[prior], J[prior, :, :3] = factors.se2_prior_error(X[a[prior]], z[prior])
             r = np.einsum("eij,ej->ei", U, e)  # whitened residual U e and Jacobian U J
             J = U @ J
