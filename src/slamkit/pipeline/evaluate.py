@@ -99,7 +99,8 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
             if result.covariances is not None:
                 covs = result.covariances[ia]
                 sig = np.sqrt(np.clip(np.diagonal(covs, axis1=1, axis2=2), 0.0, None))
-                ok = np.linalg.det(covs) > 1e-300
+                with np.errstate(divide="ignore", invalid="ignore"):  # singular: not scored
+                    ok = np.linalg.det(covs) > 1e-300
                 nees_vals = np.full(ia.size, np.nan)
                 try:
                     nees_vals[ok] = nees(err[ok], covs[ok])
