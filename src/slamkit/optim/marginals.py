@@ -19,7 +19,6 @@ from numpy.typing import ArrayLike
 from slamkit.errors import GeometryError, InputError
 from slamkit.optim.data import FloatArray, GraphData, IntArray
 from slamkit.optim.graph import GraphProblem, _lookup
-from slamkit.optim.robust import RobustKernel
 from slamkit.optim.solvers import OptimizerConfig, OptimizeResult, _indeterminate
 from slamkit.optim.sparse import SingularSystem, make_factorizer
 
@@ -55,7 +54,7 @@ def marginal_covariances(
     """
     cfg = config if config is not None else OptimizerConfig(objective=result.objective)
     problem = GraphProblem.from_data(data, objective=cfg.objective, gauge=cfg.gauge)
-    kernel = RobustKernel(cfg.robust_kernel, cfg.robust_width)
+    kernel = cfg.kernel
     lin = problem.linearize(problem.to_internal(result.poses), result.landmarks, kernel)
     assert lin.H is not None
     fac = make_factorizer(cfg.linear_solver, problem.pattern)

@@ -16,6 +16,17 @@ inlier keeps its quadratic cost and ``ρ'(0) = 1``.
 Dynamic covariance scaling (Agarwal et al., ICRA 2013) scales a residual by
 ``min(1, 2φ / (φ + s))``; its ``ρ`` above is the integral of that weight, so the reported
 cost and the IRLS weights belong to one M-estimator.
+
+**Widths.** ``s`` of an inlier relative-pose edge is χ² with 3 degrees of freedom (mean 3,
+95 % below 7.8), so a kernel must keep ``s`` of that size nearly quadratic. The defaults
+(:data:`DEFAULT_WIDTHS`) were measured on the vertigo ring and ringCity graphs with 10 % false
+loop closures, started from odometry: Geman-McClure ``c = 3`` (``c² = 9``) and DCS ``φ = 3``
+recover the outlier-free trajectory (ATE 1.00x of it), Cauchy ``c = 1`` comes within 1.5x
+(ring) and 3.5x (ringCity), Huber (convex) does not help. A redescending kernel that is too
+narrow for the *start* does nothing: from odometry, every loop closure (true or false) has
+``s`` in the hundreds or more, so Geman-McClure ``c = 1`` or DCS ``φ = 1`` gives them all
+weight ≈ 0 and the odometry start is a stationary point of the robust cost (the first step
+changes it by 1e-8 relative, and the solver rightly stops there).
 """
 
 from __future__ import annotations
@@ -28,9 +39,19 @@ import numpy as np
 from slamkit.errors import ConfigError
 from slamkit.optim.data import FloatArray
 
-__all__ = ["KernelName", "RobustKernel", "robust_rho_and_weight"]
+__all__ = ["DEFAULT_WIDTHS", "KernelName", "RobustKernel", "robust_rho_and_weight"]
 
 KernelName = Literal["none", "huber", "cauchy", "geman_mcclure", "dcs"]
+
+
+DEFAULT_WIDTHS: dict[str, float] = {
+    "none": 1.0,
+    "huber": 3.0,
+    "cauchy": 1.0,
+    "geman_mcclure": 3.0,
+    "dcs": 3.0,
+}
+"""Default width of each kernel (see the module docstring for how they were chosen)."""
 
 
 @dataclass(frozen=True)

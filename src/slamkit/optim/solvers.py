@@ -40,7 +40,7 @@ from slamkit.geometry import pose2
 from slamkit.optim.data import EdgeSet, FloatArray, GraphData, IntArray
 from slamkit.optim.graph import GaugeMode, GraphProblem, Linearization, ObjectiveName
 from slamkit.optim.init import initial_values
-from slamkit.optim.robust import KernelName, RobustKernel
+from slamkit.optim.robust import DEFAULT_WIDTHS, KernelName, RobustKernel
 from slamkit.optim.sparse import Factorizer, LinearSolverName, SingularSystem, make_factorizer
 
 __all__ = [
@@ -109,8 +109,9 @@ class OptimizerConfig:
     """Dogleg: stop (``converged = False``) when ``Δ`` shrinks below this."""
     robust_kernel: KernelName = "none"
     """``"none"``, ``"huber"``, ``"cauchy"``, ``"geman_mcclure"`` or ``"dcs"`` (all edges)."""
-    robust_width: float = 1.0
-    """Kernel width (δ, c or φ; see :mod:`slamkit.optim.robust`)."""
+    robust_width: float | None = None
+    """Kernel width (δ, c or φ; see :mod:`slamkit.optim.robust`); ``None``: the kernel's
+    default, :data:`~slamkit.optim.robust.DEFAULT_WIDTHS` (read :attr:`kernel`)."""
 
     def __post_init__(self) -> None:
         if self.method not in ("lm", "gn", "dogleg"):
@@ -141,7 +142,15 @@ class OptimizerConfig:
                 raise ConfigError(f"{name}: expected a finite number > 0, got {v}")
         if not self.lambda_factor > 1:
             raise ConfigError(f"lambda_factor: expected > 1, got {self.lambda_factor}")
-        RobustKernel(self.robust_kernel, self.robust_width)  # validates both
+        _ = self.kernel  # validates the name and the width
+
+    @property
+    def kernel(self) -> RobustKernel:
+        """The robust kernel with its width resolved (``robust_width`` or the default)."""
+        width = self.robust_width
+        if width is None:
+            width = DEFAULT_WIDTHS.get(self.robust_kernel, 1.0)
+        return RobustKernel(self.robust_kernel, width)
 
 
 @dataclass(frozen=True)
@@ -207,7 +216,7 @@ class _Solver:
     def __init__(self, problem: GraphProblem, config: OptimizerConfig) -> None:
         self.problem = problem
         self.config = config
-        self.kernel = RobustKernel(config.robust_kernel, config.robust_width)
+        self.kernel = config.kernel
         self.pattern = problem.pattern
         self.factorizer: Factorizer = make_factorizer(config.linear_solver, self.pattern)
         self.factorizations = 0
