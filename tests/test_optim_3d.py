@@ -108,6 +108,11 @@ def test_3d_sesync_objective_and_marginals() -> None:
     assert fs.cost == pytest.approx(sesync_objective(data, fs.poses), rel=1e-12)
     assert fs.cost < sesync_objective(data, g2o.poses)
     assert g2o.cost < g2o_chi2(data, fs.poses)
+    # Both objectives of both solutions are reported.
+    assert fs.sesync_objective == pytest.approx(fs.cost, rel=1e-12)
+    assert fs.g2o_chi2 == pytest.approx(g2o_chi2(data, fs.poses), rel=1e-12)
+    assert g2o.g2o_chi2 == pytest.approx(g2o.cost, rel=1e-12)
+    assert g2o.sesync_objective == pytest.approx(sesync_objective(data, g2o.poses), rel=1e-12)
     marg = marginal_covariances(data, g2o, pose_ids=[0, 10, 19])
     assert marg.pose_covariances.shape == (3, 6, 6)
     np.testing.assert_array_equal(marg.pose_covariances[0], 0.0)

@@ -457,3 +457,29 @@ def test_grow_initialization_reaches_the_optimum_near_the_truth() -> None:
     assert res.initial_cost < 0.1 * odo.initial_cost
     with pytest.raises(ConfigError, match="grow_max_step"):
         OptimizerConfig(grow_max_step=0)
+
+
+@pytest.mark.parametrize("objective", ["g2o", "sesync"])
+def test_result_reports_both_objectives(objective: str) -> None:
+    """Whatever is minimised, the result carries g2o's χ² (every edge, landmarks included)
+    and SE-Sync's F (relative-pose edges) of its solution, as the objective functions give."""
+    rng = np.random.default_rng(11)
+    data, _, _ = _landmark_graph(rng)
+    noisy = tuple(
+        EdgeSet(e.kind, e.i, e.j, e.measurement + rng.normal(size=e.measurement.shape) * 0.02,
+                e.information, e.lines)
+        for e in data.edges
+    )  # fmt: skip
+    data = GraphData(
+        dim=2, pose_ids=data.pose_ids, poses=data.poses, landmark_ids=data.landmark_ids,
+        landmarks=data.landmarks, edges=noisy,
+    )  # fmt: skip
+    res = optimize(data, OptimizerConfig(objective=objective))  # type: ignore[arg-type]
+    assert res.g2o_chi2 == pytest.approx(g2o_chi2(data, res.poses, res.landmarks), rel=1e-12)
+    assert res.sesync_objective == pytest.approx(sesync_objective(data, res.poses), rel=1e-12)
+    assert res.g2o_chi2 > 0 and res.sesync_objective > 0
+    minimised = res.g2o_chi2 if objective == "g2o" else res.sesync_objective
+    if objective == "g2o":
+        assert res.cost == pytest.approx(minimised, rel=1e-12)
+    else:  # the landmark edges keep their g2o error in the SE-Sync objective
+        assert res.cost > minimised

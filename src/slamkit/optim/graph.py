@@ -207,6 +207,7 @@ class GraphProblem:
         self.landmark_var = self.n_free_poses + np.arange(landmark_ids.shape[0], dtype=np.int64)
         self.n = self.pose_dof * self.n_free_poses + 2 * landmark_ids.shape[0]
         self._pattern: NormalPattern | None = None
+        self._other_blocks: list[_Block] | None = None  # the blocks of the other objective
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -614,6 +615,36 @@ class GraphProblem:
                 r, _, _ = self._residuals(blk, poses, landmarks)
                 out.append(np.einsum("ie,ie->e", r, r))
         return out
+
+    def objective_values(self, poses: FloatArray, landmarks: FloatArray) -> tuple[float, float]:
+        """``(g2o χ², SE-Sync F)`` at internal-format ``poses`` and ``landmarks``, whichever
+        objective the problem minimises: χ² over every edge with g2o's errors, ``F`` over the
+        relative-pose edges (:mod:`slamkit.optim.objectives`). The other objective's blocks
+        are built once from the validated edges (no second validation); each call costs one
+        residual evaluation per objective."""
+        if self._other_blocks is None:
+            other: ObjectiveName = "sesync" if self.objective == "g2o" else "g2o"
+            mine = self.objective
+            self.objective = other  # _make_block reads the objective
+            try:
+                self._other_blocks = [
+                    self._make_block(self.data, b.edges, b.a, b.b, b.b_is_landmark)
+                    for b in self.blocks
+                ]
+            finally:
+                self.objective = mine
+        g2o_blocks = self.blocks if self.objective == "g2o" else self._other_blocks
+        sesync_blocks = self._other_blocks if self.objective == "g2o" else self.blocks
+        chi2 = 0.0
+        for blk in g2o_blocks:
+            r, _, _ = self._residuals(blk, poses, landmarks)
+            chi2 += float(np.einsum("ie,ie->", r, r))
+        F = 0.0
+        for blk in sesync_blocks:
+            if blk.kind in ("se2", "se3"):
+                r, _, _ = self._residuals(blk, poses, landmarks)
+                F += float(np.einsum("ie,ie->", r, r))
+        return chi2, F
 
     def retract(
         self, poses: FloatArray, landmarks: FloatArray, delta: FloatArray

@@ -195,6 +195,12 @@ class OptimizeResult:
     initialization: str = "given"
     """The initialisation used (``"vertices"``, ``"odometry"``, ``"chordal"``, ``"grow"``),
     ``"given"`` when the caller passed the initial poses."""
+    g2o_chi2: float = float("nan")
+    """g2o's χ² of the solution over every edge (:func:`slamkit.optim.g2o_chi2`), whatever
+    the objective minimised (set by :func:`optimize`)."""
+    sesync_objective: float = float("nan")
+    """SE-Sync's ``F`` of the solution over the relative-pose edges
+    (:func:`slamkit.optim.sesync_objective`; set by :func:`optimize`)."""
 
     def as_graph(self, data: GraphData) -> GraphData:
         """``data`` with its vertices replaced by the optimised values (for a writer)."""
@@ -331,6 +337,7 @@ def optimize(
         solver, poses, landmarks, lin, history, callback
     )
     total = time.perf_counter() - t_start
+    g2o_value, sesync_value = problem.objective_values(poses, landmarks)
     return OptimizeResult(
         pose_ids=problem.pose_ids.copy(),
         poses=problem.to_external(poses),
@@ -353,6 +360,8 @@ def optimize(
         total_seconds=total,
         history=tuple(history),
         initialization=init_used,
+        g2o_chi2=g2o_value,
+        sesync_objective=sesync_value,
     )
 
 
