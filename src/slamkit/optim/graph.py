@@ -148,11 +148,12 @@ class _Block:
     b_is_landmark: bool
     a_var: IntArray  # (E,) variable index of a (free poses, then landmarks), -1 when fixed
     b_var: IntArray | None
-    sqrt_info: FloatArray | None  # (m, m, E) U with UᵀU = Ω, edge-last
-    row_weights: FloatArray | None  # (m, E) per-row weights (SE-Sync residual) instead of U
+    sqrt_info: FloatArray | None  # U with UᵀU = Ω: (m, m, E) edge-last, (E, m, m) batch-first
+    row_weights: FloatArray | None  # per-row weights (SE-Sync residual) instead of U
     da: int
     db: int
     m: int
+    batch_first: bool  # 3D: kernels, U and products batch-first (stacked 6x6 matmuls)
 
 
 @dataclass
@@ -432,7 +433,9 @@ class GraphProblem:
                 raise CovarianceError(
                     f"{edge_location(data, es, k)}: SE-Sync weights κ, τ must be positive"
                 )
-            row_weights = np.ascontiguousarray(weights.T)
+            row_weights = np.ascontiguousarray(weights if self.dim == 3 else weights.T)
+        elif self.dim == 3:
+            sqrt_info = _sqrt_information(data, es)
         else:
             sqrt_info = np.ascontiguousarray(np.moveaxis(_sqrt_information(data, es), 0, -1))
         a_var = self.pose_var[a]
@@ -455,6 +458,7 @@ class GraphProblem:
             self.pose_dof,
             db,
             m,
+            self.dim == 3,
         )
 
     # ------------------------------------------------------------------ pose formats
@@ -510,10 +514,13 @@ class GraphProblem:
     def _residuals(
         self, blk: _Block, poses: FloatArray, landmarks: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
-        """Whitened residual ``U e`` (m, E) and Jacobians ``U ∂e/∂δ`` (m, d, E), edge-last.
+        """Whitened residual ``U e`` and Jacobians ``U ∂e/∂δ``: edge-last ``(m, E)``,
+        ``(m, d, E)`` in 2D, batch-first ``(E, m)``, ``(E, m, d)`` in 3D (``blk.batch_first``).
 
-        Edge-last arrays make every per-entry operation one contiguous vector operation; the
-        whitening and block products are ``einsum`` over the small axes.
+        The 2D kernels fill contiguous per-entry rows of length ``E`` (one vector operation
+        per scalar entry; whitening and products are ``einsum`` over the small axes). The 3D
+        kernels work on stacked 3x3 matrices, so their arrays are batch-first and whitening
+        and products are stacked ``matmul`` (5x faster than ``einsum`` on strided views).
         """
         z = blk.measurement
         xa = poses[blk.a]
@@ -543,7 +550,19 @@ class GraphProblem:
                 "bearing": factors.bearing_error,
             }[blk.kind]
             e, Ja, Jb = fn(xa, landmarks[blk.b], z)
-        # The kernels build edge-last arrays and return batch-first views: undo the views.
+        if blk.batch_first:
+            if blk.row_weights is not None:
+                w3 = blk.row_weights
+                return (
+                    e * w3,
+                    Ja * w3[:, :, None],
+                    None if Jb is None else Jb * w3[:, :, None],
+                )
+            U3 = blk.sqrt_info
+            assert U3 is not None
+            r3 = np.matmul(U3, e[:, :, None])[:, :, 0]
+            return r3, U3 @ Ja, None if Jb is None else U3 @ Jb
+        # The 2D kernels build edge-last arrays and return batch-first views: undo the views.
         e, Ja = np.moveaxis(e, 0, -1), np.moveaxis(Ja, 0, -1)
         Jb = None if Jb is None else np.moveaxis(Jb, 0, -1)
         if blk.row_weights is not None:
@@ -576,7 +595,7 @@ class GraphProblem:
         robust = kernel is not None and kernel.name != "none"
         for blk in self.blocks:
             r, A, B = self._residuals(blk, poses, landmarks)
-            s = np.einsum("ie,ie->e", r, r)
+            s = _squared_norms(blk, r)
             chi2 += float(s.sum())
             if robust:
                 assert kernel is not None
@@ -585,6 +604,13 @@ class GraphProblem:
             else:
                 cost += float(s.sum())
             if not jacobians:
+                continue
+            if blk.batch_first:
+                if robust:
+                    sw = np.sqrt(w)
+                    r, A = r * sw[:, None], A * sw[:, None, None]
+                    B = None if B is None else B * sw[:, None, None]
+                _emit_batch_first(A, B, r, hw, gw)
                 continue
             if robust:
                 sw = np.sqrt(w)
@@ -613,7 +639,7 @@ class GraphProblem:
         for blk in self.blocks:
             if kind is None or blk.kind == kind:
                 r, _, _ = self._residuals(blk, poses, landmarks)
-                out.append(np.einsum("ie,ie->e", r, r))
+                out.append(_squared_norms(blk, r))
         return out
 
     def objective_values(self, poses: FloatArray, landmarks: FloatArray) -> tuple[float, float]:
@@ -638,12 +664,12 @@ class GraphProblem:
         chi2 = 0.0
         for blk in g2o_blocks:
             r, _, _ = self._residuals(blk, poses, landmarks)
-            chi2 += float(np.einsum("ie,ie->", r, r))
+            chi2 += float(_squared_norms(blk, r).sum())
         F = 0.0
         for blk in sesync_blocks:
             if blk.kind in ("se2", "se3"):
                 r, _, _ = self._residuals(blk, poses, landmarks)
-                F += float(np.einsum("ie,ie->", r, r))
+                F += float(_squared_norms(blk, r).sum())
         return chi2, F
 
     def retract(
@@ -702,6 +728,35 @@ class GraphProblem:
             return f"pose {int(self.pose_ids[row])} ({names[col % dof]})"
         k = col - dof * self.n_free_poses
         return f"landmark {int(self.landmark_ids[k // 2])} ({'xy'[k % 2]})"
+
+
+def _squared_norms(blk: _Block, r: FloatArray) -> FloatArray:
+    """``‖r_k‖²`` per edge of a whitened residual in the block's layout."""
+    return np.einsum("em,em->e", r, r) if blk.batch_first else np.einsum("ie,ie->e", r, r)
+
+
+def _emit_batch_first(
+    A: FloatArray,
+    B: FloatArray | None,
+    r: FloatArray,
+    hw: list[FloatArray],
+    gw: list[FloatArray],
+) -> None:
+    """Append the block products ``AᵀA``, ``AᵀB``, ``BᵀB`` and gradients ``Aᵀr``, ``Bᵀr`` of
+    batch-first ``A (E, m, da)``, ``B (E, m, db)``, ``r (E, m)`` in the pattern's edge-last
+    order (``(d_a, d_b, E)`` raveled). Transposing ``A`` into contiguous memory first keeps
+    every product on matmul's fast path."""
+    At = np.ascontiguousarray(np.swapaxes(A, 1, 2))
+    hw.append(np.ascontiguousarray((At @ A).transpose(1, 2, 0)).ravel())
+    rc = r[:, :, None]
+    if B is None:
+        gw.append(np.ascontiguousarray((At @ rc)[:, :, 0].T).ravel())
+        return
+    Bt = np.ascontiguousarray(np.swapaxes(B, 1, 2))
+    hw.append(np.ascontiguousarray((At @ B).transpose(1, 2, 0)).ravel())
+    hw.append(np.ascontiguousarray((Bt @ B).transpose(1, 2, 0)).ravel())
+    gw.append(np.ascontiguousarray((At @ rc)[:, :, 0].T).ravel())
+    gw.append(np.ascontiguousarray((Bt @ rc)[:, :, 0].T).ravel())
 
 
 def sesync_row_weights(information: FloatArray) -> FloatArray:
