@@ -301,6 +301,11 @@ class IncrementalOptimizer:
         """``(pose_ids, poses)`` of the current estimate (copies; rows in arrival order)."""
         return self._ids[: self._n].copy(), self._X[: self._n].copy()
 
+    def window_pose_ids(self) -> IntArray:
+        """Ids of the poses the next window step moves (arrival order)."""
+        rows = np.fromiter(self._window, dtype=np.int64, count=len(self._window))
+        return self._ids[rows].copy()
+
     def pose(self, pose_id: int) -> FloatArray:
         """The current estimate ``(x, y, θ)`` of one pose (a copy)."""
         row = self._row_of.get(int(pose_id))
