@@ -361,7 +361,10 @@ def initial_values(
 
     ``method``: ``"vertices"`` (the file's values; an error when it has none), ``"odometry"``
     (:func:`spanning_tree_initialization`), ``"chordal"`` (:func:`chordal_initialization`),
-    or ``"auto"`` (vertices when the file has them, else odometry).
+    or ``"auto"`` (vertices when the file has them, else odometry). :func:`~slamkit.optim.optimize`
+    resolves its own ``"auto"`` first and picks the grown-prefix start for landmark graphs
+    without vertices (:func:`~slamkit.optim.solvers.resolve_initialization`; that start runs
+    the optimiser, so it lives in :mod:`slamkit.optim.solvers`).
     """
     data: GraphData = problem.data
     has_vertices = data.poses.shape[0] > 0
