@@ -29,7 +29,14 @@ from slamkit.errors import (
 from slamkit.eval import absolute_trajectory_error, landmark_map_error
 from slamkit.geometry.alignment import align_points_2d
 from slamkit.localization.particles import effective_sample_size, particle_estimate
-from slamkit.models import OdometryModel, RangeBearing, RangeOnly, UnicycleEuler, odometry_control
+from slamkit.models import (
+    OdometryModel,
+    RangeBearing,
+    RangeOnly,
+    RelativePosition,
+    UnicycleEuler,
+    odometry_control,
+)
 from slamkit.pipeline.registry import EstimatorEntry
 from slamkit.pipeline.runner import run
 from slamkit.sim import observe_landmarks
@@ -157,7 +164,13 @@ def _ref_associate(x, lms, z, rid, s, seen, marginal=None):
 
 
 def _ref_prune(x, lms, seen, updated, s):
+    """Counters of the landmarks that can be removed (started by unlabelled readings);
+    those known by an id keep theirs unchanged."""
+    if not s.prune:
+        return lms
     for j, lm in enumerate(lms):
+        if lm["id"] < s.first_unlabelled_id:
+            continue
         dx, dy = lm["mu"][0] - x[0], lm["mu"][1] - x[1]
         r = math.hypot(dx, dy)
         b = _wrap(math.atan2(dy, dx) - x[2])
@@ -432,8 +445,47 @@ def test_fastslam1_common_layout_fast_path_equals_reference() -> None:
     z, ids = _scan(rng)
     new, _ = fastslam1_update(ps, z, ids, RangeBearing(), R, SETTINGS)
     _assert_same(new, *ref_update1(ps, z, ids, SETTINGS))
-    # Landmark 7 was started everywhere, 0 updated twice (its two readings), in order.
-    assert np.all(new.ids[:, 4] == 7) and np.all(new.counters[:, 0] == 2)
+    # Landmark 7 was started everywhere; labelled landmarks keep no existence counter.
+    assert np.all(new.ids[:, 4] == 7) and np.all(new.counters[:, :5] == ps.counters[0, 0])
+
+
+@pytest.mark.parametrize("model", [RangeBearing(), RelativePosition()])
+def test_landmark_terms_equal_the_models_methods(model) -> None:
+    """The fused planar kernel (range-bearing written out, other models through their batch
+    kernels) against ``predict``/``jacobians`` and dense 2×2 algebra, to 1e-12; a landmark
+    at the sensor is flagged."""
+    from slamkit.slam.fastslam import _H00, _I00, _LOGDET, _T00, _ZH0, _landmark_terms
+
+    rng = np.random.default_rng(4)
+    poses = rng.normal(0.0, [2.0, 2.0, 2.0], (7, 3))
+    mu = rng.uniform(-6.0, 6.0, (3, 7, 2))
+    mu[1, 2] = poses[2, :2]  # at the sensor
+    a = rng.normal(0.0, 0.2, (3, 7, 2, 2))
+    cov = a @ np.swapaxes(a, -1, -2) + 0.01 * np.eye(2)
+    g = np.stack([mu[..., 0], mu[..., 1], cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1]])
+    Rm = np.array([[0.02, 0.003], [0.003, 0.01]])
+    F, ok = _landmark_terms(model, tuple(poses.T), g, Rm)
+    assert ok.tolist() == [[True] * 7, [True, True, False] + [True] * 4, [True] * 7]
+    keep = ok
+    safe = mu.copy()
+    safe[1, 2] += 1.0  # the models' methods raise at the sensor: compared where ok only
+    z_hat = model.predict(poses[None], safe)
+    Hm = model.jacobians(poses[None], safe)[1]
+    T = Hm @ cov
+    Q = T @ np.swapaxes(Hm, -1, -2) + Rm
+    got_z = np.stack([F[_ZH0], F[_ZH0 + 1]], -1)
+    d = got_z - z_hat
+    d[..., 1] = (d[..., 1] + np.pi) % (2 * np.pi) - np.pi if model.angular[1] else d[..., 1]
+    np.testing.assert_allclose(d[keep], 0.0, atol=1e-12)
+    got_H = np.stack([F[_H00 : _H00 + 2], F[_H00 + 2 : _H00 + 4]]).transpose(2, 3, 0, 1)
+    np.testing.assert_allclose(got_H[keep], Hm[keep], rtol=0, atol=1e-12)
+    got_T = np.stack([F[_T00 : _T00 + 2], F[_T00 + 2 : _T00 + 4]]).transpose(2, 3, 0, 1)
+    np.testing.assert_allclose(got_T[keep], T[keep], rtol=0, atol=1e-12)
+    Qi = np.linalg.inv(Q)
+    np.testing.assert_allclose(F[_I00][keep], Qi[..., 0, 0][keep], rtol=1e-12)
+    np.testing.assert_allclose(F[_I00 + 1][keep], Qi[..., 0, 1][keep], rtol=1e-12)
+    np.testing.assert_allclose(F[_I00 + 2][keep], Qi[..., 1, 1][keep], rtol=1e-12)
+    np.testing.assert_allclose(F[_LOGDET][keep], np.log(np.linalg.det(Q))[keep], atol=1e-12)
 
 
 # --------------------------------------------------------------------------------------------
@@ -658,13 +710,20 @@ def test_clutter_is_pruned_by_existence_counters() -> None:
     ds = load_dataset("five-features", seed=2, options={"identities": False})
     rng = np.random.default_rng(0)
     events, n_clutter = [], 0
+    true_ids = list(ds.truth.reading_ids or ())
+    scan = 0
     for i, ev in enumerate(ds.events):
-        if isinstance(ev, LandmarkReadings) and i % 5 == 0 and ev.t < 25.0:
-            junk = np.array([[rng.uniform(1.0, 7.0), rng.uniform(-np.pi, np.pi)]])
-            ev = LandmarkReadings(ev.t, np.vstack([ev.z, junk]), np.append(ev.ids, -1))
-            n_clutter += 1
+        if isinstance(ev, LandmarkReadings):
+            if i % 5 == 0 and ev.t < 25.0:
+                junk = np.array([[rng.uniform(1.0, 7.0), rng.uniform(-np.pi, np.pi)]])
+                ev = LandmarkReadings(ev.t, np.vstack([ev.z, junk]), np.append(ev.ids, -1))
+                if true_ids:
+                    true_ids[scan] = np.append(true_ids[scan], -1)
+                n_clutter += 1
+            scan += 1
         events.append(ev)
-    cluttered = dataclasses.replace(ds, events=tuple(events))
+    truth = dataclasses.replace(ds.truth, reading_ids=tuple(true_ids) if true_ids else None)
+    cluttered = dataclasses.replace(ds, events=tuple(events), truth=truth)
     res = run(ENTRIES[1], cluttered, config={"n_particles": 30}, seed=2)
     d = res.output.diagnostics
     assert n_clutter > 20
@@ -752,7 +811,7 @@ def test_odometry_events_and_position_readings(version: int) -> None:
             events.append(LandmarkReadings(t, z, ids))
     data = Dataset("odometry-position", tuple(events), motion=MotionSpec(model, q, "odometry"),
                    landmark_sensor=sensor, initial_pose=truth[0], initial_cov=np.zeros((3, 3)),
-                   truth=ds.truth)  # fmt: skip
+                   truth=dataclasses.replace(ds.truth, reading_ids=None))  # fmt: skip
     res = run(ENTRIES[version], data, config={"n_particles": 30}, seed=0)
     assert res.output.landmarks is not None
     err = landmark_map_error(res.output.landmarks.landmarks, world)

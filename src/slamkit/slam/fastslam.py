@@ -14,8 +14,9 @@ Per particle, with pose ``x``, a landmark ``N(μ, Σ)`` and a reading ``z`` (noi
 * **Innovation**: ``ν = z ⊟ h(x, μ)`` (angles wrapped), ``H = ∂h/∂m`` at ``(x, μ)``,
   ``Q = H Σ Hᵀ + R``.
 * **Likelihood**: ``log N(ν; 0, Q) = -½ (νᵀ Q⁻¹ ν + log det Q + m log 2π)``.
-* **EKF update**: ``K = Σ Hᵀ Q⁻¹``, ``μ ← μ + K ν``,
-  ``Σ ← (I − K H) Σ (I − K H)ᵀ + K R Kᵀ`` (Joseph form: stays PSD under round-off).
+* **EKF update**: ``K = Σ Hᵀ Q⁻¹``, ``μ ← μ + K ν``, ``Σ ← Σ − K H Σ`` (the standard form:
+  with this closed-form 2×2 gain it is as safe as the Joseph form at half the cost; see
+  ``_ekf``).
 * **New landmark**: ``μ = g(x, z)`` (the inverse model), ``Σ = L_z R L_zᵀ``; no pose term,
   the pose is given within the particle.
 
@@ -43,7 +44,7 @@ up by one in each scan that updates the landmark and down by one in each scan in
 predicted visible (range within the sensor's limits and inside the field of view, judged from
 the particle's pose and the landmark's mean) but not matched; below zero the landmark is
 removed (clutter and duplicate landmarks die this way). A landmark known by its id is never
-removed.
+removed and keeps no counter (its counter stays at its start value).
 
 FastSLAM 1.0 vs 2.0
 -------------------
@@ -79,6 +80,13 @@ counters and ids ``(P, C)``, and the number of landmarks of each particle ``(P,)
 Every step is vectorised over particles; the only Python loops run over the few readings of a
 scan. Resampling selects particles by fancy indexing, which copies: two resampled particles
 never share a landmark buffer.
+
+Internally the kernels work on a planar, slot-major copy of the maps (``_Work``: five
+``(C, P)`` planes for the mean and covariance entries, particles last) that the estimators
+keep between steps and turn into a :class:`FastSlamParticles` only when asked: at 100
+particles and a few readings per scan a step is a couple of hundred NumPy calls on a few
+hundred numbers each, and their count — not the arithmetic — is the cost (see
+``benchmarks/bench_fastslam.py``).
 """
 
 from __future__ import annotations
@@ -95,15 +103,15 @@ from slamkit.datasets.stream import Control, Dataset, Event, LandmarkReadings, O
 from slamkit.errors import ConfigError, ConvergenceError, InputError, ShapeError
 from slamkit.geometry.angles import wrap_angle
 from slamkit.localization.particles import (
-    effective_sample_size,
     low_variance_resample,
     normalize_log_weights,
     particle_estimate,
 )
 from slamkit.mapping.ekf_mapping import InvertibleLandmarkModel
 from slamkit.maps import LandmarkMap
-from slamkit.models import MIN_RANGE, MotionModel, odometry_control
+from slamkit.models import MIN_RANGE, MotionModel, RangeBearing, odometry_control
 from slamkit.models.measurement import _LandmarkBase
+from slamkit.models.motion import _MotionBase
 from slamkit.pipeline.estimator import EstimatorOutput, LandmarkEstimate, PoseEstimate
 from slamkit.prob import chi2_gate
 
@@ -363,27 +371,104 @@ def default_p0(noise_cov: ArrayLike, probability: float = 0.999) -> float:
 # --------------------------------------------------------------------------------------------
 
 
-class _Work:
-    """The mutable working copy of a particle set's maps during one scan."""
+# Rows of the planar landmark store ``_Work.lm (5, C, P)``: mean x, y; covariance Σ00, Σ01, Σ11.
+_MX, _MY, _S00, _S01, _S11 = range(5)
+_TWO_PI = 2.0 * math.pi
 
-    def __init__(self, ps: FastSlamParticles) -> None:
-        self.means = ps.means.copy()
-        self.covs = ps.covs.copy()
-        self.counters = ps.counters.copy()
-        self.ids = ps.ids.copy()
-        self.counts = ps.counts.copy()
-        self.next_id = ps.next_id
-        n, cap = self.ids.shape
-        self.seen = np.zeros((n, cap), dtype=bool)  # matched or started in this scan
-        self.updated = np.zeros((n, cap), dtype=bool)  # matched (existing) in this scan
+
+class _Work:
+    """The mutable maps of a particle set, planar and slot-major: ``lm (5, C, P)`` holds the
+    mean ``(x, y)`` and the covariance entries ``(Σ00, Σ01, Σ11)`` of slot ``j`` of every
+    particle as contiguous rows ``lm[:, j]``; ``counters``, ``ids`` ``(C, P)``, ``counts``
+    ``(P,)``. At 100 particles × a few readings NumPy's per-call overhead, not the
+    arithmetic, is the cost: a scan's landmarks are gathered in one fancy-indexing
+    operation, and with the particles on the last axis every operation (poses ``(P,)``
+    broadcast against ``(K, P)`` blocks) runs one long inner loop — with particles first,
+    a ``(P, 1)`` by ``(P, K)`` product costs ~6x a flat one. ``seen``/``updated`` ``(C, P)``
+    mark the slots a scan matched or started (:meth:`begin_scan` clears them); ``removed``
+    counts the landmarks the scan pruned."""
+
+    def __init__(
+        self, lm: FloatArray, counters: IntArray, ids: IntArray, counts: IntArray, next_id: int
+    ) -> None:
+        self.lm = lm
+        self.counters = counters
+        self.ids = ids
+        self.counts = counts
+        self.next_id = next_id
+        self.removed = 0
+        self.seen = np.zeros(ids.shape, dtype=bool)
+        self.updated = np.zeros(ids.shape, dtype=bool)
+        # Whether every particle holds the same ids in the same slots (None: not known),
+        # and then the slot of each id (None: not built yet).
+        self._common: bool | None = None
+        self.slot_of: dict[int, int] | None = None
+
+    @property
+    def common(self) -> bool | None:
+        return self._common
+
+    @common.setter
+    def common(self, value: bool | None) -> None:
+        self._common = value
+        self.slot_of = None
+
+    @classmethod
+    def of(cls, ps: FastSlamParticles) -> _Work:
+        """A working copy of the maps of ``ps`` (shares no memory with it)."""
+        n, cap = ps.ids.shape
+        lm = np.empty((5, cap, n))
+        lm[_MX], lm[_MY] = ps.means[..., 0].T, ps.means[..., 1].T
+        lm[_S00], lm[_S01] = ps.covs[..., 0, 0].T, ps.covs[..., 0, 1].T
+        lm[_S11] = ps.covs[..., 1, 1].T
+        return cls(lm, ps.counters.T.copy(), ps.ids.T.copy(), ps.counts.copy(), ps.next_id)
+
+    def particles(self, poses: FloatArray, log_weights: FloatArray) -> FastSlamParticles:
+        """The maps as a particle set (new arrays) with ``poses`` and ``log_weights``."""
+        means, covs = self.gaussians((slice(None), slice(None)))
+        return _trusted(poses, log_weights, np.swapaxes(means, 0, 1).copy(),
+                        np.swapaxes(covs, 0, 1).copy(), self.counters.T.copy(),
+                        self.ids.T.copy(), self.counts.copy(), self.next_id)  # fmt: skip
+
+    def gaussians(self, index: tuple[Any, Any]) -> tuple[FloatArray, FloatArray]:
+        """Means ``(..., 2)`` and covariances ``(..., 2, 2)`` of the slots ``index``
+        (``(slots, particles)``, any NumPy index), as new arrays."""
+        g = self.lm[(slice(None), *index)]
+        means = np.stack((g[_MX], g[_MY]), axis=-1)
+        covs = np.empty((*g.shape[1:], 2, 2))
+        covs[..., 0, 0], covs[..., 1, 1] = g[_S00], g[_S11]
+        covs[..., 0, 1] = covs[..., 1, 0] = g[_S01]
+        return means, covs
+
+    def select(self, indices: NDArray[np.intp]) -> _Work:
+        """The maps of the particles ``indices`` (resampling): copies by fancy indexing, so
+        two selected particles never share a landmark buffer."""
+        w = _Work(self.lm[:, :, indices], self.counters[:, indices], self.ids[:, indices],
+                  self.counts[indices], self.next_id)  # fmt: skip
+        w.common = True if self.common else None
+        w.slot_of = self.slot_of  # the same slots: resampling keeps a common layout common
+        return w
+
+    def begin_scan(self) -> None:
+        self.seen.fill(False)
+        self.updated.fill(False)
         self.removed = 0
 
     @property
     def capacity(self) -> int:
-        return int(self.ids.shape[1])
+        return int(self.ids.shape[0])
 
-    def valid(self) -> NDArray[np.bool_]:
-        return np.arange(self.capacity) < self.counts[:, None]
+    def valid(self, cmax: int | None = None) -> NDArray[np.bool_]:
+        """``(cmax, P)``: which of the first ``cmax`` slots (default: all) are in use."""
+        c = self.capacity if cmax is None else cmax
+        return np.arange(c)[:, None] < self.counts
+
+    def is_common(self, cmax: int) -> bool:
+        if self.common is None:
+            c = self.counts
+            ids = self.ids[:cmax]
+            self.common = bool((c == c[0]).all() and (ids == ids[:, :1]).all())
+        return self.common
 
     def grow(self, needed: int) -> None:
         """Double the capacity until ``needed`` slots fit (copying every array)."""
@@ -393,31 +478,601 @@ class _Work:
         new = cap
         while new < needed:
             new *= 2
-        n = self.ids.shape[0]
+        n = self.counts.size
+        lm = np.zeros((5, new, n))
+        lm[:, :cap] = self.lm
+        self.lm = lm
 
         def widen(a: NDArray[Any], fill: Any) -> NDArray[Any]:
-            out = np.full((n, new, *a.shape[2:]), fill, dtype=a.dtype)
-            out[:, :cap] = a
+            out = np.full((new, n), fill, dtype=a.dtype)
+            out[:cap] = a
             return out
 
-        self.means = widen(self.means, 0.0)
-        self.covs = widen(self.covs, 0.0)
         self.counters = widen(self.counters, 0)
         self.ids = widen(self.ids, -1)
         self.seen = widen(self.seen, False)
         self.updated = widen(self.updated, False)
 
-    def particles(self, poses: FloatArray, log_weights: FloatArray) -> FastSlamParticles:
-        return _trusted(
-            poses,
-            log_weights,
-            self.means,
-            self.covs,
-            self.counters,
-            self.ids,
-            self.counts,
-            self.next_id,
-        )
+
+# Rows of the stacked innovation terms of :func:`_landmark_terms`.
+_ZH0, _ZH1, _H00, _H01, _H10, _H11, _T00, _T01, _T10, _T11, _I00, _I01, _I11, _LOGDET = range(14)
+
+
+def _dot2(
+    a: FloatArray, b: FloatArray, c: FloatArray, d: FloatArray, out: FloatArray, tmp: FloatArray
+) -> FloatArray:
+    """``out = a b + c d`` elementwise, into preallocated buffers (``tmp`` is scratch): the
+    kernels below run on a few hundred values, where allocating a result costs as much as
+    the arithmetic."""
+    np.multiply(a, b, out=out)
+    np.multiply(c, d, out=tmp)
+    out += tmp
+    return out
+
+
+def _landmark_terms(
+    model: InvertibleLandmarkModel,
+    pose: tuple[FloatArray, FloatArray, FloatArray],
+    g: FloatArray,
+    R: FloatArray,
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """What the readings of the landmarks ``g (5, *batch)`` (planar, see :class:`_Work`)
+    from the poses ``pose = (x, y, θ)`` (broadcasting to ``batch``) need before any reading
+    is known, stacked in one array ``(14, *batch)`` (rows ``_ZH0`` …): the predicted reading
+    ``ẑ`` (angular components unwrapped: the innovation wraps them), ``H = ∂h/∂m``,
+    ``T = H Σ``, ``Q⁻¹`` with ``Q = H Σ Hᵀ + R`` (entries 00, 01, 11) and ``log det Q``.
+    Also ``ok (*batch)``: False where the landmark is at the sensor (closer than
+    ``2 MIN_RANGE``; the terms are then those of a stand-in point 1 m east of the pose).
+
+    One stacked array, so the terms of chosen (slot, particle) pairs are gathered in one
+    operation. Range-bearing, the common case, is written out here (``ẑ = (r, atan2(dy, dx)
+    − θ)``, ``H = [[dx/r, dy/r], [−dy/r², dx/r²]]``, the convention of
+    :class:`~slamkit.models.RangeBearing`); other models go through their batch kernels
+    ``_h``/``_jac``. A test checks both against the models' validated methods."""
+    px, py, pth = pose
+    batch = g.shape[1:]
+    F = np.empty((14, *batch))
+    dx, dy, q00, q01, q11, tmp = np.empty((6, *batch))
+    np.subtract(g[_MX], px, out=dx)
+    np.subtract(g[_MY], py, out=dy)
+    r = np.hypot(dx, dy, out=F[_ZH0])
+    ok = r >= 2.0 * MIN_RANGE
+    if not ok.all():
+        dx[~ok], dy[~ok], r[~ok] = 1.0, 0.0, 1.0
+    if isinstance(model, RangeBearing):
+        np.arctan2(dy, dx, out=F[_ZH1])
+        F[_ZH1] -= pth
+        inv_r = np.divide(1.0, r, out=tmp)
+        np.multiply(dx, inv_r, out=F[_H00])  # (cos, sin) of the direction
+        np.multiply(dy, inv_r, out=F[_H01])
+        np.multiply(F[_H01], inv_r, out=F[_H10])  # (−sin, cos) / r
+        np.negative(F[_H10], out=F[_H10])
+        np.multiply(F[_H00], inv_r, out=F[_H11])
+    else:
+        p = np.empty((*batch, 3))
+        p[..., 0], p[..., 1], p[..., 2] = px, py, pth
+        m = np.stack((p[..., 0] + dx, p[..., 1] + dy), axis=-1)
+        if isinstance(model, _LandmarkBase):
+            z_hat, (_, Hm) = model._h(p, m), model._jac(p, m)
+        else:  # pragma: no cover - every invertible model of slamkit has the kernels
+            z_hat, (_, Hm) = model.predict(p, m), model.jacobians(p, m)
+        F[_ZH0], F[_ZH1] = z_hat[..., 0], z_hat[..., 1]
+        F[_H00], F[_H01] = Hm[..., 0, 0], Hm[..., 0, 1]
+        F[_H10], F[_H11] = Hm[..., 1, 0], Hm[..., 1, 1]
+    h00, h01, h10, h11 = F[_H00], F[_H01], F[_H10], F[_H11]
+    s00, s01, s11 = g[_S00], g[_S01], g[_S11]
+    t00 = _dot2(h00, s00, h01, s01, F[_T00], tmp)  # T = H Σ
+    t01 = _dot2(h00, s01, h01, s11, F[_T01], tmp)
+    t10 = _dot2(h10, s00, h11, s01, F[_T10], tmp)
+    t11 = _dot2(h10, s01, h11, s11, F[_T11], tmp)
+    _dot2(t00, h00, t01, h01, q00, tmp)  # Q = T Hᵀ + R
+    q00 += float(R[0, 0])
+    _dot2(t00, h10, t01, h11, q01, tmp)
+    q01 += float(R[0, 1])
+    _dot2(t10, h10, t11, h11, q11, tmp)
+    q11 += float(R[1, 1])
+    det = np.multiply(q00, q11, out=dx)
+    det -= np.multiply(q01, q01, out=tmp)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        np.log(det, out=F[_LOGDET])
+        inv_det = np.divide(1.0, det, out=det)
+    np.multiply(q11, inv_det, out=F[_I00])
+    np.multiply(q01, inv_det, out=F[_I01])
+    np.negative(F[_I01], out=F[_I01])
+    np.multiply(q00, inv_det, out=F[_I11])
+    return F, ok
+
+
+def _wrap_innovation(a: FloatArray) -> FloatArray:
+    """An angular innovation brought to ``[-π, π]`` in place: ``a − 2π round(a / 2π)``.
+
+    Not :func:`~slamkit.geometry.wrap_angle` (``[-π, π)`` exactly, bit-identical in range):
+    an innovation only enters ``νᵀ Q⁻¹ ν`` and ``K ν``, where ``±π`` are the same point
+    of the circle, and this form costs 3 array operations instead of ~10 — a tenth of a
+    FastSLAM step on 100 particles."""
+    k = np.multiply(a, 1.0 / _TWO_PI)
+    np.round(k, out=k)
+    k *= _TWO_PI
+    a -= k
+    return a
+
+
+def _innovations(
+    model: InvertibleLandmarkModel, F: FloatArray, z0: ArrayLike, z1: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """``ν = z ⊟ ẑ`` as two planes (angular components wrapped), broadcast with the terms."""
+    nu0 = z0 - F[_ZH0]
+    nu1 = z1 - F[_ZH1]
+    a0, a1 = model.angular
+    return (_wrap_innovation(nu0) if a0 else nu0), (_wrap_innovation(nu1) if a1 else nu1)
+
+
+def _log_likelihood(F: FloatArray, nu0: FloatArray, nu1: FloatArray) -> FloatArray:
+    """``log N(ν; 0, Q) = −½ (νᵀ Q⁻¹ ν + log det Q) − log 2π`` (m = 2)."""
+    d2 = F[_I00] * nu0
+    d2 += F[_I01] * nu1
+    d2 *= nu0
+    e = F[_I01] * nu0
+    e += F[_I11] * nu1
+    e *= nu1
+    d2 += e  # νᵀ Q⁻¹ ν
+    d2 += F[_LOGDET]
+    d2 *= -0.5
+    d2 -= _LOG_2PI
+    return d2
+
+
+def _ekf(
+    F: FloatArray, g: FloatArray, nu0: FloatArray, nu1: FloatArray, R: FloatArray
+) -> FloatArray:
+    """The 2×2 EKF update of the landmarks ``g (5, *batch)`` with the terms ``F`` and the
+    innovations ``ν``: the new planar landmarks ``(5, *batch)``.
+
+    ``K = Σ Hᵀ Q⁻¹ = Tᵀ Q⁻¹``, ``μ ← μ + K ν``, ``Σ ← Σ − K T`` (``= Σ − Tᵀ Q⁻¹ T``), written
+    out in matrix entries into preallocated buffers (a stacked ``matmul`` of 2×2 blocks
+    costs ~25x an elementwise operation). Only the entries 00, 01, 11 are formed, so the
+    result is exactly symmetric.
+
+    Why not the Joseph form here (EKF-SLAM uses it): with the optimal gain it is the same
+    matrix, and it guards against a gain perturbed by round-off in large filters. This gain
+    comes from a closed-form 2×2 inverse (relative error ~1e-16), and the subtraction can
+    only lose precision in proportion to how much one reading shrinks the covariance: the
+    posterior over the prior variance is ``1/(1 + λ)`` with ``λ`` an eigenvalue of
+    ``Σ Hᵀ R⁻¹ H``, about 1 at a landmark's second reading (its covariance came from one
+    reading) and at most the squared ratio of the ranges it was first and is now seen at
+    (``λ ≈ 250`` for 80 m then 5 m): a loss of under 3 of 16 digits, far from an indefinite
+    result. The Joseph form costs twice the operations, ~20 % of a FastSLAM step on 100
+    particles. The tests compare this update with a Joseph-form reference to 1e-12."""
+    t00, t01, t10, t11 = F[_T00], F[_T01], F[_T10], F[_T11]
+    i00, i01, i11 = F[_I00], F[_I01], F[_I11]
+    out = np.empty_like(g)
+    k00, k01, k10, k11, tmp = np.empty((5, *g.shape[1:]))
+    _dot2(t00, i00, t10, i01, k00, tmp)  # K = Tᵀ Q⁻¹
+    _dot2(t00, i01, t10, i11, k01, tmp)
+    _dot2(t01, i00, t11, i01, k10, tmp)
+    _dot2(t01, i01, t11, i11, k11, tmp)
+    for row, ka, kb in ((_MX, k00, k01), (_MY, k10, k11)):
+        m = _dot2(ka, nu0, kb, nu1, out[row], tmp)  # μ + K ν
+        m += g[row]
+    # Σ − K T: (K T)_ij = k_i0 t_0j + k_i1 t_1j
+    for row, (ka, kb), (ta, tb) in (
+        (_S00, (k00, k01), (t00, t10)),
+        (_S01, (k00, k01), (t01, t11)),
+        (_S11, (k10, k11), (t01, t11)),
+    ):
+        np.subtract(g[row], _dot2(ka, ta, kb, tb, tmp, out[row]), out=out[row])
+    return out
+
+
+def _update_landmarks(
+    w: _Work,
+    index: tuple[Any, Any],
+    pose: tuple[FloatArray, FloatArray, FloatArray],
+    z0: FloatArray,
+    z1: FloatArray,
+    R: FloatArray,
+    model: InvertibleLandmarkModel,
+    mark: bool = True,
+) -> FloatArray:
+    """Update the landmarks ``index = (slots, particles)`` (any batch shape; no pair may
+    repeat: fancy assignment keeps one) with readings ``(z0, z1)`` from ``pose = (x, y, θ)``
+    (all broadcasting to the batch), in place, and mark them seen and updated (``mark``
+    False: not, where no later step of the scan reads the marks). Returns the
+    log-likelihoods (``-inf`` where the landmark is at the sensor, which is left alone)."""
+    full = (slice(None), *index)
+    g = w.lm[full]
+    F, ok = _landmark_terms(model, pose, g, R)
+    nu0, nu1 = _innovations(model, F, z0, z1)
+    ll = _log_likelihood(F, nu0, nu1)
+    new = _ekf(F, g, nu0, nu1, R)
+    if ok.all():
+        w.lm[full] = new
+        if mark:
+            w.seen[index] = True
+            w.updated[index] = True
+        return ll
+    w.lm[full] = np.where(ok, new, g)
+    w.seen[index] |= ok
+    w.updated[index] |= ok
+    return np.where(ok, ll, -np.inf)
+
+
+def _start_landmarks(
+    w: _Work,
+    rows: NDArray[np.intp],
+    rank: NDArray[np.intp],
+    poses: FloatArray,
+    z: FloatArray,
+    ids: IntArray,
+    R: FloatArray,
+    model: InvertibleLandmarkModel,
+) -> None:
+    """Start landmark ``ids[i]`` from reading ``z[i]`` in particle ``rows[i]``, in its slot
+    ``counts + rank[i]`` (``rank``: 0, 1, … over the new landmarks of one particle)."""
+    slots = w.counts[rows] + rank
+    w.grow(int(slots.max()) + 1)
+    _, Lz = model.inverse_jacobians(poses, z)
+    m = model.inverse(poses, z)
+    C = _congruence(Lz, R)  # L_z R L_zᵀ: the pose is given in the particle
+    w.lm[:, slots, rows] = np.stack((m[:, 0], m[:, 1], C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]))
+    w.counters[slots, rows] = 1
+    w.ids[slots, rows] = ids
+    w.seen[slots, rows] = True
+    w.updated[slots, rows] = False
+    np.add.at(w.counts, rows, 1)
+    w.common = None
+
+
+def _new_landmarks(
+    w: _Work,
+    new: NDArray[np.bool_],
+    poses: FloatArray,
+    z: FloatArray,
+    ids: IntArray,
+    R: FloatArray,
+    model: InvertibleLandmarkModel,
+) -> None:
+    """Start a landmark for every ``new[k, p]`` (reading ``k``, particle ``p``): id
+    ``ids[k]``, appended to each particle's map in reading order."""
+    kr, pr = np.nonzero(new)
+    if pr.size == 0:
+        return
+    rank = (np.cumsum(new, axis=0) - 1)[kr, pr]
+    _start_landmarks(w, pr, rank, poses[pr], z[kr], ids[kr], R, model)
+
+
+def _pose_planes(poses: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``(x, y, θ)`` of poses ``(P, 3)`` as contiguous ``(P,)`` rows."""
+    t = poses.T.copy()
+    return t[0], t[1], t[2]
+
+
+def _labelled_round(
+    w: _Work,
+    poses: FloatArray,
+    pose: tuple[FloatArray, FloatArray, FloatArray],
+    z: FloatArray,
+    rid: IntArray,
+    R: FloatArray,
+    model: InvertibleLandmarkModel,
+    log_p0: float,
+    mark: bool = True,
+) -> FloatArray:
+    """Readings ``z (K, 2)`` of the distinct landmarks ``rid (K,)``, all at once: update the
+    landmark with that id in every particle, or start it. Returns log-likelihoods ``(K, P)``
+    (``log p0`` for a start). ``mark``: see :func:`_update_landmarks`."""
+    n, k = poses.shape[0], z.shape[0]
+    cmax = int(w.counts.max())
+    if cmax and w.is_common(cmax):
+        # Every particle holds the same ids in the same slots (the usual case with labelled
+        # readings only): look the ids up once, work on (K, P) blocks.
+        where = w.slot_of
+        if where is None:
+            where = w.slot_of = {lid: j for j, lid in enumerate(w.ids[:cmax, 0].tolist())}
+        slot_k = [where.get(lid, -1) for lid in rid.tolist()]
+        if min(slot_k) >= 0:  # every id mapped
+            slots = np.array(slot_k, dtype=np.intp)
+            return _update_landmarks(
+                w, (slots, slice(None)), pose, z[:, 0:1], z[:, 1:2], R, model, mark
+            )
+        kf = [j for j, sl in enumerate(slot_k) if sl >= 0]
+        ll = np.full((k, n), log_p0)
+        found = np.zeros((k, n), dtype=bool)
+        if kf:
+            slot = np.array([slot_k[j] for j in kf], dtype=np.intp)
+            rows: Any = slice(None) if len(kf) == k else np.array(kf, dtype=np.intp)
+            zf = z[rows]
+            ll[rows] = _update_landmarks(
+                w, (slot, slice(None)), pose, zf[:, 0:1], zf[:, 1:2], R, model
+            )
+            found[rows] = True
+        if len(kf) < k:
+            _new_landmarks(w, ~found, poses, z, rid, R, model)
+            w.common = True  # every particle started the same ids in the same slots
+        return ll
+    ll = np.full((k, n), log_p0)
+    found = np.zeros((k, n), dtype=bool)
+    if cmax:
+        valid = w.valid(cmax)
+        hit = (w.ids[None, :cmax] == rid[:, None, None]) & valid  # (K, C, P)
+        found = hit.any(axis=1)
+        kr, pr = np.nonzero(found)
+        if pr.size:
+            slot = hit[kr, :, pr].argmax(axis=1)
+            px, py, pth = pose
+            ll[kr, pr] = _update_landmarks(
+                w, (slot, pr), (px[pr], py[pr], pth[pr]), z[kr, 0], z[kr, 1], R, model
+            )
+    _new_landmarks(w, ~found, poses, z, rid, R, model)
+    return ll
+
+
+def _labelled_rounds(rid: IntArray, index: NDArray[np.intp]) -> list[NDArray[np.intp]]:
+    """Split the readings ``index`` into rounds of distinct ids, round ``r`` holding the
+    ``r``-th reading of each id, each round in reading order."""
+    if len(set(rid[index].tolist())) == index.size:  # the usual case: every id once
+        return [index] if index.size else []
+    rounds = []
+    rest = index
+    while rest.size:
+        _, first = np.unique(rid[rest], return_index=True)
+        if first.size == rest.size:
+            rounds.append(rest)
+            break
+        take = np.zeros(rest.size, dtype=bool)
+        take[first] = True
+        rounds.append(rest[take])
+        rest = rest[~take]
+    return rounds
+
+
+def _associate_greedy(ll_all: FloatArray, log_p0: float) -> tuple[NDArray[np.intp], FloatArray]:
+    """Maximum-likelihood association of ``K`` readings, in order, in every particle:
+    ``ll_all (K, C, P)`` log-likelihoods (``-inf``: not a candidate); a reading may not take
+    a landmark an earlier reading of the scan took. Returns slots ``(K, P)`` (``-1``: new
+    landmark) and log-likelihoods ``(K, P)`` (``log p0`` for a new landmark).
+
+    Where the readings' unconstrained choices are distinct (the usual case) they are the
+    greedy ones: by induction, no reading's best landmark was taken by an earlier one. Only
+    the particles where two readings want the same landmark run the reading-by-reading
+    loop."""
+    k = ll_all.shape[0]
+    best = np.argmax(ll_all, axis=1)  # (K, P)
+    lb = np.take_along_axis(ll_all, best[:, None, :], axis=1)[:, 0]
+    match = lb >= log_p0  # below p0 (or no candidate): a new landmark
+    slots = np.where(match, best, -1)
+    ll = np.where(match, lb, log_p0)
+    if k > 1:
+        key = np.sort(np.where(match, best, -1 - np.arange(k)[:, None]), axis=0)
+        clash = np.flatnonzero((key[1:] == key[:-1]).any(axis=0))
+        if clash.size:
+            slots[:, clash], ll[:, clash] = _associate_sequential(ll_all[:, :, clash], log_p0)
+    return slots, ll
+
+
+def _associate_sequential(ll_all: FloatArray, log_p0: float) -> tuple[NDArray[np.intp], FloatArray]:
+    """:func:`_associate_greedy` reading by reading (the exclusion applied as it goes)."""
+    k, c, n = ll_all.shape
+    cols = np.arange(n)
+    taken = np.zeros((c, n), dtype=bool)
+    slots = np.full((k, n), -1, dtype=np.intp)
+    ll = np.full((k, n), log_p0)
+    for j in range(k):
+        llk = np.where(taken, -np.inf, ll_all[j])
+        best = np.argmax(llk, axis=0)
+        lb = llk[best, cols]
+        match = lb >= log_p0
+        p = cols[match]
+        slots[j, p] = best[match]
+        ll[j, p] = lb[match]
+        taken[best[match], p] = True
+    return slots, ll
+
+
+def _unlabelled(
+    w: _Work,
+    poses: FloatArray,
+    pose: tuple[FloatArray, FloatArray, FloatArray],
+    z: FloatArray,
+    R: FloatArray,
+    model: InvertibleLandmarkModel,
+    log_p0: float,
+    forced: NDArray[np.intp] | None = None,
+) -> FloatArray:
+    """Unlabelled readings ``z (K, 2)``: associate each in every particle by maximum
+    likelihood (excluding landmarks already used in this scan) or take the ``forced`` slots
+    ``(K, P)`` (``-1`` new, ``-2`` skip); update or start the landmarks, all at once.
+    Returns the log-likelihoods ``(K, P)`` (meaningless with ``forced``)."""
+    n, k = poses.shape[0], z.shape[0]
+    cmax = int(w.counts.max())
+    if forced is None:
+        slots = np.full((k, n), -1, dtype=np.intp)
+        ll = np.full((k, n), log_p0)
+        if cmax:
+            # The terms of the landmarks do not depend on the reading: (C, P) once, then the
+            # innovations and likelihoods of every (reading, landmark, particle).
+            F, ok = _landmark_terms(model, pose, w.lm[:, :cmax], R)
+            Fb = F[:, None]
+            nu0, nu1 = _innovations(model, Fb, z[:, 0, None, None], z[:, 1, None, None])
+            cand = w.valid(cmax) & ok & ~w.seen[:cmax]
+            ll_all = _log_likelihood(Fb, nu0, nu1)
+            ll_all[:, ~cand] = -np.inf
+            slots, ll = _associate_greedy(ll_all, log_p0)
+            kr, pr = np.nonzero(slots >= 0)
+            if pr.size:
+                sl = slots[kr, pr]
+                g = w.lm[:, sl, pr]
+                w.lm[:, sl, pr] = _ekf(F[:, sl, pr], g, nu0[kr, sl, pr], nu1[kr, sl, pr], R)
+                w.seen[sl, pr] = True
+                w.updated[sl, pr] = True
+    else:
+        slots, ll = forced, np.zeros((k, n))
+        kr, pr = np.nonzero(slots >= 0)
+        if pr.size:
+            px, py, pth = pose
+            _update_landmarks(
+                w, (slots[kr, pr], pr), (px[pr], py[pr], pth[pr]), z[kr, 0], z[kr, 1], R,
+                model,
+            )  # fmt: skip
+    new = slots == -1
+    spawning = new.any(axis=1)  # readings that start a landmark somewhere get one id each
+    if spawning.any():
+        ids = np.full(k, -1, dtype=np.int64)
+        ids[spawning] = w.next_id + np.arange(int(spawning.sum()))
+        w.next_id += int(spawning.sum())
+        _new_landmarks(w, new, poses, z, ids, R, model)
+    return ll
+
+
+def _split(rid: IntArray, s: UpdateSettings) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Indices of the labelled readings (ids used) and of the unlabelled ones."""
+    lab = (rid >= 0) if s.use_ids else np.zeros(rid.size, dtype=bool)
+    return np.flatnonzero(lab), np.flatnonzero(~lab)
+
+
+def _scan_at_poses(
+    w: _Work,
+    poses: FloatArray,
+    z: FloatArray,
+    rid: IntArray,
+    R: FloatArray,
+    model: InvertibleLandmarkModel,
+    s: UpdateSettings,
+    *,
+    forced_unlabelled: NDArray[np.intp] | None = None,
+    weigh_first_round: bool = True,
+) -> FloatArray:
+    """One scan at given particle poses (FastSLAM 1.0, and 2.0 after sampling): labelled
+    readings first (in rounds of distinct ids), then the unlabelled ones. Returns each
+    particle's log-likelihood of the readings ``(P,)`` — for 2.0 (``forced_unlabelled``
+    ``(K_unlabelled, P)`` given, ``weigh_first_round`` False) only of the readings its
+    proposal left out."""
+    pose = _pose_planes(poses)
+    ids = rid.tolist()
+    if s.use_ids and ids and min(ids) >= 0 and len(set(ids)) == len(ids):
+        # The usual case with known correspondences: every reading labelled, each id once.
+        # Labelled landmarks keep no existence counter and no unlabelled reading follows:
+        # nothing reads the seen/updated marks of this scan.
+        l_all = _labelled_round(w, poses, pose, z, rid, R, model, s.log_p0, mark=False)
+        return l_all.sum(axis=0) if weigh_first_round else np.zeros(poses.shape[0])
+    ll = np.zeros(poses.shape[0])
+    lab, unl = _split(rid, s)
+    for r, idx in enumerate(_labelled_rounds(rid, lab)):
+        l_round = _labelled_round(w, poses, pose, z[idx], rid[idx], R, model, s.log_p0)
+        if r > 0 or weigh_first_round:
+            ll += l_round.sum(axis=0)
+    if unl.size:
+        l_unl = _unlabelled(w, poses, pose, z[unl], R, model, s.log_p0, forced_unlabelled)
+        if forced_unlabelled is None:
+            ll += l_unl.sum(axis=0)
+    return ll
+
+
+def _prune(w: _Work, poses: FloatArray, s: UpdateSettings) -> None:
+    """End of a scan, for the landmarks that can be removed (started by unlabelled readings,
+    ``prune`` on; the others keep no counter): existence counters up for updated landmarks,
+    down for landmarks predicted visible but not seen; remove those below zero (stable
+    compaction)."""
+    cmax = int(w.counts.max()) if w.counts.size else 0
+    if cmax == 0 or not s.prune:
+        return
+    prunable = w.ids[:cmax] >= s.first_unlabelled_id  # (unused slots hold id -1)
+    if not prunable.any():
+        return
+    px, py, pth = _pose_planes(poses)
+    dx, dy = w.lm[_MX, :cmax] - px, w.lm[_MY, :cmax] - py
+    r2 = dx * dx
+    r2 += dy * dy
+    visible = prunable & (r2 >= s.visible_min_range**2)
+    if math.isfinite(s.visible_max_range):
+        visible &= r2 <= s.visible_max_range**2
+    if s.fov < 2.0 * math.pi:
+        c, sn = np.cos(pth), np.sin(pth)
+        xr, yr = c * dx + sn * dy, c * dy - sn * dx  # robot frame
+        visible &= np.abs(np.arctan2(yr, xr)) <= 0.5 * s.fov
+    counters = w.counters[:cmax]
+    counters += w.updated[:cmax] & prunable  # views: in place
+    counters -= visible & ~w.seen[:cmax]
+    remove = prunable & (counters < 0)
+    if not remove.any():
+        return
+    w.removed += int(remove.sum())
+    keep = w.valid(cmax) & ~remove
+    order = np.argsort(~keep, axis=0, kind="stable")  # kept slots first, in their order
+    w.lm[:, :cmax] = np.take_along_axis(w.lm[:, :cmax], order[None], axis=1)
+    w.counters[:cmax] = np.take_along_axis(counters, order, axis=0)
+    w.ids[:cmax] = np.take_along_axis(w.ids[:cmax], order, axis=0)
+    w.counts = keep.sum(axis=0).astype(np.int64)
+    unused = ~w.valid()
+    w.ids[unused] = -1
+    w.counters[unused] = 0
+    w.common = None
+
+
+def _usable_readings(
+    z: FloatArray, model: InvertibleLandmarkModel, s: UpdateSettings
+) -> NDArray[np.bool_]:
+    if s.min_range <= 0 or z.shape[0] == 0:
+        return np.ones(z.shape[0], dtype=bool)
+    lm = model.inverse(np.zeros(3), z)  # the landmark in the robot frame
+    return np.asarray(np.hypot(lm[:, 0], lm[:, 1]) >= s.min_range)
+
+
+def _normalised(log_weights: FloatArray) -> FloatArray:
+    """Log-weights minus their log-sum-exp; ConvergenceError if every weight is zero or one
+    is NaN (:func:`normalize_log_weights`, called for its errors only on that path)."""
+    m = float(log_weights.max())
+    if not math.isfinite(m):
+        lw, _ = normalize_log_weights(log_weights)  # raises: all zero, NaN or +inf
+        return lw
+    return log_weights - (m + math.log(float(np.sum(np.exp(log_weights - m)))))
+
+
+def _normalised_with_weights(log_weights: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """:func:`_normalised` and :func:`_weights_of` at once (one exponential)."""
+    m = float(log_weights.max())
+    if not math.isfinite(m):
+        lw = _normalised(log_weights)  # raises: all zero, NaN or +inf
+        return lw, _weights_of(lw)
+    d = log_weights - m
+    e = np.exp(d)
+    total = float(e.sum())
+    d -= math.log(total)
+    e /= total
+    if float(d.min()) <= _NEGLIGIBLE_LOG_WEIGHT:
+        e[d <= _NEGLIGIBLE_LOG_WEIGHT] = 0.0
+        e /= e.sum()
+    return d, e
+
+
+def _weights_of(log_weights: FloatArray) -> FloatArray:
+    """Normalised weights; log-weights below ``-700`` give exactly 0 (see
+    :attr:`FastSlamParticles.weights`)."""
+    w: FloatArray = np.zeros(log_weights.shape)
+    np.exp(log_weights, out=w, where=log_weights > _NEGLIGIBLE_LOG_WEIGHT)
+    w /= w.sum()
+    return w
+
+
+def _update1(
+    w: _Work,
+    poses: FloatArray,
+    log_weights: FloatArray,
+    z: FloatArray,
+    rid: IntArray,
+    R: FloatArray,
+    model: InvertibleLandmarkModel,
+    s: UpdateSettings,
+) -> tuple[FloatArray, FloatArray]:
+    """FastSLAM 1.0's scan on the maps ``w`` (in place) at ``poses``: the new normalised
+    log-weights and each particle's log-likelihood of the scan ``(P,)``."""
+    w.begin_scan()
+    ll = _scan_at_poses(w, poses, z, rid, R, model, s)
+    _prune(w, poses, s)
+    return _normalised(log_weights + ll), ll
+
+
+# FastSLAM 2.0's proposal works on batched 2×2 matrices (with the pose Jacobian).
 
 
 @dataclass(frozen=True)
@@ -518,336 +1173,6 @@ def _log_gauss(nu: FloatArray, S: FloatArray) -> tuple[FloatArray, FloatArray]:
     return ll, S_inv
 
 
-def _ekf_update(
-    w: _Work,
-    index: tuple[Any, Any],
-    t: _Terms,
-    R: FloatArray,
-) -> None:
-    """The 2×2 EKF update of the landmarks ``w.means[index]`` (``index = (rows, slots)``,
-    any batch shape) with the terms ``t`` of the same batch, in place. No (row, slot) pair
-    may repeat (fancy assignment keeps one).
-
-    Written out in matrix entries: on a few hundred 2×2 blocks a stacked ``matmul`` costs
-    ~25x an elementwise operation, and this update would need eight of them."""
-    mu, P = w.means[index], w.covs[index]
-    s00, s01, s11 = P[..., 0, 0], P[..., 0, 1], P[..., 1, 1]
-    H = t.Hm
-    h00, h01, h10, h11 = H[..., 0, 0], H[..., 0, 1], H[..., 1, 0], H[..., 1, 1]
-    Q_inv, _ = _inv2(t.Q)
-    i00, i01, i11 = Q_inv[..., 0, 0], Q_inv[..., 0, 1], Q_inv[..., 1, 1]
-    # Σ Hᵀ, then the gain K = Σ Hᵀ Q⁻¹
-    a00, a01 = s00 * h00 + s01 * h01, s00 * h10 + s01 * h11
-    a10, a11 = s01 * h00 + s11 * h01, s01 * h10 + s11 * h11
-    K = np.empty_like(P)
-    K[..., 0, 0], K[..., 0, 1] = a00 * i00 + a01 * i01, a00 * i01 + a01 * i11
-    K[..., 1, 0], K[..., 1, 1] = a10 * i00 + a11 * i01, a10 * i01 + a11 * i11
-    k00, k01, k10, k11 = K[..., 0, 0], K[..., 0, 1], K[..., 1, 0], K[..., 1, 1]
-    n0, n1 = t.nu[..., 0], t.nu[..., 1]
-    mu_new = np.empty_like(mu)
-    mu_new[..., 0] = mu[..., 0] + k00 * n0 + k01 * n1  # μ + K ν
-    mu_new[..., 1] = mu[..., 1] + k10 * n0 + k11 * n1
-    A = np.empty_like(P)  # I − K H
-    A[..., 0, 0] = 1.0 - (k00 * h00 + k01 * h10)
-    A[..., 0, 1] = -(k00 * h01 + k01 * h11)
-    A[..., 1, 0] = -(k10 * h00 + k11 * h10)
-    A[..., 1, 1] = 1.0 - (k10 * h01 + k11 * h11)
-    # Joseph form (I − K H) Σ (I − K H)ᵀ + K R Kᵀ: PSD even with a round-off-perturbed gain.
-    w.means[index] = mu_new
-    w.covs[index] = _congruence(A, P) + _congruence(K, R)
-    w.seen[index] = True
-    w.updated[index] = True
-
-
-def _start_landmarks(
-    w: _Work,
-    rows: NDArray[np.intp],
-    rank: NDArray[np.intp],
-    poses: FloatArray,
-    z: FloatArray,
-    ids: IntArray,
-    R: FloatArray,
-    model: InvertibleLandmarkModel,
-) -> None:
-    """Start landmark ``ids[i]`` from reading ``z[i]`` in particle ``rows[i]``, in its slot
-    ``counts + rank[i]`` (``rank``: 0, 1, … over the new landmarks of one particle)."""
-    slots = w.counts[rows] + rank
-    w.grow(int(slots.max()) + 1)
-    _, Lz = model.inverse_jacobians(poses, z)
-    w.means[rows, slots] = model.inverse(poses, z)
-    w.covs[rows, slots] = _congruence(Lz, R)  # L_z R L_zᵀ: the pose is given in the particle
-    w.counters[rows, slots] = 1
-    w.ids[rows, slots] = ids
-    w.seen[rows, slots] = True
-    w.updated[rows, slots] = False
-    np.add.at(w.counts, rows, 1)
-
-
-def _new_landmarks(
-    w: _Work,
-    new: NDArray[np.bool_],
-    poses: FloatArray,
-    z: FloatArray,
-    ids: IntArray,
-    R: FloatArray,
-    model: InvertibleLandmarkModel,
-) -> None:
-    """Start a landmark for every ``new[p, k]`` (particle ``p``, reading ``k``): id
-    ``ids[k]``, appended to each particle's map in reading order."""
-    pr, kr = np.nonzero(new)  # row-major: by particle, then by reading
-    if pr.size == 0:
-        return
-    rank = (np.cumsum(new, axis=1) - 1)[pr, kr]
-    _start_landmarks(w, pr, rank, poses[pr], z[kr], ids[kr], R, model)
-
-
-def _labelled_round(
-    w: _Work,
-    poses: FloatArray,
-    z: FloatArray,
-    rid: IntArray,
-    R: FloatArray,
-    model: InvertibleLandmarkModel,
-    log_p0: float,
-) -> FloatArray:
-    """Readings ``z (K, 2)`` of the distinct landmarks ``rid (K,)``, all at once: update the
-    landmark with that id in every particle, or start it. Returns log-likelihoods ``(P, K)``
-    (``log p0`` for a start)."""
-    n, k = poses.shape[0], z.shape[0]
-    ll = np.full((n, k), log_p0)
-    cmax = int(w.counts.max())
-    found = np.zeros((n, k), dtype=bool)
-    if cmax and _common_layout(w, cmax):
-        # Every particle holds the same ids in the same slots (the usual case with labelled
-        # readings only): look the ids up once, work on (P, K) blocks.
-        where = {lid: j for j, lid in enumerate(w.ids[0, :cmax].tolist())}
-        slot_k = [where.get(lid, -1) for lid in rid.tolist()]
-        kf = np.array([j for j, sl in enumerate(slot_k) if sl >= 0], dtype=np.intp)
-        if kf.size:
-            slot = np.array([slot_k[j] for j in kf.tolist()], dtype=np.intp)
-            t = _terms(model, poses[:, None, :], w.means[:, slot], w.covs[:, slot], z[kf], R)
-            l_blk, _ = _log_gauss(t.nu, t.Q)
-            ll[:, kf] = np.where(t.ok, l_blk, -np.inf)  # at the sensor: weight 0
-            found[:, kf] = True
-            if t.ok.all():
-                _ekf_update(w, (slice(None), slot), t, R)
-            else:
-                pr, kr = np.nonzero(t.ok)
-                _ekf_update(w, (pr, slot[kr]), t.take((pr, kr)), R)
-    elif cmax:
-        valid = np.arange(cmax) < w.counts[:, None]
-        hit = (w.ids[:, None, :cmax] == rid[None, :, None]) & valid[:, None, :]  # (P, K, C)
-        found = hit.any(axis=2)
-        pr, kr = np.nonzero(found)
-        if pr.size:
-            slot = hit[pr, kr].argmax(axis=1)
-            t = _terms(model, poses[pr], w.means[pr, slot], w.covs[pr, slot], z[kr], R)
-            l_pair, _ = _log_gauss(t.nu, t.Q)
-            ll[pr, kr] = np.where(t.ok, l_pair, -np.inf)  # at the sensor: weight 0
-            if not t.ok.all():
-                pr, kr, slot, t = pr[t.ok], kr[t.ok], slot[t.ok], t.take(t.ok)
-            _ekf_update(w, (pr, slot), t, R)
-    _new_landmarks(w, ~found, poses, z, rid, R, model)
-    return ll
-
-
-def _common_layout(w: _Work, cmax: int) -> bool:
-    """Whether all particles have the same landmark ids in the same slots."""
-    return bool((w.counts == w.counts[0]).all() and (w.ids[:, :cmax] == w.ids[0, :cmax]).all())
-
-
-def _labelled_rounds(rid: IntArray, index: NDArray[np.intp]) -> list[NDArray[np.intp]]:
-    """Split the readings ``index`` into rounds of distinct ids, round ``r`` holding the
-    ``r``-th reading of each id, each round in reading order."""
-    if len(set(rid[index].tolist())) == index.size:  # the usual case: every id once
-        return [index] if index.size else []
-    rounds = []
-    rest = index
-    while rest.size:
-        _, first = np.unique(rid[rest], return_index=True)
-        if first.size == rest.size:
-            rounds.append(rest)
-            break
-        take = np.zeros(rest.size, dtype=bool)
-        take[first] = True
-        rounds.append(rest[take])
-        rest = rest[~take]
-    return rounds
-
-
-def _associate_greedy(
-    ll_all: FloatArray, taken: NDArray[np.bool_], log_p0: float
-) -> tuple[NDArray[np.intp], FloatArray]:
-    """Maximum-likelihood association of ``K`` readings, in order, in every particle:
-    ``ll_all (P, K, C)`` log-likelihoods (``-inf``: not a candidate), ``taken (P, C)`` the
-    landmarks already used in this scan (updated in place). Returns slots ``(P, K)`` (``-1``:
-    new landmark) and log-likelihoods ``(P, K)`` (``log p0`` for a new landmark)."""
-    n, k, _ = ll_all.shape
-    rows = np.arange(n)
-    slots = np.full((n, k), -1, dtype=np.intp)
-    ll = np.full((n, k), log_p0)
-    for j in range(k):  # the exclusion makes readings depend on earlier ones: loop over K
-        llk = np.where(taken, -np.inf, ll_all[:, j])
-        best = np.argmax(llk, axis=1)
-        lb = llk[rows, best]
-        match = lb >= log_p0  # below p0 (or no candidate): a new landmark
-        r = rows[match]
-        slots[r, j] = best[match]
-        ll[r, j] = lb[match]
-        taken[r, best[match]] = True
-    return slots, ll
-
-
-def _unlabelled(
-    w: _Work,
-    poses: FloatArray,
-    z: FloatArray,
-    R: FloatArray,
-    model: InvertibleLandmarkModel,
-    log_p0: float,
-    forced: NDArray[np.intp] | None = None,
-) -> FloatArray:
-    """Unlabelled readings ``z (K, 2)``: associate each in every particle by maximum
-    likelihood (excluding landmarks already used in this scan) or take the ``forced`` slots
-    ``(P, K)`` (``-1`` new, ``-2`` skip); update or start the landmarks, all at once.
-    Returns the log-likelihoods ``(P, K)`` (meaningless with ``forced``)."""
-    n, k = poses.shape[0], z.shape[0]
-    cmax = int(w.counts.max())
-    if forced is None:
-        slots = np.full((n, k), -1, dtype=np.intp)
-        ll = np.full((n, k), log_p0)
-        if cmax:
-            tall = _terms(
-                model,
-                poses[:, None, None, :],
-                w.means[:, None, :cmax],
-                w.covs[:, None, :cmax],
-                z[None, :, None, :],
-                R,
-            )  # (P, K, C)
-            ll_all, _ = _log_gauss(tall.nu, tall.Q)
-            valid = np.arange(cmax) < w.counts[:, None]
-            ll_all = np.where(valid[:, None, :] & tall.ok, ll_all, -np.inf)
-            slots, ll = _associate_greedy(ll_all, w.seen[:, :cmax].copy(), log_p0)
-            pr, kr = np.nonzero(slots >= 0)
-            if pr.size:
-                sl = slots[pr, kr]
-                _ekf_update(w, (pr, sl), tall.take((pr, kr, sl), pose_jacobian=False), R)
-    else:
-        slots, ll = forced, np.zeros((n, k))
-        pr, kr = np.nonzero(slots >= 0)
-        if pr.size:
-            sl = slots[pr, kr]
-            t = _terms(model, poses[pr], w.means[pr, sl], w.covs[pr, sl], z[kr], R)
-            if not t.ok.all():
-                pr, kr, sl, t = pr[t.ok], kr[t.ok], sl[t.ok], t.take(t.ok)
-            _ekf_update(w, (pr, sl), t, R)
-    new = slots == -1
-    spawning = new.any(axis=0)  # readings that start a landmark somewhere get one id each
-    ids = np.full(k, -1, dtype=np.int64)
-    ids[spawning] = w.next_id + np.arange(int(spawning.sum()))
-    w.next_id += int(spawning.sum())
-    _new_landmarks(w, new, poses, z, ids, R, model)
-    return ll
-
-
-def _split(rid: IntArray, s: UpdateSettings) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Indices of the labelled readings (ids used) and of the unlabelled ones."""
-    lab = (rid >= 0) if s.use_ids else np.zeros(rid.size, dtype=bool)
-    return np.flatnonzero(lab), np.flatnonzero(~lab)
-
-
-def _scan_at_poses(
-    w: _Work,
-    poses: FloatArray,
-    z: FloatArray,
-    rid: IntArray,
-    R: FloatArray,
-    model: InvertibleLandmarkModel,
-    s: UpdateSettings,
-    *,
-    forced_unlabelled: NDArray[np.intp] | None = None,
-    weigh_first_round: bool = True,
-) -> FloatArray:
-    """One scan at given particle poses (FastSLAM 1.0, and 2.0 after sampling): labelled
-    readings first (in rounds of distinct ids), then the unlabelled ones. Returns each
-    particle's log-likelihood of the readings ``(P,)`` — for 2.0 (``forced_unlabelled``
-    given, ``weigh_first_round`` False) only of the readings its proposal left out."""
-    ll = np.zeros(poses.shape[0])
-    lab, unl = _split(rid, s)
-    for r, idx in enumerate(_labelled_rounds(rid, lab)):
-        l_round = _labelled_round(w, poses, z[idx], rid[idx], R, model, s.log_p0)
-        if r > 0 or weigh_first_round:
-            ll += l_round.sum(axis=1)
-    if unl.size:
-        l_unl = _unlabelled(w, poses, z[unl], R, model, s.log_p0, forced_unlabelled)
-        if forced_unlabelled is None:
-            ll += l_unl.sum(axis=1)
-    return ll
-
-
-def _prune(w: _Work, poses: FloatArray, s: UpdateSettings) -> None:
-    """End of a scan: existence counters up for updated landmarks, down for landmarks
-    predicted visible but not seen; remove unlabelled ones below zero (stable compaction)."""
-    cmax = int(w.counts.max()) if w.counts.size else 0
-    if cmax == 0:
-        return
-    valid = np.arange(cmax) < w.counts[:, None]
-    d = w.means[:, :cmax] - poses[:, None, :2]
-    c, sn = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
-    xr, yr = c * d[..., 0] + sn * d[..., 1], -sn * d[..., 0] + c * d[..., 1]  # robot frame
-    r = np.hypot(xr, yr)
-    visible = valid & (r >= s.visible_min_range) & (r <= s.visible_max_range)
-    if s.fov < 2.0 * math.pi:
-        visible &= np.abs(np.arctan2(yr, xr)) <= 0.5 * s.fov
-    seen, updated = w.seen[:, :cmax], w.updated[:, :cmax]
-    counters = w.counters[:, :cmax]
-    counters += updated  # views: in place
-    counters -= visible & ~seen
-    if not s.prune:
-        return
-    remove = valid & (counters < 0) & (w.ids[:, :cmax] >= s.first_unlabelled_id)
-    if not remove.any():
-        return
-    w.removed += int(remove.sum())
-    keep = valid & ~remove
-    order = np.argsort(~keep, axis=1, kind="stable")  # kept slots first, in their order
-    w.means[:, :cmax] = np.take_along_axis(w.means[:, :cmax], order[:, :, None], axis=1)
-    w.covs[:, :cmax] = np.take_along_axis(w.covs[:, :cmax], order[:, :, None, None], axis=1)
-    w.counters[:, :cmax] = np.take_along_axis(counters, order, axis=1)
-    w.ids[:, :cmax] = np.take_along_axis(w.ids[:, :cmax], order, axis=1)
-    w.counts = keep.sum(axis=1).astype(np.int64)
-    w.ids[~(np.arange(w.capacity) < w.counts[:, None])] = -1
-
-
-def _usable_readings(
-    z: FloatArray, model: InvertibleLandmarkModel, s: UpdateSettings
-) -> NDArray[np.bool_]:
-    if s.min_range <= 0 or z.shape[0] == 0:
-        return np.ones(z.shape[0], dtype=bool)
-    lm = model.inverse(np.zeros(3), z)  # the landmark in the robot frame
-    return np.asarray(np.hypot(lm[:, 0], lm[:, 1]) >= s.min_range)
-
-
-def _normalised(log_weights: FloatArray) -> FloatArray:
-    lw, _ = normalize_log_weights(log_weights)  # log-sum-exp; ConvergenceError if all zero
-    return lw
-
-
-def _update1(
-    ps: FastSlamParticles,
-    z: FloatArray,
-    rid: IntArray,
-    R: FloatArray,
-    model: InvertibleLandmarkModel,
-    s: UpdateSettings,
-) -> tuple[FastSlamParticles, FloatArray, int]:
-    w = _Work(ps)
-    ll = _scan_at_poses(w, ps.poses, z, rid, R, model, s)
-    _prune(w, ps.poses, s)
-    return w.particles(ps.poses.copy(), _normalised(ps.log_weights + ll)), ll, w.removed
-
-
 def _sym_sqrt(S: FloatArray) -> FloatArray:
     """Symmetric square roots ``(..., k, k)`` of PSD matrices (eigen-decomposition, negative
     round-off eigenvalues clipped): unique, and defined where a Cholesky factor is not."""
@@ -903,7 +1228,9 @@ class _Proposal:
 
 
 def _update2(
-    ps: FastSlamParticles,
+    w: _Work,
+    poses0: FloatArray,
+    log_weights: FloatArray,
     motion: MotionModel,
     u: FloatArray,
     dt: float,
@@ -914,11 +1241,13 @@ def _update2(
     model: InvertibleLandmarkModel,
     s: UpdateSettings,
     rng: np.random.Generator,
-) -> tuple[FastSlamParticles, FloatArray, int]:
-    n = len(ps)
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """FastSLAM 2.0's step on the maps ``w`` (in place) from ``poses0``: the sampled poses,
+    the new normalised log-weights and each particle's log-weight increment ``(P,)``."""
+    n = poses0.shape[0]
     rows_all = np.arange(n)
-    prop = _Proposal(motion, ps.poses, u, dt, Qu)
-    w = _Work(ps)
+    prop = _Proposal(motion, poses0, u, dt, Qu)
+    w.begin_scan()
     log_p0 = s.log_p0
     ll_total = np.zeros(n)
     lab, unl = _split(rid, s)
@@ -929,24 +1258,24 @@ def _update2(
         upd = np.flatnonzero(slot >= 0)
         ll = np.full(n, log_p0)  # a new landmark: p0, the proposal is unchanged
         if upd.size:
-            t = _terms(model, prop.x_bar[upd], w.means[upd, slot[upd]], w.covs[upd, slot[upd]],
-                       z[k], R)  # fmt: skip
+            t = _terms(model, prop.x_bar[upd], *w.gaussians((slot[upd], upd)), z[k], R)
             L = prop.marginal(t, upd)
             l_upd, _ = _log_gauss(t.nu, L)
             ll[upd] = np.where(t.ok, l_upd, -np.inf)
             g = t.ok
             if g.any():
                 prop.update(upd[g], t.take(g), L[g])
-                w.seen[upd[g], slot[upd[g]]] = True
+                w.seen[slot[upd[g]], upd[g]] = True
         ll_total += ll
     # Unlabelled readings: maximum likelihood under the marginal, excluding used landmarks.
-    forced = np.full((n, unl.size), -1, dtype=np.intp)
+    forced = np.full((unl.size, n), -1, dtype=np.intp)
     for j, k in enumerate(unl):
         cmax, cand = _candidates(w)
         ll = np.full(n, log_p0)
         if cmax:
-            tall = _terms(model, prop.x_bar[:, None, :], w.means[:, :cmax], w.covs[:, :cmax],
-                          z[k], R)  # fmt: skip
+            mu_all, cov_all = w.gaussians((slice(0, cmax), slice(None)))  # (C, P, ...)
+            tall = _terms(model, prop.x_bar[:, None, :], np.swapaxes(mu_all, 0, 1),
+                          np.swapaxes(cov_all, 0, 1), z[k], R)  # fmt: skip
             L_all = prop.marginal(tall, (rows_all, None))
             ll_all, _ = _log_gauss(tall.nu, L_all)
             ll_all = np.where(cand & tall.ok, ll_all, -np.inf)
@@ -956,9 +1285,9 @@ def _update2(
             if match.size:
                 bm = best[match]
                 ll[match] = lb[match]
-                forced[match, j] = bm
+                forced[j, match] = bm
                 prop.update(match, tall.take((match, bm)), L_all[match, bm])
-                w.seen[match, bm] = True
+                w.seen[bm, match] = True
         ll_total += ll
     poses = prop.sample(rng)
     # The landmarks, from the sampled poses, with the proposal's associations.
@@ -966,20 +1295,20 @@ def _update2(
     ll_total += _scan_at_poses(w, poses, z, rid, R, model, s, forced_unlabelled=forced,
                                weigh_first_round=False)  # fmt: skip
     _prune(w, poses, s)
-    return w.particles(poses, _normalised(ps.log_weights + ll_total)), ll_total, w.removed
+    return poses, _normalised(log_weights + ll_total), ll_total
 
 
 def _lookup(w: _Work, rid: int) -> NDArray[np.intp]:
     """Slot of landmark ``rid`` in each particle, ``-1`` where it is not mapped."""
-    hit = (w.ids == rid) & w.valid()
-    return np.where(hit.any(axis=1), hit.argmax(axis=1), -1).astype(np.intp)
+    hit = (w.ids == rid) & w.valid()  # (C, P)
+    return np.where(hit.any(axis=0), hit.argmax(axis=0), -1).astype(np.intp)
 
 
 def _candidates(w: _Work) -> tuple[int, NDArray[np.bool_]]:
     """Columns in use and the slots an unlabelled reading may still match ``(P, cmax)``."""
     cmax = int(w.counts.max())
-    cand = (np.arange(cmax) < w.counts[:, None]) & ~w.seen[:, :cmax]
-    return cmax, cand
+    cand = w.valid(cmax) & ~w.seen[:cmax]
+    return cmax, cand.T
 
 
 # --------------------------------------------------------------------------------------------
@@ -1052,8 +1381,9 @@ def fastslam1_update(
     ps = _check_particles(particles)
     za, rid, R, m = _check_readings(z, ids, noise_cov, model)
     use = _usable_readings(za, m, settings)
-    new, ll, _ = _update1(ps, za[use], rid[use], R, m, settings)
-    return new, ll
+    w = _Work.of(ps)
+    lw, ll = _update1(w, ps.poses, ps.log_weights, za[use], rid[use], R, m, settings)
+    return w.particles(ps.poses.copy(), lw), ll
 
 
 def fastslam2_update(
@@ -1081,8 +1411,10 @@ def fastslam2_update(
     if not (dt >= 0 and math.isfinite(dt)):
         raise InputError(f"dt: expected a time step >= 0, got {dt}")
     use = _usable_readings(za, m, settings)
-    new, ll, _ = _update2(ps, motion, ua, float(dt), Qu, za[use], rid[use], R, m, settings, rng)
-    return new, ll
+    w = _Work.of(ps)
+    poses, lw, ll = _update2(w, ps.poses, ps.log_weights, motion, ua, float(dt), Qu, za[use],
+                             rid[use], R, m, settings, rng)  # fmt: skip
+    return w.particles(poses, lw), ll
 
 
 def fastslam_resample(particles: FastSlamParticles, rng: np.random.Generator) -> FastSlamParticles:
@@ -1244,9 +1576,17 @@ class _FastSlam:
             start = rng.multivariate_normal(
                 dataset.initial_pose, config.prior_cov_scale * cov, n, method="eigh"
             )
-        self._ps = FastSlamParticles.start(
+        ps = FastSlamParticles.start(
             start, config.initial_capacity, self._settings.first_unlabelled_id
         )
+        # The state, mutated in place by the kernels: poses, log-weights, weights and the
+        # planar maps (the particle set is built from them on demand, see `particles`).
+        self._poses = ps.poses
+        self._log_weights = ps.log_weights
+        self._weights = ps.weights
+        self._w = _Work.of(ps)
+        self._w.common = True
+        self._fast_motion = isinstance(self._motion, _MotionBase)
         self._pending: tuple[FloatArray, float] | None = None  # 2.0: a motion not yet sampled
         self._resample_pending = False
         self._last_odometry: FloatArray | None = None
@@ -1269,19 +1609,17 @@ class _FastSlam:
             self._update(event)
 
     def estimate(self) -> PoseEstimate:
-        ps = self._ps
-        poses = ps.poses
+        poses = self._poses
         if self._pending is not None:  # 2.0 between a control and its scan: the mean motion
             u, dt = self._pending
             poses = self._motion.apply(poses, u, dt)
-        weights = ps.weights
-        mean, cov = particle_estimate(poses, weights)
+        mean, cov = particle_estimate(poses, self._weights)
         if self._cfg.estimate == "best":
-            mean = poses[ps.best].copy()
+            mean = poses[int(np.argmax(self._log_weights))].copy()
         return PoseEstimate(mean, cov)
 
     def finish(self) -> EstimatorOutput:
-        ps = self._ps
+        ps = self.particles
         best = ps.best
         ess = np.asarray(self._ess) if self._ess else np.zeros(0)
         counts = ps.counts
@@ -1310,7 +1648,8 @@ class _FastSlam:
 
     @property
     def particles(self) -> FastSlamParticles:
-        return self._ps
+        """The current particle set (a copy: later steps do not change it)."""
+        return self._w.particles(self._poses.copy(), self._log_weights.copy())
 
     @property
     def settings(self) -> UpdateSettings:
@@ -1330,46 +1669,61 @@ class _FastSlam:
 
     def _resample_if_due(self) -> None:
         if self._resample_pending:
-            self._ps = self._ps.select(low_variance_resample(self._ps.weights, self._rng))
+            idx = low_variance_resample(self._weights, self._rng)
+            n = idx.size
+            self._poses = self._poses[idx]
+            self._w = self._w.select(idx)
+            self._log_weights = np.full(n, -math.log(n))
+            self._weights = np.full(n, 1.0 / n)
             self._resamplings += 1
             self._resample_pending = False
 
     def _predict(self, u: FloatArray, dt: float) -> None:
         self._resample_if_due()
-        ps = self._ps
+        poses = self._poses
         # g(x, u + ε), ε = Q^½ n, n ~ N(0, I): MotionModel.sample with Q's root computed once.
-        eps = self._rng.standard_normal((len(ps), self._Q_root.shape[0])) @ self._Q_root
-        poses = self._motion.apply(ps.poses, u + eps, dt)
-        self._ps = _trusted(
-            poses, ps.log_weights, ps.means, ps.covs, ps.counters, ps.ids, ps.counts, ps.next_id
-        )
+        eps = self._rng.standard_normal((poses.shape[0], self._Q_root.shape[0])) @ self._Q_root
+        eps += u
+        if self._fast_motion:  # validated once (data set, config): the batch kernel directly
+            self._poses = self._motion._g(poses, eps, dt)  # type: ignore[attr-defined]
+        else:  # pragma: no cover - every motion model of slamkit has the kernel
+            self._poses = self._motion.apply(poses, eps, dt)
 
     def _motion_step(self, u: FloatArray, dt: float) -> None:
         self._predict(u, dt)
 
-    def _scan(self, z: FloatArray, rid: IntArray) -> tuple[FastSlamParticles, FloatArray, int]:
-        return _update1(self._ps, z, rid, self._R, self._model, self._settings)
+    def _scan(self, z: FloatArray, rid: IntArray) -> FloatArray:
+        """The scan on the state (in place); returns the new log-weights (not normalised)."""
+        w = self._w
+        w.begin_scan()
+        ll = _scan_at_poses(w, self._poses, z, rid, self._R, self._model, self._settings)
+        _prune(w, self._poses, self._settings)
+        return self._log_weights + ll
 
     def _update(self, event: LandmarkReadings) -> None:
         z = np.asarray(event.z, dtype=float)
         rid = np.asarray(event.ids, dtype=np.int64)
-        use = _usable_readings(z, self._model, self._settings)
-        self._readings_skipped += int(np.count_nonzero(~use))
-        if not use.any():
-            return
+        if self._settings.min_range > 0:
+            use = _usable_readings(z, self._model, self._settings)
+            n_use = int(np.count_nonzero(use))
+            self._readings_skipped += use.size - n_use
+            if n_use == 0:
+                return
+            if n_use < use.size:
+                z, rid = z[use], rid[use]
         self._updates += 1
         self._resample_if_due()
         try:
-            ps, _, removed = self._scan(z[use], rid[use])
+            self._log_weights, w = _normalised_with_weights(self._scan(z, rid))
         except ConvergenceError as exc:
             raise ConvergenceError(
                 f"{self.name} at t = {event.t}: {exc}", step=self._updates
             ) from exc
-        self._removed += removed
-        self._ps = ps
-        ess = effective_sample_size(ps.weights)
+        self._removed += self._w.removed
+        self._weights = w
+        ess = 1.0 / float(np.sum(w * w))  # effective_sample_size of normalised weights
         self._ess.append(ess)
-        if ess < self._cfg.resample_threshold * len(ps):
+        if ess < self._cfg.resample_threshold * w.size:
             self._resample_pending = True
 
 
@@ -1405,12 +1759,13 @@ class FastSlam2(_FastSlam):
             self._predict(*self._pending)
         self._pending = (u, dt)
 
-    def _scan(self, z: FloatArray, rid: IntArray) -> tuple[FastSlamParticles, FloatArray, int]:
+    def _scan(self, z: FloatArray, rid: IntArray) -> FloatArray:
         if self._pending is None:
             return super()._scan(z, rid)
         u, dt = self._pending
         self._pending = None
-        return _update2(
-            self._ps, self._motion, u, dt, self._Q, z, rid, self._R, self._model,
-            self._settings, self._rng,
+        self._poses, lw, _ = _update2(
+            self._w, self._poses, self._log_weights, self._motion, u, dt, self._Q, z, rid,
+            self._R, self._model, self._settings, self._rng,
         )  # fmt: skip
+        return lw  # normalised already: normalising again changes nothing
