@@ -559,22 +559,23 @@ def test_weight_underflow_is_normalised_in_log_space() -> None:
 
 def test_estimator_raises_convergence_error_with_the_step() -> None:
     """The robot drives exactly onto the landmark it mapped: every particle's likelihood of
-    the next reading is zero (no bearing at zero range) -> ConvergenceError, step 2."""
+    the next reading is zero (no bearing at zero range) -> ConvergenceError. Its step is the
+    runner's (one per distinct time stamp, as EKF-SLAM's): the fourth time stamp, though it
+    is only the second measurement update."""
     events = (
         LandmarkReadings(0.0, np.array([[1.0, 0.0]]), np.array([0])),
         Control(1.0, np.array([1.0, 0.0]), 1.0),
-        LandmarkReadings(1.0, np.array([[0.5, 0.0]]), np.array([0])),
+        Control(1.5, np.array([0.0, 0.0]), 0.5),
+        Control(2.0, np.array([0.0, 0.0]), 0.5),
+        LandmarkReadings(2.0, np.array([[0.5, 0.0]]), np.array([0])),
     )
     ds = Dataset("onto-landmark", events, motion=MotionSpec(UnicycleEuler(), np.zeros((2, 2))),
                  landmark_sensor=LandmarkSensorSpec("range-bearing", R),
                  initial_pose=np.zeros(3), initial_cov=np.zeros((3, 3)))  # fmt: skip
-    for cls in (FastSlam1, FastSlam2):
-        est = cls(ds, FastSlamConfig(n_particles=4), np.random.default_rng(0))
-        est.handle(events[0])
-        est.handle(events[1])
-        with pytest.raises(ConvergenceError) as info:
-            est.handle(events[2])
-        assert info.value.step == 2
+    for v in (1, 2):
+        with pytest.raises(ConvergenceError, match="measurement update 2") as info:
+            run(ENTRIES[v], ds, config={"n_particles": 4}, seed=0)
+        assert info.value.step == 4
 
 
 def test_bad_inputs_raise_typed_errors() -> None:

@@ -1591,6 +1591,8 @@ class _FastSlam:
         self._resample_pending = False
         self._last_odometry: FloatArray | None = None
         self._updates = 0
+        self._step = 0
+        self._last_t: float | None = None
         self._resamplings = 0
         self._readings_skipped = 0
         self._removed = 0
@@ -1599,6 +1601,9 @@ class _FastSlam:
     # -- the Estimator protocol -------------------------------------------------------------
 
     def handle(self, event: Event) -> None:
+        if self._last_t is None or event.t != self._last_t:
+            self._step += 1  # the runner's numbering: one step per distinct time stamp
+            self._last_t = event.t
         if isinstance(event, Control):
             self._motion_step(np.asarray(event.u, dtype=float), float(event.dt))
         elif isinstance(event, Odometry):
@@ -1717,7 +1722,8 @@ class _FastSlam:
             self._log_weights, w = _normalised_with_weights(self._scan(z, rid))
         except ConvergenceError as exc:
             raise ConvergenceError(
-                f"{self.name} at t = {event.t}: {exc}", step=self._updates
+                f"{self.name} at t = {event.t:g} s (measurement update {self._updates}): {exc}",
+                step=self._step,
             ) from exc
         self._removed += self._w.removed
         self._weights = w
