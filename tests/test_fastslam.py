@@ -819,3 +819,27 @@ def test_odometry_events_and_position_readings(version: int) -> None:
     assert err.n_matched == 5 and err.rmse < 0.03  # measured 0.010 (1.0), 0.011 (2.0)
     odo_ate = absolute_trajectory_error(np.asarray(odom), truth, align="se2").rmse
     assert _ate(res, data) < 0.3 * odo_ate  # measured 0.033 m vs 0.29 m of odometry
+
+
+@pytest.mark.parametrize("version", [1, 2])
+def test_particle_snapshots_for_the_plots(version: int) -> None:
+    """By default six snapshots spread over the run (the last at its end), each a copy of
+    the poses with normalised weights; ``snapshot_every`` counts measurement updates (plus
+    the initial set) as MCL's does; ``n_snapshots=0`` keeps none."""
+    ds = load_dataset("five-features", seed=0)
+    res = run(ENTRIES[version], ds, config={"n_particles": 10}, seed=0)
+    snaps = res.output.particle_snapshots
+    times = [s.t for s in snaps]
+    assert len(snaps) == 6 and times == sorted(times)
+    assert times[0] == ds.start_time and times[-1] == ds.end_time
+    for s in snaps:
+        assert s.particles.shape == (10, 3) and s.weights.sum() == pytest.approx(1.0)
+    # The clouds follow the robot: first at the start, last near the last true pose.
+    assert np.linalg.norm(snaps[0].particles.mean(axis=0)[:2] - ds.truth.poses[0, :2]) < 0.1
+    assert np.linalg.norm(snaps[-1].particles.mean(axis=0)[:2] - ds.truth.poses[-1, :2]) < 0.5
+    assert not np.shares_memory(snaps[-1].particles, snaps[-2].particles)
+    every = run(ENTRIES[version], ds, config={"n_particles": 10, "snapshot_every": 100}, seed=0)
+    updates = every.output.diagnostics["measurement_updates"]
+    assert len(every.output.particle_snapshots) == 1 + updates // 100
+    none = run(ENTRIES[version], ds, config={"n_particles": 10, "n_snapshots": 0}, seed=0)
+    assert none.output.particle_snapshots == ()

@@ -112,7 +112,12 @@ from slamkit.maps import LandmarkMap
 from slamkit.models import MIN_RANGE, MotionModel, RangeBearing, odometry_control
 from slamkit.models.measurement import _LandmarkBase
 from slamkit.models.motion import _MotionBase
-from slamkit.pipeline.estimator import EstimatorOutput, LandmarkEstimate, PoseEstimate
+from slamkit.pipeline.estimator import (
+    EstimatorOutput,
+    LandmarkEstimate,
+    ParticleSnapshot,
+    PoseEstimate,
+)
 from slamkit.prob import chi2_gate
 
 __all__ = [
@@ -1475,6 +1480,16 @@ class FastSlamConfig:
     the particles' weighted covariance about their mean in both cases."""
     initial_capacity: int = 8
     """Landmark slots per particle to start with; doubled whenever a particle needs more."""
+    n_snapshots: int = 6
+    """Copies of the particle poses and weights kept for the plots (``particles.png``) when
+    neither ``snapshot_every`` nor ``snapshot_times`` is set: at the first measurement update
+    at or after each of this many times evenly spread from the data set's first to its last
+    event (the last one at the end of the run). 0: none."""
+    snapshot_every: int = 0
+    """Keep a snapshot every this many measurement updates (0: not by count), plus the
+    initial set (as :class:`~slamkit.localization.mcl.MclConfig`)."""
+    snapshot_times: tuple[float, ...] = ()
+    """Keep a snapshot at the first measurement update at or after each of these times [s]."""
 
     def __post_init__(self) -> None:
         if not self.n_particles >= 1:
@@ -1505,6 +1520,13 @@ class FastSlamConfig:
             raise ConfigError(
                 f"initial_capacity: expected an integer >= 1, got {self.initial_capacity}"
             )
+        if not (self.n_snapshots >= 0 and self.snapshot_every >= 0):
+            raise ConfigError(
+                "n_snapshots and snapshot_every: expected integers >= 0, got "
+                f"{self.n_snapshots} and {self.snapshot_every}"
+            )
+        if not all(math.isfinite(t) for t in self.snapshot_times):
+            raise ConfigError(f"snapshot_times: expected finite times, got {self.snapshot_times}")
 
 
 class _FastSlam:
@@ -1593,10 +1615,21 @@ class _FastSlam:
         self._updates = 0
         self._step = 0
         self._last_t: float | None = None
+        self._t = dataset.start_time
         self._resamplings = 0
         self._readings_skipped = 0
         self._removed = 0
         self._ess: list[float] = []
+        self._snapshots: list[ParticleSnapshot] = []
+        if config.snapshot_every > 0 or config.snapshot_times:
+            self._snapshot_times = sorted(config.snapshot_times)
+            if config.snapshot_every > 0:
+                self._snapshot(dataset.start_time)
+        elif config.n_snapshots > 0:
+            span = np.linspace(dataset.start_time, dataset.end_time, config.n_snapshots)
+            self._snapshot_times = span.tolist()
+        else:
+            self._snapshot_times = []
 
     # -- the Estimator protocol -------------------------------------------------------------
 
@@ -1604,6 +1637,7 @@ class _FastSlam:
         if self._last_t is None or event.t != self._last_t:
             self._step += 1  # the runner's numbering: one step per distinct time stamp
             self._last_t = event.t
+        self._t = float(event.t)
         if isinstance(event, Control):
             self._motion_step(np.asarray(event.u, dtype=float), float(event.dt))
         elif isinstance(event, Odometry):
@@ -1647,7 +1681,13 @@ class _FastSlam:
             "ess_final": float(ess[-1]) if ess.size else None,
             "best_particle_weight": float(ps.weights[best]),
         }
-        return EstimatorOutput(landmarks=ps.landmarks_of(best), diagnostics=diagnostics)
+        if self._snapshot_times and (not self._snapshots or self._snapshots[-1].t < self._t):
+            self._snapshot(self._t)  # times left after the last update: the final set
+        return EstimatorOutput(
+            landmarks=ps.landmarks_of(best),
+            diagnostics=diagnostics,
+            particle_snapshots=tuple(self._snapshots),
+        )
 
     # -- read-only views (tests, plots) ---------------------------------------------------
 
@@ -1671,6 +1711,20 @@ class _FastSlam:
         return tuple(self._ess)
 
     # -- steps ----------------------------------------------------------------------------
+
+    def _maybe_snapshot(self, t: float) -> None:
+        due = False
+        every = self._cfg.snapshot_every
+        if every > 0 and self._updates % every == 0:
+            due = True
+        while self._snapshot_times and self._snapshot_times[0] <= t:
+            self._snapshot_times.pop(0)
+            due = True
+        if due:
+            self._snapshot(t)
+
+    def _snapshot(self, t: float) -> None:
+        self._snapshots.append(ParticleSnapshot(float(t), self._poses.copy(), self._weights.copy()))
 
     def _resample_if_due(self) -> None:
         if self._resample_pending:
@@ -1727,6 +1781,7 @@ class _FastSlam:
             ) from exc
         self._removed += self._w.removed
         self._weights = w
+        self._maybe_snapshot(event.t)
         ess = 1.0 / float(np.sum(w * w))  # effective_sample_size of normalised weights
         self._ess.append(ess)
         if ess < self._cfg.resample_threshold * w.size:
