@@ -269,8 +269,10 @@ def test_estimator_in_the_runner_with_the_registry_entry() -> None:
     metrics = evaluate(result, dataset).metrics
     assert metrics["ate"]["rmse"] < 0.1
     # without ids the filter names its landmarks itself, from OWN_ID_BASE on: they cannot
-    # be mistaken for the data set's ids 0..4 (an id-matched map error would be nonsense)
-    assert "skipped" in metrics["landmarks"]
+    # be mistaken for the data set's ids 0..4, so evaluation pairs them by position
+    assert metrics["landmarks_matched_by"] == "position"
+    assert metrics["landmarks"]["n_matched"] == 5 and metrics["landmarks"]["rmse"] < 0.05
+    assert metrics["association"]["accuracy"] > 0.99
     assert result.output.landmarks.landmarks.ids.min() >= OWN_ID_BASE
     assert result.output.diagnostics["n_landmarks"] == 5
     assert result.output.diagnostics["jcbb_searches"] > 300

@@ -208,7 +208,7 @@ class GroundTruth:
     reading_ids: tuple[NDArray[np.int64], ...] | None = None
     """The true landmark id of every reading, one array per :class:`LandmarkReadings` event
     in stream order (``-1`` = unknown): the data association, for scoring an estimator that
-    was given no ids."""
+    was given no ids (matched against the events by :meth:`Dataset.check_reading_ids`)."""
 
     def __post_init__(self) -> None:
         if (self.times is None) != (self.poses is None):
@@ -271,8 +271,6 @@ class Dataset:
             object.__setattr__(self, "initial_cov", cov)
         object.__setattr__(self, "events", tuple(self.events))
         self._validate_events()
-        if self.truth.reading_ids is not None:
-            self._check_reading_ids(self.truth.reading_ids)
 
     def _validate_events(self) -> None:
         """Check the whole stream once: times finite and non-decreasing, every event's arrays
@@ -314,8 +312,16 @@ class Dataset:
             else:
                 self._fail(idx[0], "unknown event type")
 
-    def _check_reading_ids(self, truth_ids: tuple[NDArray[np.int64], ...]) -> None:
-        """``truth.reading_ids`` holds one id per reading of every readings event, in order."""
+    def check_reading_ids(self) -> NDArray[np.int64]:
+        """The true landmark of every reading, concatenated in stream order, after checking
+        that ``truth.reading_ids`` holds one id per reading of every readings event (a data
+        set whose events were replaced, say with clutter added, no longer matches its truth:
+        :class:`~slamkit.errors.ShapeError` naming the event). Checked here, when the
+        association is scored, rather than at construction, so that such a data set can
+        still be run."""
+        truth_ids = self.truth.reading_ids
+        if truth_ids is None:
+            raise InputError(f"data set {self.name!r} has no true association of its readings")
         idx = [i for i, ev in enumerate(self.events) if isinstance(ev, LandmarkReadings)]
         if len(truth_ids) != len(idx):
             raise ShapeError(
@@ -326,6 +332,7 @@ class Dataset:
             n = np.size(self.events[i].ids)  # type: ignore[union-attr]
             if ids.shape != (n,):
                 self._fail(i, f"truth reading_ids: expected {n} ids, got {ids.size}", ShapeError)
+        return np.concatenate([np.zeros(0, np.int64), *truth_ids])
 
     def _fail(self, i: int, message: str, error: type[InputError] = InputError) -> NoReturn:
         ev = self.events[i]

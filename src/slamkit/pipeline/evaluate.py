@@ -137,8 +137,7 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
 
 
 def _association(chosen: np.ndarray, dataset: Dataset) -> _HasDict:
-    assert dataset.truth.reading_ids is not None
-    true = np.concatenate([np.zeros(0, np.int64), *dataset.truth.reading_ids])
+    true = dataset.check_reading_ids()
     if true.size != chosen.size:
         raise InputError(
             f"association: the estimator reported {chosen.size} readings, the data set has "
