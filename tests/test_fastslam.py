@@ -843,3 +843,48 @@ def test_particle_snapshots_for_the_plots(version: int) -> None:
     assert len(every.output.particle_snapshots) == 1 + updates // 100
     none = run(ENTRIES[version], ds, config={"n_particles": 10, "n_snapshots": 0}, seed=0)
     assert none.output.particle_snapshots == ()
+
+
+@pytest.mark.parametrize(("version", "seeds"), [(1, (0, 1, 2)), (2, (1,))])
+def test_association_accuracy_in_the_cluttered_world(version: int, seeds) -> None:
+    """``landmark-clutter``: 150 landmarks >= 1.2 m apart, ~13 readings per scan, no ids, a
+    loop closed at the end; the best particle's association (traced through its ancestors)
+    scored against ``truth.reading_ids`` by the pipeline's evaluation. Measured with 100
+    particles (1.0, seeds 0-5): accuracy 1.0, 1.0, 0.9997, 0.961, 0.9997, 0.9993 — seed 3
+    fails part of the loop closure (14 landmarks mapped twice) — and 30 particles (2.0,
+    seeds 0-3): 0.971, 1.0, 0.953, 0.997. The issue's target is 95 %."""
+    from slamkit.pipeline.evaluate import evaluate
+
+    for seed in seeds:
+        ds = load_dataset("landmark-clutter", seed=seed)
+        assert ds.truth.reading_ids is not None
+        n = 100 if version == 1 else 30
+        res = run(ENTRIES[version], ds, config={"n_particles": n}, seed=seed)
+        chosen = res.output.reading_landmarks
+        assert chosen is not None and chosen.size == sum(a.size for a in ds.truth.reading_ids)
+        scores = evaluate(res, ds).metrics["association"]
+        assert scores["accuracy"] >= 0.95, (seed, scores)  # measured >= 0.9997 for these
+        assert scores["used"] == scores["readings"]  # every reading updated or started one
+
+
+def test_reading_log_follows_the_best_particle_through_resampling() -> None:
+    """With ids the log is the ids themselves, updated or started; without, each logged id
+    is a landmark of the final best particle's map or one it started and later pruned."""
+    ds = load_dataset("five-features", seed=3)
+    labels = np.concatenate([e.ids for e in ds.events if isinstance(e, LandmarkReadings)])
+    est = FastSlam1(ds, FastSlamConfig(n_particles=20), np.random.default_rng(0))
+    for ev in ds.events:
+        est.handle(ev)
+    times, ids, status = est.reading_log()
+    assert ids.tolist() == labels.tolist() and times.size == labels.size
+    assert np.count_nonzero(status == 1) == 5 and set(status.tolist()) == {0, 1}  # 5 starts
+    ds = load_dataset("five-features", seed=3, options={"identities": False})
+    est = FastSlam1(ds, FastSlamConfig(n_particles=20), np.random.default_rng(0))
+    for ev in ds.events:
+        est.handle(ev)
+    assert est.finish().diagnostics["resamplings"] > 10
+    _, ids, status = est.reading_log()
+    best = est.particles.best
+    kept = set(est.particles.ids[best, : est.particles.counts[best]].tolist())
+    assert kept <= set(ids.tolist()) and len(kept) == 5
+    assert np.mean(np.isin(ids, list(kept))) > 0.99

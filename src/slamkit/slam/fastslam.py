@@ -107,7 +107,13 @@ from slamkit.localization.particles import (
     normalize_log_weights,
     particle_estimate,
 )
-from slamkit.mapping.ekf_mapping import InvertibleLandmarkModel
+from slamkit.mapping.ekf_mapping import (
+    DISCARDED,
+    INITIALISED,
+    TOO_CLOSE,
+    UPDATED,
+    InvertibleLandmarkModel,
+)
 from slamkit.maps import LandmarkMap
 from slamkit.models import MIN_RANGE, MotionModel, RangeBearing, odometry_control
 from slamkit.models.measurement import _LandmarkBase
@@ -402,6 +408,10 @@ class _Work:
         self.counts = counts
         self.next_id = next_id
         self.removed = 0
+        # The last scan's association: landmark id and status code of each reading, (K,)
+        # when every particle agrees, else (K, P).
+        self.assoc: IntArray = np.zeros(0, dtype=np.int64)
+        self.assoc_status: NDArray[np.int8] = np.zeros(0, dtype=np.int8)
         self.seen = np.zeros(ids.shape, dtype=bool)
         self.updated = np.zeros(ids.shape, dtype=bool)
         # Whether every particle holds the same ids in the same slots (None: not known),
@@ -762,10 +772,11 @@ def _labelled_round(
     model: InvertibleLandmarkModel,
     log_p0: float,
     mark: bool = True,
-) -> FloatArray:
+) -> tuple[FloatArray, NDArray[np.bool_] | None]:
     """Readings ``z (K, 2)`` of the distinct landmarks ``rid (K,)``, all at once: update the
     landmark with that id in every particle, or start it. Returns log-likelihoods ``(K, P)``
-    (``log p0`` for a start). ``mark``: see :func:`_update_landmarks`."""
+    (``log p0`` for a start, ``-inf`` for a landmark at the sensor) and which readings found
+    their landmark ``(K, P)`` (None: all). ``mark``: see :func:`_update_landmarks`."""
     n, k = poses.shape[0], z.shape[0]
     cmax = int(w.counts.max())
     if cmax and w.is_common(cmax):
@@ -777,9 +788,10 @@ def _labelled_round(
         slot_k = [where.get(lid, -1) for lid in rid.tolist()]
         if min(slot_k) >= 0:  # every id mapped
             slots = np.array(slot_k, dtype=np.intp)
-            return _update_landmarks(
+            ll_all = _update_landmarks(
                 w, (slots, slice(None)), pose, z[:, 0:1], z[:, 1:2], R, model, mark
             )
+            return ll_all, None
         kf = [j for j, sl in enumerate(slot_k) if sl >= 0]
         ll = np.full((k, n), log_p0)
         found = np.zeros((k, n), dtype=bool)
@@ -794,7 +806,7 @@ def _labelled_round(
         if len(kf) < k:
             _new_landmarks(w, ~found, poses, z, rid, R, model)
             w.common = True  # every particle started the same ids in the same slots
-        return ll
+        return ll, found
     ll = np.full((k, n), log_p0)
     found = np.zeros((k, n), dtype=bool)
     if cmax:
@@ -809,7 +821,7 @@ def _labelled_round(
                 w, (slot, pr), (px[pr], py[pr], pth[pr]), z[kr, 0], z[kr, 1], R, model
             )
     _new_landmarks(w, ~found, poses, z, rid, R, model)
-    return ll
+    return ll, found
 
 
 def _labelled_rounds(rid: IntArray, index: NDArray[np.intp]) -> list[NDArray[np.intp]]:
@@ -883,11 +895,13 @@ def _unlabelled(
     model: InvertibleLandmarkModel,
     log_p0: float,
     forced: NDArray[np.intp] | None = None,
-) -> FloatArray:
+) -> tuple[FloatArray, IntArray, NDArray[np.int8]]:
     """Unlabelled readings ``z (K, 2)``: associate each in every particle by maximum
     likelihood (excluding landmarks already used in this scan) or take the ``forced`` slots
     ``(K, P)`` (``-1`` new, ``-2`` skip); update or start the landmarks, all at once.
-    Returns the log-likelihoods ``(K, P)`` (meaningless with ``forced``)."""
+    Returns the log-likelihoods ``(K, P)`` (meaningless with ``forced``), and the id of the
+    landmark each reading updated or started with its status code ``(K, P)`` (see
+    :meth:`FastSlam1.reading_log`)."""
     n, k = poses.shape[0], z.shape[0]
     cmax = int(w.counts.max())
     if forced is None:
@@ -920,13 +934,21 @@ def _unlabelled(
                 model,
             )  # fmt: skip
     new = slots == -1
+    matched = slots >= 0
+    assoc = np.full((k, n), -1, dtype=np.int64)
+    status = np.full((k, n), DISCARDED, dtype=np.int8)
+    kr, pr = np.nonzero(matched)
+    assoc[kr, pr] = w.ids[slots[kr, pr], pr]  # before new landmarks or pruning move slots
+    status[matched] = UPDATED
     spawning = new.any(axis=1)  # readings that start a landmark somewhere get one id each
     if spawning.any():
         ids = np.full(k, -1, dtype=np.int64)
         ids[spawning] = w.next_id + np.arange(int(spawning.sum()))
         w.next_id += int(spawning.sum())
         _new_landmarks(w, new, poses, z, ids, R, model)
-    return ll
+        assoc[new] = np.broadcast_to(ids[:, None], (k, n))[new]
+        status[new] = INITIALISED
+    return ll, assoc, status
 
 
 def _split(rid: IntArray, s: UpdateSettings) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
@@ -958,19 +980,45 @@ def _scan_at_poses(
         # The usual case with known correspondences: every reading labelled, each id once.
         # Labelled landmarks keep no existence counter and no unlabelled reading follows:
         # nothing reads the seen/updated marks of this scan.
-        l_all = _labelled_round(w, poses, pose, z, rid, R, model, s.log_p0, mark=False)
+        l_all, found = _labelled_round(w, poses, pose, z, rid, R, model, s.log_p0, mark=False)
+        at_sensor = l_all == -np.inf
+        if found is None and not at_sensor.any():  # every particle: every reading updated
+            w.assoc, w.assoc_status = rid, np.full(rid.size, UPDATED, dtype=np.int8)
+        else:
+            w.assoc, w.assoc_status = _labelled_association(rid, found, at_sensor)
         return l_all.sum(axis=0) if weigh_first_round else np.zeros(poses.shape[0])
-    ll = np.zeros(poses.shape[0])
+    n, k = poses.shape[0], rid.size
+    assoc = np.full((k, n), -1, dtype=np.int64)
+    status = np.full((k, n), DISCARDED, dtype=np.int8)
+    ll = np.zeros(n)
     lab, unl = _split(rid, s)
     for r, idx in enumerate(_labelled_rounds(rid, lab)):
-        l_round = _labelled_round(w, poses, pose, z[idx], rid[idx], R, model, s.log_p0)
+        l_round, found = _labelled_round(w, poses, pose, z[idx], rid[idx], R, model, s.log_p0)
+        assoc[idx], status[idx] = _labelled_association(rid[idx], found, l_round == -np.inf)
         if r > 0 or weigh_first_round:
             ll += l_round.sum(axis=0)
     if unl.size:
-        l_unl = _unlabelled(w, poses, pose, z[unl], R, model, s.log_p0, forced_unlabelled)
+        l_unl, assoc[unl], status[unl] = _unlabelled(
+            w, poses, pose, z[unl], R, model, s.log_p0, forced_unlabelled
+        )
         if forced_unlabelled is None:
             ll += l_unl.sum(axis=0)
+    w.assoc, w.assoc_status = assoc, status
     return ll
+
+
+def _labelled_association(
+    rid: IntArray, found: NDArray[np.bool_] | None, at_sensor: NDArray[np.bool_]
+) -> tuple[IntArray, NDArray[np.int8]]:
+    """Ids and status codes ``(K, P)`` of labelled readings: the reading's id, updated where
+    the landmark was found (discarded where it was at the sensor), started elsewhere."""
+    k, n = at_sensor.shape
+    status = np.full((k, n), UPDATED if found is None else INITIALISED, dtype=np.int8)
+    if found is not None:
+        status[found] = UPDATED
+    status[at_sensor] = DISCARDED
+    assoc = np.where(at_sensor, -1, rid[:, None])
+    return assoc, status
 
 
 def _prune(w: _Work, poses: FloatArray, s: UpdateSettings) -> None:
@@ -1621,6 +1669,9 @@ class _FastSlam:
         self._removed = 0
         self._ess: list[float] = []
         self._snapshots: list[ParticleSnapshot] = []
+        # Per scan (time, ids (K,) or (K, P), status codes) and per resampling the parent
+        # indices (P,): the association of any final particle, traced through its ancestors.
+        self._history: list[tuple[float, IntArray, NDArray[np.int8]] | NDArray[np.intp]] = []
         if config.snapshot_every > 0 or config.snapshot_times:
             self._snapshot_times = sorted(config.snapshot_times)
             if config.snapshot_every > 0:
@@ -1683,10 +1734,14 @@ class _FastSlam:
         }
         if self._snapshot_times and (not self._snapshots or self._snapshots[-1].t < self._t):
             self._snapshot(self._t)  # times left after the last update: the final set
+        _, chosen, status = self.reading_log()
+        diagnostics["readings"] = int(chosen.size)
+        diagnostics["readings_new_landmark"] = int(np.count_nonzero(status == INITIALISED))
         return EstimatorOutput(
             landmarks=ps.landmarks_of(best),
             diagnostics=diagnostics,
             particle_snapshots=tuple(self._snapshots),
+            reading_landmarks=chosen,
         )
 
     # -- read-only views (tests, plots) ---------------------------------------------------
@@ -1710,7 +1765,48 @@ class _FastSlam:
         """The effective sample size after every measurement update."""
         return tuple(self._ess)
 
+    def reading_log(self) -> tuple[FloatArray, NDArray[np.int64], NDArray[np.int64]]:
+        """Every reading handled so far, as the particle that now has the largest weight saw
+        it (its own association and those of its ancestors): ``(times, landmark ids,
+        status)`` — the id of the landmark the reading updated or started (``-1`` if none);
+        status codes as :meth:`EkfSlam.reading_log <slamkit.slam.EkfSlam.reading_log>`'s:
+        :data:`~slamkit.mapping.ekf_mapping.UPDATED`, ``INITIALISED``, ``DISCARDED`` (the
+        landmark was at the sensor) and ``TOO_CLOSE`` (skipped, see
+        :attr:`FastSlamConfig.min_range`)."""
+        p = int(np.argmax(self._log_weights))
+        times, ids, status = [], [], []
+        for entry in reversed(self._history):
+            if isinstance(entry, np.ndarray):
+                p = int(entry[p])  # the parent of particle p before that resampling
+                continue
+            t, a, s = entry
+            times.append(np.full(a.shape[0], t))
+            ids.append(a[:, p] if a.ndim == 2 else a)
+            status.append(s[:, p] if s.ndim == 2 else s)
+
+        def cat(parts: list[NDArray[Any]], dtype: type) -> NDArray[Any]:
+            return np.concatenate(parts[::-1]).astype(dtype) if parts else np.zeros(0, dtype)
+
+        return cat(times, np.float64), cat(ids, np.int64), cat(status, np.int64)
+
     # -- steps ----------------------------------------------------------------------------
+
+    def _log_scan(
+        self,
+        t: float,
+        assoc: IntArray,
+        status: NDArray[np.int8],
+        use: NDArray[np.bool_] | None,
+    ) -> None:
+        """Keep the association of a scan; ``use`` marks the readings that were not skipped
+        (None: all), the others are logged ``TOO_CLOSE``."""
+        if use is not None:
+            a = np.full((use.size, *assoc.shape[1:]), -1, dtype=np.int64)
+            s = np.full((use.size, *status.shape[1:]), TOO_CLOSE, dtype=np.int8)
+            if assoc.size:
+                a[use], s[use] = assoc, status
+            assoc, status = a, s
+        self._history.append((float(t), assoc, status))
 
     def _maybe_snapshot(self, t: float) -> None:
         due = False
@@ -1730,6 +1826,7 @@ class _FastSlam:
         if self._resample_pending:
             idx = low_variance_resample(self._weights, self._rng)
             n = idx.size
+            self._history.append(idx)
             self._poses = self._poses[idx]
             self._w = self._w.select(idx)
             self._log_weights = np.full(n, -math.log(n))
@@ -1762,14 +1859,18 @@ class _FastSlam:
     def _update(self, event: LandmarkReadings) -> None:
         z = np.asarray(event.z, dtype=float)
         rid = np.asarray(event.ids, dtype=np.int64)
+        use = None
         if self._settings.min_range > 0:
             use = _usable_readings(z, self._model, self._settings)
             n_use = int(np.count_nonzero(use))
             self._readings_skipped += use.size - n_use
             if n_use == 0:
+                self._log_scan(event.t, np.zeros(0, np.int64), np.zeros(0, np.int8), use)
                 return
             if n_use < use.size:
                 z, rid = z[use], rid[use]
+            else:
+                use = None
         self._updates += 1
         self._resample_if_due()
         try:
@@ -1780,6 +1881,7 @@ class _FastSlam:
                 step=self._step,
             ) from exc
         self._removed += self._w.removed
+        self._log_scan(event.t, self._w.assoc, self._w.assoc_status, use)
         self._weights = w
         self._maybe_snapshot(event.t)
         ess = 1.0 / float(np.sum(w * w))  # effective_sample_size of normalised weights
