@@ -120,7 +120,8 @@ def test_synthetic_g2o_loop_recovers_the_true_poses(tmp_path):
 
 def test_synthetic_isam_landmark_graph_is_written_as_g2o_with_renumbered_landmarks(tmp_path):
     """An iSAM file (no vertices; pose ids 0-3 and landmark ids 0-1 share numbers) with exact
-    odometry, one loop closure and landmark readings: chordal start and optimum are the truth,
+    odometry, one loop closure and landmark readings: the default start of a landmark graph
+    (grown prefixes) and the optimum are the truth,
     the output is g2o with landmark ids shifted by 4 (largest pose id + 1), and it reads back
     with the same χ² and the true landmarks."""
     truth = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.5], [1.5, 1.0, 1.8], [0.2, 1.2, -2.9]])
@@ -137,7 +138,7 @@ def test_synthetic_isam_landmark_graph_is_written_as_g2o_with_renumbered_landmar
     out = tmp_path / "out"
     m = _optimize(src, out, "--no-plots")
     assert sorted(p.name for p in out.iterdir()) == ["config.json", "metrics.json", "optimized.g2o"]
-    assert m["input"]["family"] == "isam" and m["initialization"] == "chordal"
+    assert m["input"]["family"] == "isam" and m["initialization"] == "grow"
     assert (m["poses"], m["landmarks"], m["edges"]) == (4, 2, 10)
     assert m["edges_by_kind"] == {"se2": 4, "se2_xy": 6}
     assert m["chi2_initial"] < 1e-18 and m["chi2_final"] < 1e-18
@@ -316,14 +317,15 @@ def test_toro_bearing_range_graph_writes_landmarks_beside_it(data_root, tmp_path
 @pytest.mark.realdata
 def test_isam_city_trees_is_written_as_g2o_with_shifted_landmark_ids(data_root, tmp_path):
     """cityTrees10000.txt (iSAM: 10000 poses, 100 landmarks, ids overlap): written as g2o
-    with landmark ids + 10000; χ² 9.03e8 (chordal poses, landmarks from first readings) →
-    8668.93 (measured) in 6 LM iterations."""
+    with landmark ids + 10000; χ² 5.04e6 (the default start of a landmark graph: batch
+    solves over growing prefixes; chordal poses with landmarks from first readings: 9.03e8)
+    → 8668.93 (measured)."""
     out = tmp_path / "city"
     m = _optimize(_real(data_root, "isam/cityTrees10000.txt"), out, "--no-plots")
     assert (m["poses"], m["landmarks"], m["edges"]) == (10000, 100, 14442)
     assert m["output"]["family"] == "g2o" and m["output"]["landmark_id_offset"] == 10000
     assert m["chi2_final"] == pytest.approx(8668.93, rel=1e-5)
-    assert m["chi2_final"] < 1e-4 * m["chi2_initial"]
+    assert m["initialization"] == "grow" and m["chi2_final"] < 2e-3 * m["chi2_initial"]
     graph, chi2 = _readback(out, m)
     assert graph.landmark_ids.min() == 10000 and graph.family == "g2o"
     assert chi2 == pytest.approx(m["chi2_final"], rel=1e-12)
@@ -368,3 +370,15 @@ def test_pose_graph_plot_draws_the_loop_closures_under_the_trajectory():
     assert drawn["landmarks"].get_offsets().shape == (3, 2)
     with pytest.raises(InputError, match="edges: expected rows in"):
         plot_pose_graph(ax, HEXAGON[:, :2], edges=np.array([[0, 6]]))
+
+
+@pytest.mark.realdata
+def test_victoria_park_graph_reaches_its_optimum_from_the_default_start(data_root, tmp_path):
+    """victoriaPark.txt (iSAM: 6969 poses, 151 landmarks, no vertices): the default start of a
+    landmark graph (grown prefixes) leads LM to χ² 6184.12 (measured), the optimum
+    ``tests/test_optim_landmarks_real.py`` establishes; from the chordal start LM stops far
+    above it (measured: not converged in 100 iterations, F 7.2e5)."""
+    m = _optimize(_real(data_root, "isam/victoriaPark.txt"), tmp_path / "vp", "--no-plots")
+    assert (m["poses"], m["landmarks"]) == (6969, 151)
+    assert m["initialization"] == "grow" and m["converged"]
+    assert m["chi2_final"] == pytest.approx(6184.12, rel=1e-5)

@@ -47,6 +47,7 @@ from slamkit.optim import (
     OptimizerConfig,
     OptimizeResult,
     g2o_chi2,
+    grow_initialization,
     initial_values,
     optimize,
     sesync_objective,
@@ -61,13 +62,14 @@ if TYPE_CHECKING:
 __all__ = ["OptimizeReport", "OptimizeRequest", "optimize_graph_job"]
 
 SOLVERS = ("lm", "gn", "dogleg")
-INITS = ("file", "odometry", "chordal")
+INITS = ("file", "odometry", "chordal", "grow")
 OBJECTIVES = ("g2o", "sesync")
 KERNELS = ("none", "huber", "cauchy", "geman_mcclure", "dcs")
 _INIT_METHOD: dict[str, InitName] = {
     "file": "vertices",
     "odometry": "odometry",
     "chordal": "chordal",
+    "grow": "grow",
 }
 _SUFFIX = {"g2o": ".g2o", "toro": ".graph"}
 _FAMILY_TITLE = {"g2o": "g2o", "toro": "TORO", "isam": "iSAM", "gtsam": "GTSAM"}
@@ -84,13 +86,16 @@ class OptimizeRequest:
     solver: str = "lm"
     """``"lm"``, ``"gn"`` or ``"dogleg"``."""
     init: str | None = None
-    """``"file"`` (the file's vertices), ``"odometry"`` (spanning tree) or ``"chordal"``;
-    ``None``: the file's vertices when it has them, else chordal."""
+    """``"file"`` (the file's vertices), ``"odometry"`` (spanning tree), ``"chordal"`` or
+    ``"grow"`` (batch solves over growing time-ordered prefixes,
+    :func:`~slamkit.optim.grow_initialization`); ``None``: the file's vertices when it has
+    them, else grow for landmark graphs (their chordal or odometry start lies in a bad basin:
+    Victoria Park) and chordal for pose graphs."""
     robust_kernel: str = "none"
     """``"none"``, ``"huber"``, ``"cauchy"``, ``"geman_mcclure"`` (or ``geman-mcclure``),
     ``"dcs"``."""
     robust_width: float | None = None
-    """Kernel width (``None``: the optimiser's default, 1.0; units in
+    """Kernel width (``None``: the kernel's default width in the optimiser; units in
     :mod:`slamkit.optim.robust`)."""
     objective: str = "g2o"
     """``"g2o"`` (the file's χ²) or ``"sesync"`` (SE-Sync's F on the relative-pose edges)."""
@@ -231,10 +236,16 @@ def _history(history: tuple[IterationInfo, ...]) -> list[dict[str, Any]]:
     ]
 
 
+def _has_landmark_edges(data: GraphData) -> bool:
+    return any(es.kind in LANDMARK_KINDS for es in data.edges)
+
+
 def _resolve_init(init: str | None, data: GraphData) -> str:
     has_vertices = data.poses.shape[0] > 0
     if init is None:
-        return "file" if has_vertices else "chordal"
+        if has_vertices:
+            return "file"
+        return "grow" if data.landmarks.shape[0] or _has_landmark_edges(data) else "chordal"
     if init == "file" and not has_vertices:
         raise ConfigError(
             f"init 'file': {data.source or 'the graph'} has no vertex lines; use odometry or "
@@ -352,7 +363,10 @@ def optimize_graph_job(
 
     # The folder check comes before the work; on any error the partial folder is removed.
     with atomic_folder(request.out_dir, overwrite=request.overwrite) as tmp:
-        p0, l0 = initial_values(problem, method, cfg.linear_solver)
+        if method == "grow":
+            p0, l0 = grow_initialization(problem, cfg)
+        else:
+            p0, l0 = initial_values(problem, method, cfg.linear_solver)
         t3 = time.perf_counter()
         result = optimize(
             data, cfg, initial_poses=p0, initial_landmarks=l0, callback=on_iteration,
@@ -366,7 +380,7 @@ def optimize_graph_job(
             "solver": result.method,
             "init": init,
             "robust_kernel": cfg.robust_kernel,
-            "robust_width": cfg.robust_width,
+            "robust_width": cfg.kernel.width if cfg.robust_kernel != "none" else None,
             "objective": cfg.objective,
             "max_iterations": cfg.max_iterations,
             "output": metrics["output"],

@@ -56,8 +56,9 @@ def optimize_command(
     init: Annotated[
         str | None,
         typer.Option(
-            help="Start: file (its vertices), odometry or chordal "
-            "(default: file when it has vertices, else chordal)."
+            help="Start: file (its vertices), odometry, chordal or grow (solves over growing "
+            "prefixes; default: file when it has vertices, else grow for landmark graphs and "
+            "chordal for pose graphs)."
         ),
     ] = None,
     robust: Annotated[
@@ -65,7 +66,7 @@ def optimize_command(
     ] = "none",
     robust_width: Annotated[
         float | None,
-        typer.Option(help="Kernel width, in whitened-error units (default 1)."),
+        typer.Option(help="Kernel width, in whitened-error units (default: the kernel's own)."),
     ] = None,
     objective: Annotated[
         str, typer.Option(help="g2o (the file's χ²) or sesync (SE-Sync's F).")

@@ -12,10 +12,20 @@ and 2D landmarks, and over SE(3) poses.
 * :mod:`~slamkit.optim.objectives`: the g2o χ² and SE-Sync's ``F`` of any solution.
 * :mod:`~slamkit.optim.robust`: Huber, Cauchy, Geman-McClure and DCS kernels (IRLS).
 * :mod:`~slamkit.optim.marginals`: marginal covariances from the factorisation.
+* :mod:`~slamkit.optim.incremental`: poses and edges added in time order, window steps
+  between periodic batch steps (iSAM-style), equal to batch at the end.
 """
 
 from slamkit.optim.data import EdgeKind, EdgeSet, GraphData
 from slamkit.optim.graph import GraphProblem, Linearization
+from slamkit.optim.incremental import (
+    GraphUpdate,
+    IncrementalConfig,
+    IncrementalOptimizer,
+    IncrementalResult,
+    UpdateInfo,
+    time_ordered_updates,
+)
 from slamkit.optim.init import (
     chordal_initialization,
     initial_values,
@@ -38,12 +48,17 @@ __all__ = [
     "EdgeSet",
     "GraphData",
     "GraphProblem",
+    "GraphUpdate",
+    "IncrementalConfig",
+    "IncrementalOptimizer",
+    "IncrementalResult",
     "IterationInfo",
     "Linearization",
     "Marginals",
     "OptimizeResult",
     "OptimizerConfig",
     "RobustKernel",
+    "UpdateInfo",
     "cholmod_available",
     "chordal_initialization",
     "g2o_chi2",
@@ -54,4 +69,5 @@ __all__ = [
     "robust_rho_and_weight",
     "sesync_objective",
     "spanning_tree_initialization",
+    "time_ordered_updates",
 ]

@@ -755,9 +755,13 @@ class IncrementalOptimizer:
                 try:
                     fac.factor(lin.H)
                 except SingularSystem as exc:
+                    which = (
+                        f"{problem.variable_of_column(exc.column)} is not determined"
+                        if exc.column is not None
+                        else "the back-end does not say which variable is not determined"
+                    )
                     raise GeometryError(
-                        f"the normal equations of the graph so far are singular ({exc}); "
-                        f"{problem.variable_of_column(_column(exc, problem.n))} is not determined"
+                        f"the normal equations of the graph so far are singular ({exc}); {which}"
                     ) from None
                 delta = -fac.solve(lin.g)
                 x_new, _ = problem.retract(x, lm, delta)
@@ -807,12 +811,6 @@ class IncrementalOptimizer:
         self._last_converged = converged
         self._last_chi2 = lin.chi2
         return iterations
-
-
-def _column(exc: Exception, n: int) -> int:
-    """The column named in a CHOLMOD message (0 when there is none)."""
-    digits = "".join(ch if ch.isdigit() else " " for ch in str(exc)).split()
-    return min(int(digits[0]), n - 1) if digits else 0
 
 
 def _window_normal_equations(
