@@ -177,7 +177,13 @@ def particle_estimate(poses: ArrayLike, weights: ArrayLike) -> tuple[FloatArray,
     total = float(w.sum())
     if p.shape[0] == 0 or np.any(w < 0) or not total > 0:
         raise InputError("weights: expected non-negative weights with a positive sum")
-    w = w / total
+    return _particle_estimate_unchecked(p, w / total)
+
+
+def _particle_estimate_unchecked(p: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """:func:`particle_estimate` of validated poses ``(P, 3)`` and normalised weights: the
+    filter's per-step kernel (the checks cost more than the arithmetic for a few hundred
+    particles). A test checks it equals the validated function."""
     # einsum, not BLAS: see effective_sample_size.
     xy = np.einsum("i,ij->j", w, p[:, :2])
     theta = float(circular_mean(p[:, 2], w))
