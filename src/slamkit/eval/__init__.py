@@ -9,6 +9,12 @@ from slamkit.eval.consistency import (
     nees,
     nis,
 )
+from slamkit.eval.convergence import (
+    ConvergenceReport,
+    ErrorStats,
+    convergence,
+    convergence_against_truth,
+)
 from slamkit.eval.gps import GpsError, GpsOutliers, GpsScoreConfig, gps_error, gps_outliers
 from slamkit.eval.innovations import NisSummary, nis_summary
 from slamkit.eval.landmarks import (
@@ -32,6 +38,8 @@ __all__ = [
     "AlignMode",
     "AssociationScores",
     "ConsistencyReport",
+    "ConvergenceReport",
+    "ErrorStats",
     "GpsError",
     "GpsOutliers",
     "GpsScoreConfig",
@@ -46,6 +54,8 @@ __all__ = [
     "association_scores",
     "chi2_bounds",
     "consistency_report",
+    "convergence",
+    "convergence_against_truth",
     "gps_error",
     "gps_outliers",
     "landmark_map_error",

@@ -16,6 +16,7 @@ from slamkit.eval import (
     associate,
     association_scores,
     chi2_bounds,
+    convergence,
     gps_error,
     landmark_map_error,
     nees,
@@ -25,7 +26,13 @@ from slamkit.eval import (
 )
 from slamkit.pipeline.runner import Result
 
-__all__ = ["Evaluation", "evaluate"]
+__all__ = ["CONVERGENCE", "CONVERGENCE_LOST", "Evaluation", "evaluate"]
+
+CONVERGENCE = (0.5, 30.0)
+"""``(threshold [m], hold [s])``: a run without a prior has converged once its position error
+stays below 0.5 m for 30 s (:func:`slamkit.eval.convergence`)."""
+CONVERGENCE_LOST = 1.0
+"""Position error [m] above which a converged run counts as having lost the robot."""
 
 
 @dataclass(frozen=True)
@@ -56,7 +63,8 @@ def _metric(metrics: dict[str, Any], name: str, compute: Callable[[], _HasDict])
 
 def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -> Evaluation:
     """ATE (SE(2)-aligned and unaligned), RPE over one step and over 10 m, NEES against the
-    true trajectory, the error against a position-only reference track (GPS, outliers
+    true trajectory, the time to converge of a run without a prior (:data:`CONVERGENCE`),
+    the error against a position-only reference track (GPS, outliers
     rejected, SE(2)-aligned at its times), NIS statistics of the innovation log (windows of
     50 updates), landmark-map error (landmarks matched by id, or by position when the
     estimator numbered its own), data-association scores against the true association of
@@ -95,6 +103,21 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
             )
             err = pose_errors(est, ref)
             metrics["final_position_error"] = float(np.hypot(*err[-1, :2]))
+            if dataset.initial_pose is None:  # a global start: when did it find the robot?
+                position, heading = np.hypot(err[:, 0], err[:, 1]), np.abs(err[:, 2])
+                threshold, hold = CONVERGENCE
+                _metric(
+                    metrics,
+                    "convergence",
+                    lambda: convergence(
+                        result.times[ia],
+                        position,
+                        threshold,
+                        hold,
+                        lost_threshold=CONVERGENCE_LOST,
+                        heading_errors=heading,
+                    ),
+                )
             sig = nees_vals = None
             if result.covariances is not None:
                 covs = result.covariances[ia]
