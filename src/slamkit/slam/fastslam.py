@@ -417,6 +417,9 @@ class _Work:
         self.assoc_status: NDArray[np.int8] = np.zeros(0, dtype=np.int8)
         self.seen = np.zeros(ids.shape, dtype=bool)
         self.updated = np.zeros(ids.shape, dtype=bool)
+        self.all_ok = True  # the last update found every landmark off the sensor
+        # False only while no landmark can have been started by an unlabelled reading.
+        self.maybe_prunable = True
         # Whether every particle holds the same ids in the same slots (None: not known),
         # and then the slot of each id (None: not built yet).
         self._common: bool | None = None
@@ -464,6 +467,7 @@ class _Work:
         w = _Work(self.lm[:, :, indices], self.counters[:, indices], self.ids[:, indices],
                   self.counts[indices], self.next_id)  # fmt: skip
         w.common = True if self.common else None
+        w.maybe_prunable = self.maybe_prunable
         w.slot_of = self.slot_of  # the same slots: resampling keeps a common layout common
         return w
 
@@ -512,6 +516,9 @@ class _Work:
         self.updated = widen(self.updated, False)
 
 
+# What `_landmark_terms` returns for `ok` when every landmark is off the sensor (broadcasts).
+_ALL_OK = np.ones((), dtype=bool)
+
 # Rows of the stacked innovation terms of :func:`_landmark_terms`.
 _ZH0, _ZH1, _H00, _H01, _H10, _H11, _T00, _T01, _T10, _T11, _I00, _I01, _I11, _LOGDET = range(14)
 
@@ -549,13 +556,16 @@ def _landmark_terms(
     ``_h``/``_jac``. A test checks both against the models' validated methods."""
     px, py, pth = pose
     batch = g.shape[1:]
-    F = np.empty((14, *batch))
-    dx, dy, q00, q01, q11, tmp = np.empty((6, *batch))
+    buf = np.empty((20, *batch))  # the terms and, after them, scratch
+    F = buf[:14]
+    dx, dy, q00, q01, q11, tmp = buf[14:]
     np.subtract(g[_MX], px, out=dx)
     np.subtract(g[_MY], py, out=dy)
-    r = np.hypot(dx, dy, out=F[_ZH0])
-    ok = r >= 2.0 * MIN_RANGE
-    if not ok.all():
+    r = np.sqrt(_dot2(dx, dx, dy, dy, F[_ZH0], tmp), out=F[_ZH0])  # np.hypot costs 2x
+    if r.size and float(r.min()) >= 2.0 * MIN_RANGE:
+        ok = _ALL_OK
+    else:
+        ok = r >= 2.0 * MIN_RANGE
         dx[~ok], dy[~ok], r[~ok] = 1.0, 0.0, 1.0
     if isinstance(model, RangeBearing):
         np.arctan2(dy, dx, out=F[_ZH1])
@@ -590,10 +600,9 @@ def _landmark_terms(
     _dot2(t10, h10, t11, h11, q11, tmp)
     q11 += float(R[1, 1])
     det = np.multiply(q00, q11, out=dx)
-    det -= np.multiply(q01, q01, out=tmp)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        np.log(det, out=F[_LOGDET])
-        inv_det = np.divide(1.0, det, out=det)
+    det -= np.multiply(q01, q01, out=tmp)  # > 0: R is positive definite, H Σ Hᵀ semidefinite
+    np.log(det, out=F[_LOGDET])
+    inv_det = np.divide(1.0, det, out=det)
     np.multiply(q11, inv_det, out=F[_I00])
     np.multiply(q01, inv_det, out=F[_I01])
     np.negative(F[_I01], out=F[_I01])
@@ -663,8 +672,9 @@ def _ekf(
     particles. The tests compare this update with a Joseph-form reference to 1e-12."""
     t00, t01, t10, t11 = F[_T00], F[_T01], F[_T10], F[_T11]
     i00, i01, i11 = F[_I00], F[_I01], F[_I11]
-    out = np.empty_like(g)
-    k00, k01, k10, k11, tmp = np.empty((5, *g.shape[1:]))
+    buf = np.empty((10, *g.shape[1:]))
+    out = buf[:5]
+    k00, k01, k10, k11, tmp = buf[5:]
     _dot2(t00, i00, t10, i01, k00, tmp)  # K = Tᵀ Q⁻¹
     _dot2(t00, i01, t10, i11, k01, tmp)
     _dot2(t01, i00, t11, i01, k10, tmp)
@@ -703,7 +713,8 @@ def _update_landmarks(
     nu0, nu1 = _innovations(model, F, z0, z1)
     ll = _log_likelihood(F, nu0, nu1)
     new = _ekf(F, g, nu0, nu1, R)
-    if ok.all():
+    w.all_ok = ok is _ALL_OK or bool(ok.all())
+    if w.all_ok:
         w.lm[full] = new
         if mark:
             w.seen[index] = True
@@ -781,8 +792,8 @@ def _labelled_round(
     (``log p0`` for a start, ``-inf`` for a landmark at the sensor) and which readings found
     their landmark ``(K, P)`` (None: all). ``mark``: see :func:`_update_landmarks`."""
     n, k = poses.shape[0], z.shape[0]
-    cmax = int(w.counts.max())
-    if cmax and w.is_common(cmax):
+    cmax = w.ids.shape[0] if w.slot_of is not None else int(w.counts.max())
+    if cmax and (w.slot_of is not None or w.is_common(cmax)):
         # Every particle holds the same ids in the same slots (the usual case with labelled
         # readings only): look the ids up once, work on (K, P) blocks.
         where = w.slot_of
@@ -945,6 +956,7 @@ def _unlabelled(
     status[matched] = UPDATED
     spawning = new.any(axis=1)  # readings that start a landmark somewhere get one id each
     if spawning.any():
+        w.maybe_prunable = True
         ids = np.full(k, -1, dtype=np.int64)
         ids[spawning] = w.next_id + np.arange(int(spawning.sum()))
         w.next_id += int(spawning.sum())
@@ -983,12 +995,12 @@ def _scan_at_poses(
         # The usual case with known correspondences: every reading labelled, each id once.
         # Labelled landmarks keep no existence counter and no unlabelled reading follows:
         # nothing reads the seen/updated marks of this scan.
+        w.all_ok = True
         l_all, found = _labelled_round(w, poses, pose, z, rid, R, model, s.log_p0, mark=False)
-        at_sensor = l_all == -np.inf
-        if found is None and not at_sensor.any():  # every particle: every reading updated
+        if found is None and w.all_ok:  # every particle: every reading updated
             w.assoc, w.assoc_status = rid, np.full(rid.size, UPDATED, dtype=np.int8)
         else:
-            w.assoc, w.assoc_status = _labelled_association(rid, found, at_sensor)
+            w.assoc, w.assoc_status = _labelled_association(rid, found, l_all == -np.inf)
         return l_all.sum(axis=0) if weigh_first_round else np.zeros(poses.shape[0])
     n, k = poses.shape[0], rid.size
     assoc = np.full((k, n), -1, dtype=np.int64)
@@ -1029,8 +1041,10 @@ def _prune(w: _Work, poses: FloatArray, s: UpdateSettings) -> None:
     ``prune`` on; the others keep no counter): existence counters up for updated landmarks,
     down for landmarks predicted visible but not seen; remove those below zero (stable
     compaction)."""
+    if not (s.prune and w.maybe_prunable):
+        return
     cmax = int(w.counts.max()) if w.counts.size else 0
-    if cmax == 0 or not s.prune:
+    if cmax == 0:
         return
     prunable = w.ids[:cmax] >= s.first_unlabelled_id  # (unused slots hold id -1)
     if not prunable.any():
@@ -1732,6 +1746,7 @@ class _FastSlam:
         self._weights = ps.weights
         self._w = _Work.of(ps)
         self._w.common = True
+        self._w.maybe_prunable = False  # no landmark yet
         self._fast_motion = isinstance(self._motion, _MotionBase)
         self._steering_limit = _steering_limit(self._motion)
         self._pending: tuple[FloatArray, float] | None = None  # 2.0: a motion not yet sampled
