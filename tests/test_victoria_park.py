@@ -429,8 +429,12 @@ def test_ground_truth_positions_and_reading_ids_are_checked(tmp_path: Path) -> N
         GroundTruth(position_times=np.array([1.0, 0.0]), positions=np.zeros((2, 2)))
     ds = load_victoria_park({}, data_root=_write(tmp_path))
     ids = ds.truth.reading_ids or ()
+    assert ds.check_reading_ids().tolist() == np.concatenate(ids).tolist()
+    # A truth that no longer matches the events is refused when the association is scored.
+    short = dataclasses.replace(ds, truth=dataclasses.replace(ds.truth, reading_ids=ids[:2]))
     with pytest.raises(ShapeError, match="expected 3 arrays"):
-        dataclasses.replace(ds, truth=dataclasses.replace(ds.truth, reading_ids=ids[:2]))
+        short.check_reading_ids()
     wrong = (ids[0], ids[1][:1], ids[2])
+    bad = dataclasses.replace(ds, truth=dataclasses.replace(ds.truth, reading_ids=wrong))
     with pytest.raises(ShapeError, match="expected 2 ids, got 1"):
-        dataclasses.replace(ds, truth=dataclasses.replace(ds.truth, reading_ids=wrong))
+        bad.check_reading_ids()
