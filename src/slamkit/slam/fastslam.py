@@ -40,10 +40,12 @@ applies every EKF update and landmark start of the scan in one batch. The result
 reading-by-reading loop exactly (a test compares them to 1e-12).
 
 Landmarks started from unlabelled readings carry an existence counter: it starts at 1, goes
-up by one in each scan that updates the landmark and down by one in each scan in which it was
-predicted visible (range within the sensor's limits and inside the field of view, judged from
-the particle's pose and the landmark's mean) but not matched; below zero the landmark is
-removed (clutter and duplicate landmarks die this way). A landmark known by its id is never
+up by ``hit_weight`` (default 1) in each scan that updates the landmark and down by one in
+each scan in which it was predicted visible (range within the sensor's minimum and its
+*effective* range — where it actually reads landmarks, see
+:attr:`FastSlamConfig.miss_max_range` — and inside the field of view, judged from the
+particle's pose and the landmark's mean) but not matched; below zero the landmark is removed
+(clutter and duplicate landmarks die this way). A landmark known by its id is never
 removed and keeps no counter (its counter stays at its start value).
 
 FastSLAM 1.0 vs 2.0
@@ -333,7 +335,9 @@ class UpdateSettings:
     ``visible_max_range`` [m] and ``fov`` [rad, centred on the heading]: where the sensor
     sees a landmark (for the counters). ``min_range`` [m]: readings that place their landmark
     closer than this are skipped. ``first_unlabelled_id``: landmarks with ids at or above it
-    were started by unlabelled readings (only those are pruned).
+    were started by unlabelled readings (only those keep a counter and are pruned).
+    ``hit_weight``: what a scan that updates a landmark adds to its counter (a miss
+    subtracts 1).
     """
 
     p0: float
