@@ -54,10 +54,9 @@ from slamkit.optim import (
 )
 
 if TYPE_CHECKING:
-    from matplotlib.figure import Figure
-
     from slamkit.optim.data import GraphFamily
     from slamkit.optim.solvers import InitName
+    from slamkit.viz.plots import Figure  # app never imports matplotlib itself
 
 __all__ = ["OptimizeReport", "OptimizeRequest", "optimize_graph_job"]
 
