@@ -234,6 +234,29 @@ class _Solver:
         self.assembly_seconds += lin.seconds
         return lin
 
+    def info(
+        self,
+        iteration: int,
+        lin: Linearization,
+        step: float,
+        accepted: bool,
+        damping: float,
+        since: tuple[float, float],
+    ) -> IterationInfo:
+        """The callback's record of an iteration that began when the assembly and factor
+        clocks read ``since``."""
+        return IterationInfo(
+            iteration,
+            lin.cost,
+            lin.chi2,
+            step,
+            accepted,
+            damping,
+            self.factorizations,
+            self.assembly_seconds - since[0],
+            self.factor_seconds - since[1],
+        )
+
     def solve(self, H: FloatArray, g: FloatArray, shift: FloatArray | None) -> FloatArray:
         """``δ = -(H + shift)⁻¹ g`` (``shift`` added to the diagonal)."""
         t0 = time.perf_counter()
@@ -542,17 +565,7 @@ def _gauss_newton(
         step = float(np.max(np.abs(delta))) if delta.shape[0] else 0.0
         why = _small_change(cfg, lin.cost, new.cost, step)
         lin = new
-        info = IterationInfo(
-            it,
-            lin.cost,
-            lin.chi2,
-            step,
-            True,
-            0.0,
-            s.factorizations,
-            s.assembly_seconds - a0,
-            s.factor_seconds - f0,
-        )
+        info = s.info(it, lin, step, True, 0.0, (a0, f0))
         if _notify(history, callback, info):
             return poses, landmarks, lin, it, False, "stopped by the callback"
         if why:
@@ -591,17 +604,7 @@ def _levenberg_marquardt(
                 break
             lam *= cfg.lambda_factor
             if lam > cfg.lambda_max:
-                info = IterationInfo(
-                    it,
-                    lin.cost,
-                    lin.chi2,
-                    0.0,
-                    False,
-                    lam,
-                    s.factorizations,
-                    s.assembly_seconds - a0,
-                    s.factor_seconds - f0,
-                )
+                info = s.info(it, lin, 0.0, False, lam, (a0, f0))
                 _notify(history, callback, info)
                 return (
                     poses,
@@ -613,17 +616,7 @@ def _levenberg_marquardt(
                 )
         step = float(np.max(np.abs(delta))) if delta.shape[0] else 0.0
         why = _small_change(cfg, lin.cost, new.cost, step)
-        info = IterationInfo(
-            it,
-            new.cost,
-            new.chi2,
-            step,
-            True,
-            lam,
-            s.factorizations,
-            s.assembly_seconds - a0,
-            s.factor_seconds - f0,
-        )
+        info = s.info(it, new, step, True, lam, (a0, f0))
         poses, landmarks, lin = p_new, l_new, new
         lam = max(lam / cfg.lambda_factor, 1e-20)
         if _notify(history, callback, info):
@@ -686,17 +679,7 @@ def _dogleg(
             if gain > 0:
                 break
             if radius < cfg.trust_radius_min:
-                info = IterationInfo(
-                    it,
-                    lin.cost,
-                    lin.chi2,
-                    0.0,
-                    False,
-                    radius,
-                    s.factorizations,
-                    s.assembly_seconds - a0,
-                    s.factor_seconds - f0,
-                )
+                info = s.info(it, lin, 0.0, False, radius, (a0, f0))
                 _notify(history, callback, info)
                 return (
                     poses,
@@ -708,17 +691,7 @@ def _dogleg(
                 )
         step = float(np.max(np.abs(h))) if h.shape[0] else 0.0
         why = _small_change(cfg, lin.cost, new.cost, step)
-        info = IterationInfo(
-            it,
-            new.cost,
-            new.chi2,
-            step,
-            True,
-            radius,
-            s.factorizations,
-            s.assembly_seconds - a0,
-            s.factor_seconds - f0,
-        )
+        info = s.info(it, new, step, True, radius, (a0, f0))
         poses, landmarks, lin = p_new, l_new, new
         if _notify(history, callback, info):
             return poses, landmarks, lin, it, False, "stopped by the callback"
