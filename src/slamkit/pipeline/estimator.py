@@ -9,6 +9,8 @@ through :meth:`Estimator.handle`, reports its current pose estimate through
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -17,6 +19,7 @@ from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset, Event
+from slamkit.errors import ConvergenceError
 from slamkit.maps import LandmarkMap, OccupancyGrid
 
 __all__ = [
@@ -27,6 +30,7 @@ __all__ = [
     "LandmarkEstimate",
     "ParticleSnapshot",
     "PoseEstimate",
+    "StepClock",
 ]
 
 
@@ -98,6 +102,34 @@ class Frame:
     landmarks: LandmarkEstimate | None = None
     particles: FloatArray | None = None
     """Particle poses ``(P, 3)`` of a particle filter."""
+
+
+class StepClock:
+    """The runner's step numbering inside an estimator — one step per distinct time stamp,
+    the first event being step 1 — so that an estimator's own errors name the step the
+    runner would (:class:`~slamkit.errors.ConvergenceError` carries it)."""
+
+    def __init__(self) -> None:
+        self.step = 0
+        self._t: float | None = None
+
+    def tick(self, t: float) -> int:
+        """Count the event at time ``t``; the step it belongs to."""
+        if self._t is None or t != self._t:
+            self.step += 1
+            self._t = t
+        return self.step
+
+    @contextmanager
+    def numbering(self, name: str, t: float) -> Iterator[None]:
+        """Re-raise a :class:`~slamkit.errors.ConvergenceError` without a step as
+        ``"{name} at t = {t} s: ..."`` with the current step."""
+        try:
+            yield
+        except ConvergenceError as exc:
+            if exc.step is not None:
+                raise
+            raise ConvergenceError(f"{name} at t = {t:g} s: {exc}", step=self.step) from exc
 
 
 class Estimator(Protocol):

@@ -108,6 +108,7 @@ from slamkit.pipeline.estimator import (
     InnovationLog,
     LandmarkEstimate,
     PoseEstimate,
+    StepClock,
 )
 from slamkit.prob import chi2_gate
 
@@ -918,8 +919,7 @@ class EkfSlam:
         self._slot_of: dict[int, int] = {}  # landmark id -> index in the state
         self._next_id = OWN_ID_BASE
         self._last_odometry: FloatArray | None = None
-        self._last_t: float | None = None
-        self._step = 0
+        self._clock = StepClock()
         self._counts = dict.fromkeys(_COUNTS, 0)
         self._log_t: list[float] = []
         self._log_id: list[int] = []
@@ -972,10 +972,8 @@ class EkfSlam:
     # -- Estimator protocol ---------------------------------------------------------------
 
     def handle(self, event: Event) -> None:
-        if self._last_t is None or event.t != self._last_t:
-            self._step += 1
-            self._last_t = event.t
-        try:
+        step = self._clock.tick(event.t)
+        with self._clock.numbering("ekf-slam", event.t):
             if isinstance(event, Control):
                 self._predict(event.u, event.dt)
             elif isinstance(event, Odometry):
@@ -984,14 +982,8 @@ class EkfSlam:
                 self._last_odometry = event.pose
             elif isinstance(event, LandmarkReadings):
                 self._scan(event)
-            if self._config.check_every is not None and self._step % self._config.check_every == 0:
+            if self._config.check_every is not None and step % self._config.check_every == 0:
                 _check_covariance(self._views()[1], "ekf-slam")
-        except ConvergenceError as exc:
-            if exc.step is not None:
-                raise
-            raise ConvergenceError(
-                f"ekf-slam at t = {event.t:g} s: {exc}", step=self._step
-            ) from exc
 
     def estimate(self) -> PoseEstimate:
         return PoseEstimate(self._mean_buf[:3].copy(), self._cov_buf[:3, :3].copy())

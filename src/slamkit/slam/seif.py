@@ -124,6 +124,7 @@ from slamkit.pipeline.estimator import (
     InnovationLog,
     LandmarkEstimate,
     PoseEstimate,
+    StepClock,
 )
 from slamkit.prob import chi2_gate
 from slamkit.slam.ekf_slam import (
@@ -495,8 +496,7 @@ class Seif:
         self._max_block = 0  # the largest index block a motion update or sparsification used
         self._max_blanket = 0  # the largest association solve (state entries)
         self._last_odometry: FloatArray | None = None
-        self._last_t: float | None = None
-        self._step = 0
+        self._clock = StepClock()
         self._counts = dict.fromkeys(_COUNTS, 0)
         self._log_t: list[float] = []
         self._log_nis: list[float] = []
@@ -508,10 +508,8 @@ class Seif:
     # -- Estimator protocol ---------------------------------------------------------------
 
     def handle(self, event: Event) -> None:
-        if self._last_t is None or event.t != self._last_t:
-            self._step += 1
-            self._last_t = event.t
-        try:
+        self._clock.tick(event.t)
+        with self._clock.numbering("seif", event.t):
             if isinstance(event, Control):
                 self._predict(event.u, event.dt)
             elif isinstance(event, Odometry):
@@ -525,10 +523,6 @@ class Seif:
                 self._check_pose_block()
             if not math.isfinite(float(self._mu[0] + self._mu[1] + self._mu[2])):
                 raise ConvergenceError("the mean became non-finite")
-        except ConvergenceError as exc:
-            if exc.step is not None:
-                raise
-            raise ConvergenceError(f"seif at t = {event.t:g} s: {exc}", step=self._step) from exc
 
     def estimate(self) -> PoseEstimate:
         pose = self._mu[:3].copy()
