@@ -811,6 +811,21 @@ class EkfSlamConfig:
                 raise ConfigError(f"{name}: expected an integer >= 1, got {v!r}")
 
 
+def _scan_readings(
+    event: LandmarkReadings, m: int, use_ids: bool
+) -> tuple[FloatArray, NDArray[np.int64]]:
+    """A scan's readings ``(K, m)``, checked (shape, finite), and the ids to use: the
+    event's, or all ``-1`` when ids are not used."""
+    z = np.asarray(event.z, dtype=np.float64)
+    if z.ndim != 2 or z.shape[1] != m:
+        raise ShapeError(f"readings at t={event.t}: expected shape (K, {m}), got {z.shape}")
+    if not np.isfinite(z).all():
+        raise NonFiniteError(f"readings at t={event.t}: NaN or inf values")
+    if not use_ids:
+        return z, np.full(z.shape[0], -1, dtype=np.int64)
+    return z, np.asarray(event.ids, dtype=np.int64)
+
+
 _COUNTS = (
     "predictions",
     "readings",
@@ -1228,19 +1243,10 @@ class EkfSlam:
         return 0.5 * (M + M.T)
 
     def _scan(self, event: LandmarkReadings) -> None:
-        z = np.asarray(event.z, dtype=np.float64)
-        if z.ndim != 2 or z.shape[1] != self._m:
-            raise ShapeError(
-                f"readings at t={event.t}: expected shape (K, {self._m}), got {z.shape}"
-            )
-        if not np.isfinite(z).all():
-            raise NonFiniteError(f"readings at t={event.t}: NaN or inf values")
+        z, ids = _scan_readings(event, self._m, self._use_ids)
         t = float(event.t)
         K = z.shape[0]
         self._counts["readings"] += K
-        ids = np.asarray(event.ids, dtype=np.int64)
-        if not self._use_ids:
-            ids = np.full(K, -1, dtype=np.int64)
         usable = np.ones(K, dtype=bool)
         if self._config.min_range > 0 and K:
             x = self._mean_buf[:3]

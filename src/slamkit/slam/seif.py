@@ -107,8 +107,6 @@ from slamkit.errors import (
     ConvergenceError,
     GeometryError,
     InputError,
-    NonFiniteError,
-    ShapeError,
 )
 from slamkit.geometry import wrap_angle
 from slamkit.geometry.angles import wrap_angle_float
@@ -133,6 +131,7 @@ from slamkit.slam.ekf_slam import (
     OWN_ID_BASE,
     UPDATED,
     _h_jacobians,
+    _scan_readings,
     _wrap_components,
 )
 
@@ -678,19 +677,10 @@ class Seif:
         self._read_status.append(status)
 
     def _readings(self, event: LandmarkReadings) -> None:
-        z = np.asarray(event.z, dtype=np.float64)
-        if z.ndim != 2 or z.shape[1] != self._m:
-            raise ShapeError(
-                f"readings at t={event.t}: expected shape (K, {self._m}), got {z.shape}"
-            )
-        if not np.isfinite(z).all():
-            raise NonFiniteError(f"readings at t={event.t}: NaN or inf values")
+        z, ids = _scan_readings(event, self._m, self._use_ids)
         t = float(event.t)
         K = z.shape[0]
         self._counts["readings"] += K
-        ids = np.asarray(event.ids, dtype=np.int64)
-        if not self._use_ids:
-            ids = np.full(K, -1, dtype=np.int64)
         labelled = ids >= 0
         # association at the state before the scan
         target = np.full(K, REJECTED, dtype=np.int64)  # map row, NEW or REJECTED
