@@ -29,7 +29,7 @@ from scipy.ndimage import distance_transform_edt
 
 from slamkit._validation import FloatArray, as_array, as_positive
 from slamkit.errors import InputError
-from slamkit.maps import OccupancyGrid
+from slamkit.maps import FREE_THRESHOLD, OCCUPIED_THRESHOLD, OccupancyGrid
 
 __all__ = ["LikelihoodField", "beam_log_likelihood", "log_likelihood", "usable_beams"]
 
@@ -99,8 +99,8 @@ class LikelihoodField:
         z_rand: float = 0.05,
         max_range: float = 30.0,
         *,
-        occupied_threshold: float = 0.65,
-        free_threshold: float = 0.35,
+        occupied_threshold: float = OCCUPIED_THRESHOLD,
+        free_threshold: float = FREE_THRESHOLD,
     ) -> LikelihoodField:
         """Compute the distance map of ``grid`` and build the field.
 

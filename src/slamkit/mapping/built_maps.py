@@ -47,7 +47,7 @@ from slamkit.datasets.carmen import load_intel
 from slamkit.datasets.stream import Dataset, Event, LaserScan
 from slamkit.errors import ConfigError, InputError
 from slamkit.mapping.occupancy import OccupancyMappingConfig, build_occupancy_map
-from slamkit.maps import OccupancyGrid
+from slamkit.maps import OCCUPIED_THRESHOLD, OccupancyGrid
 
 __all__ = [
     "BuiltMapOptions",
@@ -89,7 +89,7 @@ class BuiltMapOptions:
 
 
 def crop_to_occupied(
-    grid: OccupancyGrid, margin: float, occupied_threshold: float = 0.65
+    grid: OccupancyGrid, margin: float, occupied_threshold: float = OCCUPIED_THRESHOLD
 ) -> OccupancyGrid:
     """The part of ``grid`` covering its occupied cells (probability ``>= occupied_threshold``)
     grown by ``margin`` metres, on the same lattice (cells keep their values and positions).

@@ -31,7 +31,7 @@ from slamkit.mapping.occupancy import (
     build_occupancy_map,
     data_bounds,
 )
-from slamkit.maps import OccupancyGrid
+from slamkit.maps import FREE_THRESHOLD, OCCUPIED_THRESHOLD, OccupancyGrid
 
 __all__ = [
     "FREE_THRESHOLD",
@@ -47,16 +47,12 @@ __all__ = [
     "occupied_precision_recall",
 ]
 
-OCCUPIED_THRESHOLD = 0.65
-"""A map cell with probability at least this is occupied. With :data:`FREE_THRESHOLD` the one
-classification of built maps: the quality report, the map agreement, precision/recall and the
-ROS export (:mod:`slamkit.io.rosmap` writes these numbers into ``map.yaml``) use it; the
-defaults of :meth:`OccupancyGrid.occupied` / :meth:`~OccupancyGrid.free` are the same
-numbers. With the default inverse model (``p_occ`` 0.75, ``p_free`` 0.45) one occupied
-reading makes a prior cell occupied, while it takes four free readings (net) to make it free
-(0.45, 0.40, 0.354, 0.309)."""
-FREE_THRESHOLD = 0.35
-"""A map cell with probability at most this is free (see :data:`OCCUPIED_THRESHOLD`)."""
+# OCCUPIED_THRESHOLD / FREE_THRESHOLD (defined in slamkit.maps.types, re-exported here) are
+# the one classification of built maps: the quality report, the map agreement,
+# precision/recall and the ROS export (slamkit.io.rosmap writes these numbers into map.yaml).
+# With the default inverse model (p_occ 0.75, p_free 0.45) one occupied reading makes a prior
+# cell occupied, while it takes four free readings (net) to make it free (0.45, 0.40, 0.354,
+# 0.309).
 
 
 def check_thresholds(occupied_threshold: float, free_threshold: float) -> None:

@@ -20,9 +20,24 @@ from numpy.typing import ArrayLike, NDArray
 from slamkit._validation import FloatArray, as_array, as_positive
 from slamkit.errors import InputError, ShapeError
 
-__all__ = ["UNKNOWN", "LandmarkMap", "OccupancyGrid", "SegmentMap"]
+__all__ = [
+    "FREE_THRESHOLD",
+    "OCCUPIED_THRESHOLD",
+    "UNKNOWN",
+    "LandmarkMap",
+    "OccupancyGrid",
+    "SegmentMap",
+]
 
 UNKNOWN = 0.5
+OCCUPIED_THRESHOLD = 0.65
+"""An occupancy-grid cell with probability at least this is occupied — the one
+classification of grids in slamkit: :meth:`OccupancyGrid.occupied`, the likelihood field,
+ray casting, the quality report of built maps (:mod:`slamkit.mapping.quality`, where the
+choice is discussed) and the ROS export all use it."""
+FREE_THRESHOLD = 0.35
+"""An occupancy-grid cell with probability at most this is free (see
+:data:`OCCUPIED_THRESHOLD`)."""
 
 
 @dataclass(frozen=True)
@@ -158,11 +173,11 @@ class OccupancyGrid:
         rows, cols = self.shape
         return (c[..., 0] >= 0) & (c[..., 0] < rows) & (c[..., 1] >= 0) & (c[..., 1] < cols)
 
-    def occupied(self, threshold: float = 0.65) -> NDArray[np.bool_]:
+    def occupied(self, threshold: float = OCCUPIED_THRESHOLD) -> NDArray[np.bool_]:
         """Boolean mask of cells whose probability is at least ``threshold``."""
         return self.prob >= threshold
 
-    def free(self, threshold: float = 0.35) -> NDArray[np.bool_]:
+    def free(self, threshold: float = FREE_THRESHOLD) -> NDArray[np.bool_]:
         """Boolean mask of cells whose probability is at most ``threshold``."""
         return self.prob <= threshold
 

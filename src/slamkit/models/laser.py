@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray, as_array, as_positive
 from slamkit.errors import InputError, ShapeError
-from slamkit.maps.types import OccupancyGrid, SegmentMap
+from slamkit.maps.types import OCCUPIED_THRESHOLD, OccupancyGrid, SegmentMap
 
 __all__ = ["LaserScanner", "cast_rays_grid", "cast_rays_segments"]
 
@@ -106,7 +106,7 @@ def cast_rays_grid(
     beam_angles: ArrayLike,
     grid: OccupancyGrid,
     max_range: float,
-    occupied_threshold: float = 0.65,
+    occupied_threshold: float = OCCUPIED_THRESHOLD,
 ) -> FloatArray:
     """Ranges ``(..., B)`` from each pose along each beam to the first occupied grid cell.
 
@@ -247,7 +247,7 @@ class LaserScanner:
         poses: ArrayLike,
         world: SegmentMap | OccupancyGrid | ArrayLike,
         *,
-        occupied_threshold: float = 0.65,
+        occupied_threshold: float = OCCUPIED_THRESHOLD,
     ) -> FloatArray:
         """Noise-free ranges ``(..., B)`` from sensor poses ``(..., 3)`` in ``world`` (a
         :class:`SegmentMap`, an ``(S, 2, 2)`` segment array or an :class:`OccupancyGrid`)."""
@@ -263,7 +263,7 @@ class LaserScanner:
         world: SegmentMap | OccupancyGrid | ArrayLike,
         rng: np.random.Generator,
         *,
-        occupied_threshold: float = 0.65,
+        occupied_threshold: float = OCCUPIED_THRESHOLD,
     ) -> FloatArray:
         """Noisy scans ``(..., B)``: true range plus ``N(0, range_sigma²)`` per beam, clipped to
         ``[0, max_range]``. Beams without a return read exactly ``max_range`` (no noise); a
