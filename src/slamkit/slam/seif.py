@@ -594,6 +594,12 @@ class Seif:
         except np.linalg.LinAlgError:
             raise ConvergenceError("seif: the information matrix is singular") from None
 
+    def landmark_estimate(self) -> LandmarkEstimate:
+        """The landmarks now at the amortised (relaxed) mean, without covariances: recovering
+        those needs the whole information matrix, which only :meth:`finish` does."""
+        mean = self._mu[3 : self._n].reshape(-1, 2).copy()
+        return LandmarkEstimate(LandmarkMap(mean, np.asarray(self._ids, dtype=np.int64)))
+
     def finish(self) -> EstimatorOutput:
         O, _ = self.information
         mu = self.recover_mean()
