@@ -18,6 +18,7 @@ import numpy as np
 from matplotlib.animation import FuncAnimation, PillowWriter
 
 from slamkit.errors import InputError
+from slamkit.geometry.alignment import Similarity
 from slamkit.viz.plots import (
     new_figure,
     plot_covariance_ellipses,
@@ -67,7 +68,7 @@ def save_animation(
     if truth.poses is not None:
         plot_trajectory(ax, truth.poses, label="ground truth", color="black", linewidth=1.0)
     if truth.positions is not None and gps_alignment is not None:
-        gps = _to_estimate_frame(truth.positions, gps_alignment)
+        gps = Similarity.from_pose(gps_alignment).inverse().apply_to_points(truth.positions)
         ax.plot(gps[:, 0], gps[:, 1], ".", ms=1.5, color="0.55", label="GPS (aligned)")
     _fix_limits(ax, result, dataset)
     ax.set_aspect("equal")
@@ -118,14 +119,6 @@ def save_animation(
         tmp.unlink(missing_ok=True)
         raise
     return target
-
-
-def _to_estimate_frame(xy: np.ndarray, alignment: tuple[float, float, float]) -> np.ndarray:
-    """Points of the GPS frame in the estimate's frame (the inverse of the alignment)."""
-    tx, ty, angle = alignment
-    c, s = np.cos(angle), np.sin(angle)
-    d = xy - np.array([tx, ty])
-    return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], axis=1)
 
 
 def _fix_limits(ax: Axes, result: Result, dataset: Dataset) -> None:

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from slamkit.eval import chi2_bounds, nis_summary
+from slamkit.geometry.alignment import Similarity
 from slamkit.viz.maps import plot_map
 from slamkit.viz.plots import (
     new_figure,
@@ -50,11 +51,10 @@ def run_figures(
     plot_trajectories(ax, truth=truth.poses, estimate=result.poses, legend=False)
     gps = evaluation.metrics.get("gps", {})
     if truth.positions is not None and "alignment_tx" in gps:
-        from slamkit.viz.animation import _to_estimate_frame
-
-        xy = _to_estimate_frame(
-            truth.positions, (gps["alignment_tx"], gps["alignment_ty"], gps["alignment_angle"])
+        to_gps = Similarity.from_pose(
+            (gps["alignment_tx"], gps["alignment_ty"], gps["alignment_angle"])
         )
+        xy = to_gps.inverse().apply_to_points(truth.positions)
         ax.plot(xy[:, 0], xy[:, 1], ".", ms=1.5, color="0.55", label="GPS (aligned)", zorder=1)
     if result.covariances is not None and len(result) > 1:
         every = max(1, len(result) // 25)
