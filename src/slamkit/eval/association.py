@@ -54,10 +54,15 @@ class AssociationScores:
         }
 
 
-def association_scores(estimated_ids: ArrayLike, true_ids: ArrayLike) -> AssociationScores:
+def association_scores(
+    estimated_ids: ArrayLike, true_ids: ArrayLike, *, same_ids: bool = False
+) -> AssociationScores:
     """Score the landmark ``estimated_ids (N,)`` an estimator gave each reading (``-1``:
     unused) against the ``true_ids (N,)`` of the same readings (``-1``: unknown, not
-    scored). See the module docstring for the definitions."""
+    scored). See the module docstring for the definitions. ``same_ids``: the estimator
+    numbers landmarks as the truth does (localization in a known map), so a reading is
+    correct only when it got exactly its true id — each true landmark's estimate is itself,
+    not the estimated landmark holding most of its readings."""
     est = np.asarray(estimated_ids)
     true = np.asarray(true_ids)
     if est.ndim != 1 or true.shape != est.shape:
@@ -78,6 +83,8 @@ def association_scores(estimated_ids: ArrayLike, true_ids: ArrayLike) -> Associa
     pairs = pairs[:, order]
     first = np.r_[True, pairs[0, 1:] != pairs[0, :-1]] if pairs.size else np.zeros(0, bool)
     primary_true, primary_est = pairs[0, first], pairs[1, first]
+    if same_ids:
+        primary_true = primary_est = np.unique(true)
     expected = np.full(true.size, -2, dtype=np.int64)
     pos = np.searchsorted(primary_true, true)
     known = (pos < primary_true.size) & (primary_true[np.minimum(pos, primary_true.size - 1)]

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.datasets.stream import Control, Dataset, Event, LandmarkReadings, Odometry
@@ -357,6 +357,7 @@ class _GaussianLocalization:
         self._log_t: list[float] = []
         self._log_nis: list[float] = []
         self._log_id: list[int] = []
+        self._chosen: list[NDArray[np.int64]] = []  # per readings event: landmark or -1
 
     # -- the two steps a filter provides ------------------------------------------------
 
@@ -377,10 +378,12 @@ class _GaussianLocalization:
                 self._motion_step(odometry_control(self._last_odometry, event.pose), 0.0)
             self._last_odometry = event.pose
         elif isinstance(event, LandmarkReadings):
+            chosen = np.full(event.ids.size, -1, dtype=np.int64)
             if self._mean is None:
                 self._start_from_fix(event)
             else:
-                self._readings(event)
+                self._readings(event, chosen)
+            self._chosen.append(chosen)
 
     def estimate(self) -> PoseEstimate:
         if self._mean is None or self._cov is None:
@@ -407,7 +410,8 @@ class _GaussianLocalization:
                 dof=np.full(nis.size, self._meas.dim, dtype=np.int64),
                 landmark_ids=np.asarray(self._log_id, dtype=np.int64),
             )
-        return EstimatorOutput(diagnostics=diagnostics, innovations=log)
+        chosen = np.concatenate([np.zeros(0, np.int64), *self._chosen])
+        return EstimatorOutput(diagnostics=diagnostics, innovations=log, reading_landmarks=chosen)
 
     # -- internals ------------------------------------------------------------------------
 
@@ -461,7 +465,9 @@ class _GaussianLocalization:
         self._counts["relocalization_readings"] += event.ids.size
         return True
 
-    def _readings(self, event: LandmarkReadings) -> None:
+    def _readings(self, event: LandmarkReadings, chosen: NDArray[np.int64]) -> None:
+        """Update with the readings of ``event``; ``chosen[j]`` becomes the landmark reading
+        ``j`` updated with (left ``-1`` when unassociated, rejected or used by a fix)."""
         if self._relocalizing and self._relocalize(event):
             return  # the fix used these readings
         z = event.z
@@ -501,6 +507,7 @@ class _GaussianLocalization:
                     self._lockout_times.append(float(event.t))
                 continue
             self._counts["updates"] += 1
+            chosen[j] = lid
             self._rejections_in_a_row = 0
             if self._config.record_innovations:
                 self._log_t.append(float(event.t))

@@ -166,4 +166,7 @@ def _association(chosen: np.ndarray, dataset: Dataset) -> _HasDict:
             f"association: the estimator reported {chosen.size} readings, the data set has "
             f"{true.size}"
         )
-    return association_scores(chosen, true)
+    known = dataset.known_landmarks
+    used = chosen[chosen >= 0]
+    same_ids = known is not None and bool(np.isin(used, known.ids).all())
+    return association_scores(chosen, true, same_ids=same_ids)
