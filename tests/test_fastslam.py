@@ -29,13 +29,20 @@ from slamkit.errors import (
 )
 from slamkit.eval import absolute_trajectory_error, landmark_map_error
 from slamkit.geometry.alignment import align_points_2d
-from slamkit.localization.particles import effective_sample_size, particle_estimate
+from slamkit.localization.particles import (
+    _low_variance_resample_unchecked,
+    effective_sample_size,
+    low_variance_resample,
+    particle_estimate,
+)
 from slamkit.models import (
     Ackermann,
+    DifferentialDrive,
     OdometryModel,
     RangeBearing,
     RangeOnly,
     RelativePosition,
+    UnicycleArc,
     UnicycleEuler,
     odometry_control,
     propagate_gaussian,
@@ -650,6 +657,80 @@ def test_bad_inputs_raise_typed_errors() -> None:
 
 
 # --------------------------------------------------------------------------------------------
+# The unchecked hot-path kernels against the validated functions
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "model",
+    [
+        UnicycleEuler(),
+        UnicycleArc(),
+        OdometryModel(),
+        Ackermann(2.83, (0.4, -0.2), 0.76),
+        DifferentialDrive(0.5),
+    ],
+    ids=lambda m: type(m).__name__,
+)
+def test_move_particles_in_place_equals_apply(model) -> None:
+    """The in-place particle kernel of every motion model against ``apply`` (1e-12; it is
+    bit-identical), with headings near ±π so that some wrap and some do not, a straight
+    (ω = 0) control for the arc's series branch and turns only for its closed form, and
+    the input controls left alone."""
+    rng = np.random.default_rng(3)
+    n = 200
+    near_pi = rng.choice([-1.0, 1.0], n) * (np.pi - rng.uniform(0, 0.05, n))
+    x = np.column_stack([rng.normal(0, 5, n), rng.normal(0, 5, n), near_pi])
+    k = model.control_dim
+    u = rng.normal(0.0, 0.3, (n, k)) + (np.array([1.0, 0.2, 0.1])[:k])
+    u[0, -1] = 0.0
+    u_copy = u.copy()
+    for dt in (0.1, 0.0):
+        want = model.apply(x, u, dt)
+        got = x.copy()
+        model._move_particles(got, u, dt)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+        assert np.all((got[:, 2] >= -np.pi) & (got[:, 2] < np.pi))
+    np.testing.assert_array_equal(u, u_copy)
+    # No heading out of range: the same, without the wrap; and every turn rate away from 0
+    # (the arc's closed form only).
+    x[:, 2] = rng.uniform(-1.0, 1.0, n)
+    turning = u.copy()
+    turning[:, -1] = np.clip(np.where(u[:, -1] < 0, -0.5, 0.5) + u[:, -1], -1.0, 1.0)
+    for controls in (u, turning):
+        got = x.copy()
+        model._move_particles(got, controls, 0.1)
+        np.testing.assert_allclose(got, model.apply(x, controls, 0.1), rtol=0, atol=1e-12)
+
+
+def test_ackermann_max_steering_is_the_models_domain() -> None:
+    """``max_steering``: ``min(π/2, atan(L/|H|))``; the model is defined just inside it (in
+    both directions) and raises at it."""
+    car = Ackermann(2.83, (0.0, 0.0), 0.76)
+    assert car.max_steering == pytest.approx(math.atan(2.83 / 0.76))
+    assert Ackermann(2.0).max_steering == pytest.approx(np.pi / 2)
+    x = np.zeros(3)
+    for sign in (1.0, -1.0):
+        assert np.all(np.isfinite(car.apply(x, [1.0, sign * 0.999 * car.max_steering], 0.1)))
+    with pytest.raises(GeometryError):
+        car.apply(x, [1.0, car.max_steering * (1 + 1e-9)], 0.1)
+
+
+def test_unchecked_low_variance_resample_equals_the_validated_one() -> None:
+    rng = np.random.default_rng(4)
+    for n in (1, 7, 100):
+        w = rng.exponential(1.0, n)
+        w[rng.random(n) < 0.3] = 0.0
+        w[0] = max(w[0], 1e-3)
+        w /= w.sum()
+        a, b = np.random.default_rng(9), np.random.default_rng(9)
+        np.testing.assert_array_equal(
+            _low_variance_resample_unchecked(w, a, n), low_variance_resample(w, b)
+        )
+        assert a.bit_generator.state == b.bit_generator.state
+
+
+# --------------------------------------------------------------------------------------------
 # FastSLAM 2.0's proposal against brute-force importance sampling
 # --------------------------------------------------------------------------------------------
 
@@ -975,11 +1056,12 @@ def test_particle_snapshots_for_the_plots(version: int) -> None:
 def test_association_accuracy_in_the_cluttered_world(version: int, seeds) -> None:
     """``landmark-clutter``: 150 landmarks >= 1.2 m apart, ~13 readings per scan, no ids, a
     loop closed at the end; the best particle's association (traced through its ancestors)
-    scored against ``truth.reading_ids`` by the pipeline's evaluation. Measured with 100
-    particles (1.0, seeds 0-5): accuracy 1.0, 1.0, 0.9997, 0.961, 0.9997, 0.9993 — seed 3
-    fails part of the loop closure (14 landmarks mapped twice) — and 30 particles (2.0,
-    seeds 0-3): 0.971, 1.0, 0.953, 0.997. The issue's target is 95 %."""
-    from slamkit.pipeline.evaluate import evaluate
+    scored against ``truth.reading_ids`` (:func:`slamkit.eval.association_scores`: the
+    filter numbers its landmarks itself). Measured with 100 particles (1.0, seeds 0-5):
+    accuracy 1.0, 1.0, 0.9997, 0.961, 0.9997, 0.9993 — seed 3 fails part of the loop
+    closure (14 landmarks mapped twice) — and 30 particles (2.0, seeds 0-3): 0.971, 1.0,
+    0.953, 0.997. The issue's target is 95 %."""
+    from slamkit.eval import association_scores
 
     for seed in seeds:
         ds = load_dataset("landmark-clutter", seed=seed)
@@ -988,7 +1070,7 @@ def test_association_accuracy_in_the_cluttered_world(version: int, seeds) -> Non
         res = run(ENTRIES[version], ds, config={"n_particles": n}, seed=seed)
         chosen = res.output.reading_landmarks
         assert chosen is not None and chosen.size == sum(a.size for a in ds.truth.reading_ids)
-        scores = evaluate(res, ds).metrics["association"]
+        scores = association_scores(chosen, np.concatenate(ds.truth.reading_ids)).as_dict()
         assert scores["accuracy"] >= 0.95, (seed, scores)  # measured >= 0.9997 for these
         assert scores["used"] == scores["readings"]  # every reading updated or started one
 

@@ -155,12 +155,21 @@ def low_variance_resample(
     count = w.size if n is None else int(n)
     if count < 1:
         raise InputError(f"n: expected at least one draw, got {n}")
+    return _low_variance_resample_unchecked(w, rng, count)
+
+
+def _low_variance_resample_unchecked(
+    w: FloatArray, rng: np.random.Generator, count: int
+) -> NDArray[np.intp]:
+    """:func:`low_variance_resample` of validated weights ``(P,)`` (float64, non-negative,
+    positive sum) and ``count >= 1`` draws: a particle filter's kernel, where the checks
+    cost as much as the resampling. A test checks it equals the validated function."""
     cum = np.cumsum(w)
     cum /= cum[-1]  # exactly 1 at the end, so every pointer < 1 finds a particle
     pointers = (rng.random() + np.arange(count)) / count
     idx = np.searchsorted(cum, pointers, side="right")
     # Zero-weight particles have cum[i] == cum[i-1]; side="right" never selects them.
-    return np.minimum(idx, w.size - 1).astype(np.intp)
+    return np.minimum(idx, w.size - 1).astype(np.intp, copy=False)
 
 
 def particle_estimate(poses: ArrayLike, weights: ArrayLike) -> tuple[FloatArray, FloatArray]:

@@ -116,9 +116,10 @@ from slamkit.datasets.stream import Control, Dataset, Event, LandmarkReadings, O
 from slamkit.errors import ConfigError, ConvergenceError, InputError, ShapeError
 from slamkit.geometry.angles import wrap_angle
 from slamkit.localization.particles import (
+    _low_variance_resample_unchecked,
+    _particle_estimate_unchecked,
     low_variance_resample,
     normalize_log_weights,
-    particle_estimate,
 )
 from slamkit.mapping.ekf_mapping import (
     DISCARDED,
@@ -405,6 +406,13 @@ _MX, _MY, _S00, _S01, _S11 = range(5)
 _TWO_PI = 2.0 * math.pi
 
 
+# The association of a set that has seen no scan yet (shared, read-only).
+_NO_IDS: IntArray = np.zeros(0, dtype=np.int64)
+_NO_STATUS: NDArray[np.int8] = np.zeros(0, dtype=np.int8)
+_NO_IDS.setflags(write=False)
+_NO_STATUS.setflags(write=False)
+
+
 class _Work:
     """The mutable maps of a particle set, planar and slot-major: ``lm (5, C, P)`` holds the
     mean ``(x, y)`` and the covariance entries ``(Σ00, Σ01, Σ11)`` of slot ``j`` of every
@@ -417,8 +425,17 @@ class _Work:
     mark the slots a scan matched or started (:meth:`begin_scan` clears them); ``removed``
     counts the landmarks the scan pruned."""
 
+    seen: NDArray[np.bool_]
+    updated: NDArray[np.bool_]
+
     def __init__(
-        self, lm: FloatArray, counters: IntArray, ids: IntArray, counts: IntArray, next_id: int
+        self,
+        lm: FloatArray,
+        counters: IntArray,
+        ids: IntArray,
+        counts: IntArray,
+        next_id: int,
+        scratch_of: _Work | None = None,
     ) -> None:
         self.lm = lm
         self.counters = counters
@@ -428,10 +445,15 @@ class _Work:
         self.removed = 0
         # The last scan's association: landmark id and status code of each reading, (K,)
         # when every particle agrees, else (K, P).
-        self.assoc: IntArray = np.zeros(0, dtype=np.int64)
-        self.assoc_status: NDArray[np.int8] = np.zeros(0, dtype=np.int8)
-        self.seen = np.zeros(ids.shape, dtype=bool)
-        self.updated = np.zeros(ids.shape, dtype=bool)
+        self.assoc: IntArray = _NO_IDS
+        self.assoc_status: NDArray[np.int8] = _NO_STATUS
+        self.seen: NDArray[np.bool_]
+        self.updated: NDArray[np.bool_]
+        if scratch_of is not None and scratch_of.seen.shape == ids.shape:
+            self.seen, self.updated = scratch_of.seen, scratch_of.updated
+        else:
+            self.seen = np.zeros(ids.shape, dtype=bool)
+            self.updated = np.zeros(ids.shape, dtype=bool)
         self.all_ok = True  # the last update found every landmark off the sensor
         # False only while no landmark can have been started by an unlabelled reading.
         self.maybe_prunable = True
@@ -477,10 +499,19 @@ class _Work:
         return means, covs
 
     def select(self, indices: NDArray[np.intp]) -> _Work:
-        """The maps of the particles ``indices`` (resampling): copies by fancy indexing, so
-        two selected particles never share a landmark buffer."""
-        w = _Work(self.lm[:, :, indices], self.counters[:, indices], self.ids[:, indices],
-                  self.counts[indices], self.next_id)  # fmt: skip
+        """The maps of the particles ``indices`` (resampling), replacing this object (which
+        is not used afterwards): copies by fancy indexing, so two selected particles never
+        share a landmark buffer. When every particle holds the same labelled landmarks in
+        the same slots (``common``, nothing prunable), the ids, counters and counts are the
+        same in every column and are passed on as they are; so are the per-scan scratch
+        marks (cleared by :meth:`begin_scan`)."""
+        same_layout = bool(self.common) and not self.maybe_prunable
+        if same_layout:
+            counters, ids, counts = self.counters, self.ids, self.counts
+        else:
+            counters, ids, counts = (self.counters[:, indices], self.ids[:, indices],
+                                     self.counts[indices])  # fmt: skip
+        w = _Work(self.lm[:, :, indices], counters, ids, counts, self.next_id, self)
         w.common = True if self.common else None
         w.maybe_prunable = self.maybe_prunable
         w.slot_of = self.slot_of  # the same slots: resampling keeps a common layout common
@@ -538,18 +569,6 @@ _ALL_OK = np.ones((), dtype=bool)
 _ZH0, _ZH1, _H00, _H01, _H10, _H11, _T00, _T01, _T10, _T11, _I00, _I01, _I11, _LOGDET = range(14)
 
 
-def _dot2(
-    a: FloatArray, b: FloatArray, c: FloatArray, d: FloatArray, out: FloatArray, tmp: FloatArray
-) -> FloatArray:
-    """``out = a b + c d`` elementwise, into preallocated buffers (``tmp`` is scratch): the
-    kernels below run on a few hundred values, where allocating a result costs as much as
-    the arithmetic."""
-    np.multiply(a, b, out=out)
-    np.multiply(c, d, out=tmp)
-    out += tmp
-    return out
-
-
 def _landmark_terms(
     model: InvertibleLandmarkModel,
     pose: tuple[FloatArray, FloatArray, FloatArray],
@@ -573,24 +592,33 @@ def _landmark_terms(
     batch = g.shape[1:]
     buf = np.empty((20, *batch))  # the terms and, after them, scratch
     F = buf[:14]
+    # Every row as a name (one view per row, not one per use: at a few hundred values per
+    # row, creating views is a tenth of the cost).
+    zh0, zh1, h00, h01, h10, h11, t00, t01, t10, t11, i00, i01, i11, logdet = F
     dx, dy, q00, q01, q11, tmp = buf[14:]
-    np.subtract(g[_MX], px, out=dx)
-    np.subtract(g[_MY], py, out=dy)
-    r = np.sqrt(_dot2(dx, dx, dy, dy, F[_ZH0], tmp), out=F[_ZH0])  # np.hypot costs 2x
+    mx, my, s00, s01, s11 = g
+    np.subtract(mx, px, out=dx)
+    np.subtract(my, py, out=dy)
+    # Sums of products ``a b + c d`` are written out as two in-place calls into preallocated
+    # rows, here and in _ekf: allocating a result, or a helper function's Python call,
+    # costs a third of the arithmetic at this size.
+    d2 = np.multiply(buf[14:16], buf[14:16], out=buf[16:18])  # dx², dy² in one call
+    np.add(d2[0], d2[1], out=zh0)
+    r = np.sqrt(zh0, out=zh0)  # np.hypot costs 2x
     if r.size and float(r.min()) >= 2.0 * MIN_RANGE:
         ok = _ALL_OK
     else:
         ok = r >= 2.0 * MIN_RANGE
         dx[~ok], dy[~ok], r[~ok] = 1.0, 0.0, 1.0
     if isinstance(model, RangeBearing):
-        np.arctan2(dy, dx, out=F[_ZH1])
-        F[_ZH1] -= pth
+        np.arctan2(dy, dx, out=zh1)
+        zh1 -= pth
         inv_r = np.divide(1.0, r, out=tmp)
-        np.multiply(dx, inv_r, out=F[_H00])  # (cos, sin) of the direction
-        np.multiply(dy, inv_r, out=F[_H01])
-        np.multiply(F[_H01], inv_r, out=F[_H10])  # (−sin, cos) / r
-        np.negative(F[_H10], out=F[_H10])
-        np.multiply(F[_H00], inv_r, out=F[_H11])
+        np.multiply(dx, inv_r, out=h00)  # (cos, sin) of the direction
+        np.multiply(dy, inv_r, out=h01)
+        np.multiply(h01, inv_r, out=h10)  # (−sin, cos) / r
+        np.negative(h10, out=h10)
+        np.multiply(h00, inv_r, out=h11)
     else:
         p = np.empty((*batch, 3))
         p[..., 0], p[..., 1], p[..., 2] = px, py, pth
@@ -599,29 +627,34 @@ def _landmark_terms(
             z_hat, (_, Hm) = model._h(p, m), model._jac(p, m)
         else:  # pragma: no cover - every invertible model of slamkit has the kernels
             z_hat, (_, Hm) = model.predict(p, m), model.jacobians(p, m)
-        F[_ZH0], F[_ZH1] = z_hat[..., 0], z_hat[..., 1]
-        F[_H00], F[_H01] = Hm[..., 0, 0], Hm[..., 0, 1]
-        F[_H10], F[_H11] = Hm[..., 1, 0], Hm[..., 1, 1]
-    h00, h01, h10, h11 = F[_H00], F[_H01], F[_H10], F[_H11]
-    s00, s01, s11 = g[_S00], g[_S01], g[_S11]
-    t00 = _dot2(h00, s00, h01, s01, F[_T00], tmp)  # T = H Σ
-    t01 = _dot2(h00, s01, h01, s11, F[_T01], tmp)
-    t10 = _dot2(h10, s00, h11, s01, F[_T10], tmp)
-    t11 = _dot2(h10, s01, h11, s11, F[_T11], tmp)
-    _dot2(t00, h00, t01, h01, q00, tmp)  # Q = T Hᵀ + R
+        zh0[...], zh1[...] = z_hat[..., 0], z_hat[..., 1]
+        h00[...], h01[...] = Hm[..., 0, 0], Hm[..., 0, 1]
+        h10[...], h11[...] = Hm[..., 1, 0], Hm[..., 1, 1]
+    np.multiply(h00, s00, out=t00)  # T = H Σ
+    t00 += np.multiply(h01, s01, out=tmp)
+    np.multiply(h00, s01, out=t01)
+    t01 += np.multiply(h01, s11, out=tmp)
+    np.multiply(h10, s00, out=t10)
+    t10 += np.multiply(h11, s01, out=tmp)
+    np.multiply(h10, s01, out=t11)
+    t11 += np.multiply(h11, s11, out=tmp)
+    np.multiply(t00, h00, out=q00)  # Q = T Hᵀ + R
+    q00 += np.multiply(t01, h01, out=tmp)
     q00 += float(R[0, 0])
-    _dot2(t00, h10, t01, h11, q01, tmp)
+    np.multiply(t00, h10, out=q01)
+    q01 += np.multiply(t01, h11, out=tmp)
     q01 += float(R[0, 1])
-    _dot2(t10, h10, t11, h11, q11, tmp)
+    np.multiply(t10, h10, out=q11)
+    q11 += np.multiply(t11, h11, out=tmp)
     q11 += float(R[1, 1])
     det = np.multiply(q00, q11, out=dx)
     det -= np.multiply(q01, q01, out=tmp)  # > 0: R is positive definite, H Σ Hᵀ semidefinite
-    np.log(det, out=F[_LOGDET])
+    np.log(det, out=logdet)
     inv_det = np.divide(1.0, det, out=det)
-    np.multiply(q11, inv_det, out=F[_I00])
-    np.multiply(q01, inv_det, out=F[_I01])
-    np.negative(F[_I01], out=F[_I01])
-    np.multiply(q00, inv_det, out=F[_I11])
+    np.multiply(q11, inv_det, out=i00)
+    np.multiply(q01, inv_det, out=i01)
+    np.negative(i01, out=i01)
+    np.multiply(q00, inv_det, out=i11)
     return F, ok
 
 
@@ -631,7 +664,10 @@ def _wrap_innovation(a: FloatArray) -> FloatArray:
     Not :func:`~slamkit.geometry.wrap_angle` (``[-π, π)`` exactly, bit-identical in range):
     an innovation only enters ``νᵀ Q⁻¹ ν`` and ``K ν``, where ``±π`` are the same point
     of the circle, and this form costs 3 array operations instead of ~10 — a tenth of a
-    FastSLAM step on 100 particles."""
+    FastSLAM step on 100 particles. Innovations already within ``[-π, π]`` (the usual
+    case) are left as they are, which is what the formula gives them."""
+    if float(np.abs(a).max(initial=0.0)) <= math.pi:
+        return a
     k = np.multiply(a, 1.0 / _TWO_PI)
     np.round(k, out=k)
     k *= _TWO_PI
@@ -651,14 +687,15 @@ def _innovations(
 
 def _log_likelihood(F: FloatArray, nu0: FloatArray, nu1: FloatArray) -> FloatArray:
     """``log N(ν; 0, Q) = −½ (νᵀ Q⁻¹ ν + log det Q) − log 2π`` (m = 2)."""
-    d2 = F[_I00] * nu0
-    d2 += F[_I01] * nu1
+    i00, i01, i11, logdet = F[_I00 : _LOGDET + 1]
+    d2 = i00 * nu0
+    d2 += i01 * nu1
     d2 *= nu0
-    e = F[_I01] * nu0
-    e += F[_I11] * nu1
+    e = i01 * nu0
+    e += i11 * nu1
     e *= nu1
     d2 += e  # νᵀ Q⁻¹ ν
-    d2 += F[_LOGDET]
+    d2 += logdet
     d2 *= -0.5
     d2 -= _LOG_2PI
     return d2
@@ -685,25 +722,35 @@ def _ekf(
     (``λ ≈ 250`` for 80 m then 5 m): a loss of under 3 of 16 digits, far from an indefinite
     result. The Joseph form costs twice the operations, ~20 % of a FastSLAM step on 100
     particles. The tests compare this update with a Joseph-form reference to 1e-12."""
-    t00, t01, t10, t11 = F[_T00], F[_T01], F[_T10], F[_T11]
-    i00, i01, i11 = F[_I00], F[_I01], F[_I11]
+    t00, t01, t10, t11 = F[_T00 : _T11 + 1]
+    i00, i01, i11 = F[_I00 : _I11 + 1]
+    mx, my, s00, s01, s11 = g
     buf = np.empty((10, *g.shape[1:]))
     out = buf[:5]
-    k00, k01, k10, k11, tmp = buf[5:]
-    _dot2(t00, i00, t10, i01, k00, tmp)  # K = Tᵀ Q⁻¹
-    _dot2(t00, i01, t10, i11, k01, tmp)
-    _dot2(t01, i00, t11, i01, k10, tmp)
-    _dot2(t01, i01, t11, i11, k11, tmp)
-    for row, ka, kb in ((_MX, k00, k01), (_MY, k10, k11)):
-        m = _dot2(ka, nu0, kb, nu1, out[row], tmp)  # μ + K ν
-        m += g[row]
+    ox, oy, o00, o01, o11, k00, k01, k10, k11, tmp = buf
+    np.multiply(t00, i00, out=k00)  # K = Tᵀ Q⁻¹
+    k00 += np.multiply(t10, i01, out=tmp)
+    np.multiply(t00, i01, out=k01)
+    k01 += np.multiply(t10, i11, out=tmp)
+    np.multiply(t01, i00, out=k10)
+    k10 += np.multiply(t11, i01, out=tmp)
+    np.multiply(t01, i01, out=k11)
+    k11 += np.multiply(t11, i11, out=tmp)
+    np.multiply(k00, nu0, out=ox)  # μ + K ν
+    ox += np.multiply(k01, nu1, out=tmp)
+    ox += mx
+    np.multiply(k10, nu0, out=oy)
+    oy += np.multiply(k11, nu1, out=tmp)
+    oy += my
     # Σ − K T: (K T)_ij = k_i0 t_0j + k_i1 t_1j
-    for row, (ka, kb), (ta, tb) in (
-        (_S00, (k00, k01), (t00, t10)),
-        (_S01, (k00, k01), (t01, t11)),
-        (_S11, (k10, k11), (t01, t11)),
+    for o, s_ij, ka, kb, ta, tb in (
+        (o00, s00, k00, k01, t00, t10),
+        (o01, s01, k00, k01, t01, t11),
+        (o11, s11, k10, k11, t01, t11),
     ):
-        np.subtract(g[row], _dot2(ka, ta, kb, tb, tmp, out[row]), out=out[row])
+        np.multiply(ka, ta, out=tmp)
+        tmp += np.multiply(kb, tb, out=o)
+        np.subtract(s_ij, tmp, out=o)
     return out
 
 
@@ -1013,7 +1060,8 @@ def _scan_at_poses(
         w.all_ok = True
         l_all, found = _labelled_round(w, poses, pose, z, rid, R, model, s.log_p0, mark=False)
         if found is None and w.all_ok:  # every particle: every reading updated
-            w.assoc, w.assoc_status = rid, np.full(rid.size, UPDATED, dtype=np.int8)
+            w.assoc, w.assoc_status = rid, np.empty(rid.size, dtype=np.int8)
+            w.assoc_status.fill(UPDATED)  # (np.full costs 3x: a Python wrapper)
         else:
             w.assoc, w.assoc_status = _labelled_association(rid, found, l_all == -np.inf)
         return l_all.sum(axis=0) if weigh_first_round else np.zeros(poses.shape[0])
@@ -1234,6 +1282,21 @@ def _congruence(H: FloatArray, S: FloatArray) -> FloatArray:
     return out
 
 
+def _congruence_2x3(H: FloatArray, S: FloatArray) -> FloatArray:
+    """``H S Hᵀ`` ``(..., 2, 2)`` for ``H (..., 2, 3)`` and a symmetric ``S (..., 3, 3)``
+    (broadcast), written out as :func:`_congruence`: exactly symmetric, and on every
+    landmark of every particle several times faster than stacked ``matmul``."""
+    h = [[H[..., i, k] for k in range(3)] for i in range(2)]
+    s = [[S[..., i, k] for k in range(3)] for i in range(3)]
+    hs = [[h[i][0] * s[0][k] + h[i][1] * s[1][k] + h[i][2] * s[2][k] for k in range(3)]
+          for i in range(2)]  # fmt: skip
+    out = np.empty((*np.broadcast_shapes(H.shape[:-2], S.shape[:-2]), 2, 2))
+    out[..., 0, 0] = hs[0][0] * h[0][0] + hs[0][1] * h[0][1] + hs[0][2] * h[0][2]
+    out[..., 0, 1] = out[..., 1, 0] = hs[0][0] * h[1][0] + hs[0][1] * h[1][1] + hs[0][2] * h[1][2]
+    out[..., 1, 1] = hs[1][0] * h[1][0] + hs[1][1] * h[1][1] + hs[1][2] * h[1][2]
+    return out
+
+
 def _inv2(S: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Inverse and determinant of 2×2 matrices ``(..., 2, 2)`` in closed form (LAPACK's
     per-matrix overhead is ~100x the arithmetic of a 2×2)."""
@@ -1299,6 +1362,7 @@ class _Proposal:
             self.S[:, :3, :3] = pose_cov
         self.x_bar = np.empty((n, 3))
         self.V = np.empty((n, 3, d))
+        self.Px = np.empty((n, 3, 3))  # V Σ_δ Vᵀ: the proposal's pose covariance
         self._linearise(slice(None))
 
     def _motion_at(self, rows: Any, delta: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -1307,7 +1371,8 @@ class _Proposal:
         return x, self._feasible(self.u + delta[:, self.b :])
 
     def _linearise(self, rows: Any) -> None:
-        """``x̄`` and ``V`` of the particles ``rows`` at their current mean ``e``."""
+        """``x̄``, ``V`` and ``P_x = V Σ_δ Vᵀ`` of the particles ``rows`` at their current
+        mean ``e``."""
         x, u = self._motion_at(rows, self.e[rows])
         self.x_bar[rows] = self.motion.apply(x, u, self.dt)
         G, V = self.motion.jacobians(x, u, self.dt)
@@ -1316,14 +1381,16 @@ class _Proposal:
             self.V[rows, :, 3:] = V
         else:
             self.V[rows] = V
+        Vr = self.V[rows]
+        Px = Vr @ self.S[rows] @ np.swapaxes(Vr, -1, -2)
+        self.Px[rows] = 0.5 * (Px + np.swapaxes(Px, -1, -2))
 
     def marginal(self, t: _Terms, rows: Any) -> FloatArray:
-        """``L = A Σ_δ Aᵀ + Q`` with ``A = H_x V`` (the reading's covariance, motion noise
-        integrated out) for terms ``t`` of the particles ``rows`` (broadcasting over extra
-        axes)."""
-        A = t.Hx @ self.V[rows]
-        L = A @ self.S[rows] @ np.swapaxes(A, -1, -2) + t.Q
-        return 0.5 * (L + np.swapaxes(L, -1, -2))
+        """``L = A Σ_δ Aᵀ + Q = H_x P_x H_xᵀ + Q`` with ``A = H_x V`` (the reading's
+        covariance, motion noise integrated out) for terms ``t`` of the particles ``rows``
+        (broadcasting over extra axes). Through the 3×3 ``P_x``, whatever the size of
+        ``δ``, and written out: the association tries every landmark of every particle."""
+        return _congruence_2x3(t.Hx, self.Px[rows]) + t.Q
 
     def update(self, rows: NDArray[np.intp], t: _Terms, L: FloatArray) -> None:
         """Fold one reading (terms ``t``, marginal covariance ``L``) into the proposal of
@@ -1736,9 +1803,7 @@ def _steering_limit(motion: MotionModel) -> float | None:
     instead of stopping the run."""
     if not isinstance(motion, Ackermann):
         return None
-    h = abs(motion.encoder_offset)
-    limit = math.pi / 2 if h == 0 else min(math.pi / 2, math.atan(motion.wheelbase / h))
-    return 0.99 * limit
+    return 0.99 * motion.max_steering
 
 
 class _FastSlam:
@@ -1883,7 +1948,8 @@ class _FastSlam:
             # Gaussian; the estimate is their mixture (mean, spread of the means + mean cov).
             poses, covs = self._pending_gaussian()
             spread = np.einsum("p,pij->ij", self._weights, covs)
-        mean, cov = particle_estimate(poses, self._weights)
+        # The weights are normalised by construction, the poses the filter's own.
+        mean, cov = _particle_estimate_unchecked(poses, self._weights)
         if spread is not None:
             cov = cov + spread
         if self._cfg.estimate == "best":
@@ -2006,7 +2072,8 @@ class _FastSlam:
 
     def _resample_if_due(self) -> None:
         if self._resample_pending:
-            idx = low_variance_resample(self._weights, self._rng)
+            # The weights are normalised and finite by construction: the unchecked kernel.
+            idx = _low_variance_resample_unchecked(self._weights, self._rng, self._weights.size)
             n = idx.size
             self._history.append(idx)
             self._poses = self._poses[idx]
@@ -2015,8 +2082,9 @@ class _FastSlam:
             if self._after is not None:
                 self._after = (self._after[0][idx], self._after[1][idx])
             self._w = self._w.select(idx)
-            self._log_weights = np.full(n, -math.log(n))
-            self._weights = np.full(n, 1.0 / n)
+            self._log_weights, self._weights = np.empty(n), np.empty(n)
+            self._log_weights.fill(-math.log(n))
+            self._weights.fill(1.0 / n)
             self._resamplings += 1
             self._resample_pending = False
 
@@ -2028,8 +2096,8 @@ class _FastSlam:
         eps += u
         if self._steering_limit is not None:  # Ackermann: keep sampled steering in its domain
             np.clip(eps[:, 1], -self._steering_limit, self._steering_limit, out=eps[:, 1])
-        if self._fast_motion:  # validated once (data set, config): the batch kernel directly
-            self._poses = self._motion._g(poses, eps, dt)  # type: ignore[attr-defined]
+        if self._fast_motion:  # validated once (data set, config): the in-place kernel
+            self._motion._move_particles(poses, eps, dt)  # type: ignore[attr-defined]
         else:  # pragma: no cover - every motion model of slamkit has the kernel
             self._poses = self._motion.apply(poses, eps, dt)
 
@@ -2083,7 +2151,7 @@ class _FastSlam:
         self._log_scan(event.t, self._w.assoc, self._w.assoc_status, use)
         self._weights = w
         self._maybe_snapshot(event.t)
-        ess = 1.0 / float(np.sum(w * w))  # effective_sample_size of normalised weights
+        ess = 1.0 / float((w * w).sum())  # effective_sample_size of normalised weights
         self._ess.append(ess)
         if ess < self._cfg.resample_threshold * w.size:
             self._resample_pending = True
