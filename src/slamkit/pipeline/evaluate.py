@@ -24,6 +24,7 @@ from slamkit.eval import (
     pose_errors,
     relative_pose_error,
 )
+from slamkit.pipeline.registry import ESTIMATORS
 from slamkit.pipeline.runner import Result
 
 __all__ = ["CONVERGENCE", "CONVERGENCE_LOST", "Evaluation", "evaluate"]
@@ -155,18 +156,19 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
         _metric(metrics, "landmarks", lambda: landmark_map_error(est_map, true_map, match=by))
     chosen = result.output.reading_landmarks
     if chosen is not None and truth.reading_ids is not None:
-        _metric(metrics, "association", lambda: _association(chosen, dataset))
+        _metric(metrics, "association", lambda: _association(chosen, dataset, result.estimator))
     return ev
 
 
-def _association(chosen: np.ndarray, dataset: Dataset) -> _HasDict:
+def _association(chosen: np.ndarray, dataset: Dataset, estimator: str) -> _HasDict:
     true = dataset.check_reading_ids()
     if true.size != chosen.size:
         raise InputError(
             f"association: the estimator reported {chosen.size} readings, the data set has "
             f"{true.size}"
         )
-    known = dataset.known_landmarks
-    used = chosen[chosen >= 0]
-    same_ids = known is not None and bool(np.isin(used, known.ids).all())
+    # An estimator that needs the known map (localization) numbers landmarks as the map
+    # does; the others (SLAM) number their own.
+    entry = ESTIMATORS.get(estimator)
+    same_ids = entry is not None and "known_landmarks" in entry.requires
     return association_scores(chosen, true, same_ids=same_ids)
