@@ -47,6 +47,13 @@ Conversion (:func:`load_victoria_park`):
   ``feature_index = -1`` (poor features, none in this file) are dropped and counted.
   The ``x_est y_est`` columns are the SLSJF estimate of the tree in the world frame; they are
   not read.
+* **Where the laser sees.** The readings are moved to the rear axle, but the laser still
+  sees from where it sits: its 180° field of view is the half-plane ahead of ``(a, b)``,
+  its ranges are measured from there. ``metadata["landmark_sensor_offset"] = [a, b]``
+  records it for estimators that predict which trees should be seen (FastSLAM's existence
+  counters): from the axle, trees beside the cab, between axle and laser, would count as
+  missed at every scan. (The sensor specification's ``max_range`` is the laser's 80 m plus
+  ``|(a, b)|``, a bound from the axle; ``fov`` is the laser's.)
 * **GPS** is ``truth.position_times``/``truth.positions``: positions only (no heading), in
   the GPS frame, every fix as recorded, outliers included. :func:`slamkit.eval.gps.gps_error`
   rejects fixes that disagree with their neighbours and scores an estimate after an SE(2)
@@ -373,6 +380,9 @@ def load_victoria_park(
             "outside_odometry": int(outside.sum()),
         },
         "gps_fixes": n_gps,
+        # The landmark sensor's position in the robot frame [m]: the readings are given from
+        # the rear axle, the field of view and the ranges are the laser's from here.
+        "landmark_sensor_offset": [a_off, b_off],
         "vehicle": {
             "wheelbase": opts.wheelbase,
             "encoder_offset": opts.encoder_offset,
