@@ -1214,3 +1214,20 @@ def test_sampled_ackermann_steering_stays_in_the_models_domain() -> None:
         for ev in ds.events:
             est.handle(ev)
         assert np.all(np.isfinite(est.particles.poses))
+
+
+@pytest.mark.parametrize("version", [1, 2])
+def test_animation_frames_show_the_best_map_and_the_particles(version: int) -> None:
+    """``frames``: each frame holds the particle poses and the map of the heaviest particle;
+    the last frame's map is the final map, and the cloud's centre is near the estimate."""
+    ds = load_dataset("five-features", seed=0)
+    result = run(ENTRIES[version], ds, config={"n_particles": 50}, seed=1, frames=8)
+    assert 8 <= len(result.frames) <= 10
+    for f in result.frames:
+        assert f.particles is not None and f.particles.shape == (50, 3)
+        assert np.hypot(*(f.particles[:, :2].mean(axis=0) - f.pose[:2])) < 0.2
+        assert f.landmarks is not None and f.landmarks.covariances.shape[1:] == (2, 2)
+    last, final = result.frames[-1].landmarks, result.output.landmarks
+    assert last is not None and final is not None
+    np.testing.assert_array_equal(last.landmarks.positions, final.landmarks.positions)
+    np.testing.assert_array_equal(last.landmarks.ids, final.landmarks.ids)

@@ -393,7 +393,7 @@ def test_runs_through_the_pipeline_runner() -> None:
         "slamkit.localization.mcl:MclConfig",
         requires=("motion",),
     )
-    result = run(entry, data, config={"n_particles": 300, "kld": False}, seed=4)
+    result = run(entry, data, config={"n_particles": 300, "kld": False}, seed=4, frames=5)
     assert data.truth.poses is not None
     assert result.covariances is not None and result.poses.shape == data.truth.poses.shape
     err = np.hypot(*(result.poses[:, :2] - data.truth.poses[:, :2]).T)
@@ -401,6 +401,12 @@ def test_runs_through_the_pipeline_runner() -> None:
     assert np.sqrt(np.mean(err**2)) < 0.06
     assert result.output.diagnostics["measurement_updates"] == data.counts()["LandmarkReadings"]
     assert result.config["n_particles"] == 300
+    # Animation frames carry the particle cloud; its unweighted centre is the estimate's
+    # neighbour (the weights after a scan are close to even with 300 particles).
+    assert 5 <= len(result.frames) <= 7
+    for f in result.frames:
+        assert f.particles is not None and f.particles.shape == (300, 3)
+        assert np.hypot(*(f.particles[:, :2].mean(axis=0) - f.pose[:2])) < 0.1
 
 
 # -- global localization, kidnapping, wrong prior (seeded Monte Carlo runs) --------------------

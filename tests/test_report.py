@@ -38,3 +38,6 @@ def test_run_figures_include_particles_and_nis_when_the_estimator_provides_them(
     offsets = visible[1].collections[-1].get_offsets()
     assert offsets.shape == (300, 2)
     np.testing.assert_allclose(np.mean(offsets, axis=0), ds.truth.poses[100, :2], atol=0.05)
+    # The map figure shows the last cloud too (FastSLAM: the poses behind the maps).
+    labels = [c.get_label() for c in figs["trajectory.png"].axes[0].collections]
+    assert "particles at t = 20.0 s" in labels

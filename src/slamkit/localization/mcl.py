@@ -1002,6 +1002,10 @@ class MonteCarloLocalization:
             particle_snapshots=tuple(self._snapshots),
         )
 
+    def particle_poses(self) -> FloatArray:
+        """The particle poses ``(P, 3)`` now (animation frames)."""
+        return self._particles.poses.copy()
+
     # -- read-only views (tests, plots) ---------------------------------------------------
 
     @property

@@ -86,6 +86,18 @@ of the heading noise on cityTrees: the weights collapse (median ESS 1 of 100) an
 diverges (ATE 57 m); with the whole motion in the proposal, median ESS ~40, ATE 1.1-3.4 m
 over seeds 0-4 (``tests/test_fastslam_real.py``).
 
+Consistency
+-----------
+The pose covariance the estimators report is the weighted spread of the particles (plus,
+for 2.0 between a control and its scan, the mean of the particles' motion covariances). It
+is optimistic, as Bailey, Nieto and Nebot (2006) showed FastSLAM to be in general:
+resampling prunes the path hypotheses, so after a while every particle shares one ancestor
+and the spread no longer holds the drift of the whole map. Measured on the five-feature
+world, default settings, seeds 0-4: mean pose NEES (3 dof, 3 when consistent) 5-710 for
+1.0 and 21-160 for 2.0, against EKF-SLAM's 0.9-7.1, with ATE RMSE 0.04-0.06 m (1.0),
+0.06-0.14 m (2.0) and 0.03-0.06 m (EKF-SLAM). Use the trajectory, not the covariance, of
+a FastSLAM run.
+
 Arrays
 ------
 A particle set is a struct of arrays (:class:`FastSlamParticles`): poses ``(P, 3)``,
@@ -139,6 +151,7 @@ from slamkit.pipeline.estimator import (
     LandmarkEstimate,
     ParticleSnapshot,
     PoseEstimate,
+    StepClock,
 )
 from slamkit.prob import chi2_gate
 
@@ -1980,8 +1993,7 @@ class _FastSlam:
         self._resample_pending = False
         self._last_odometry: FloatArray | None = None
         self._updates = 0
-        self._step = 0
-        self._last_t: float | None = None
+        self._clock = StepClock()
         self._t = dataset.start_time
         self._resamplings = 0
         self._readings_skipped = 0
@@ -2004,9 +2016,7 @@ class _FastSlam:
     # -- the Estimator protocol -------------------------------------------------------------
 
     def handle(self, event: Event) -> None:
-        if self._last_t is None or event.t != self._last_t:
-            self._step += 1  # the runner's numbering: one step per distinct time stamp
-            self._last_t = event.t
+        self._clock.tick(event.t)
         self._t = float(event.t)
         if isinstance(event, Control):
             self._motion_step(np.asarray(event.u, dtype=float), float(event.dt))
@@ -2068,6 +2078,18 @@ class _FastSlam:
             particle_snapshots=tuple(self._snapshots),
             reading_landmarks=chosen,
         )
+
+    def landmark_estimate(self) -> LandmarkEstimate:
+        """The map of the particle with the largest weight now (animation frames)."""
+        ps = self.particles
+        return ps.landmarks_of(ps.best)
+
+    def particle_poses(self) -> FloatArray:
+        """The particle poses ``(P, 3)`` now (animation frames); for 2.0 between a control
+        and its scan, the means of each particle's motion since the scan."""
+        if self._pending is not None:
+            return self._pending_gaussian()[0].copy()
+        return self._poses.copy()
 
     # -- read-only views (tests, plots) ---------------------------------------------------
 
@@ -2222,7 +2244,7 @@ class _FastSlam:
         except ConvergenceError as exc:
             raise ConvergenceError(
                 f"{self.name} at t = {event.t:g} s (measurement update {self._updates}): {exc}",
-                step=self._step,
+                step=self._clock.step,
             ) from exc
         self._removed += self._w.removed
         self._log_scan(event.t, self._w.assoc, self._w.assoc_status, use)

@@ -69,6 +69,10 @@ def run_figures(
     est_lm = result.output.landmarks
     if est_lm is not None:
         plot_landmark_estimates(ax, est_lm.landmarks.positions, est_lm.covariances, n_sigma=n_sigma)
+    snaps = result.output.particle_snapshots
+    if snaps:  # the last particle cloud over the map (FastSLAM: the poses behind the maps)
+        cloud = plot_particles(ax, snaps[-1].particles, snaps[-1].weights)
+        cloud[0].set_label(f"particles at t = {snaps[-1].t:.1f} s")
     ax.set_title(f"{result.estimator} on {result.dataset}")
     ax.legend(loc="best", fontsize="small")
     figs["trajectory.png"] = fig
@@ -99,7 +103,6 @@ def run_figures(
         plot_trajectories(ax, estimate=result.poses, legend=False)
         ax.set_title(f"{result.estimator} on {result.dataset}: occupancy grid")
         figs["map.png"] = fig
-    snaps = result.output.particle_snapshots
     if snaps:
         figs["particles.png"] = _particle_figure(result, dataset)
     log = result.output.innovations
