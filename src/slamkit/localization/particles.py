@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 from slamkit._validation import FloatArray, as_array
 from slamkit.errors import ConvergenceError, InputError
 from slamkit.geometry.angles import angle_diff, circular_mean, wrap_angle
-from slamkit.maps import OccupancyGrid
+from slamkit.maps import FREE_THRESHOLD, OccupancyGrid
 
 __all__ = [
     "ParticleSet",
@@ -222,7 +222,7 @@ def uniform_particles_in_box(
 
 
 def uniform_particles_in_free_space(
-    grid: OccupancyGrid, n: int, rng: np.random.Generator, free_threshold: float = 0.35
+    grid: OccupancyGrid, n: int, rng: np.random.Generator, free_threshold: float = FREE_THRESHOLD
 ) -> FloatArray:
     """``n`` poses ``(n, 3)`` uniform over the free cells of ``grid``.
 
