@@ -57,6 +57,7 @@ def main() -> str:
             *rows,
         ]
     )
+    dead = evaluate(run("dead-reckoning", ds), ds).metrics["gps"]["rmse"]
     notes = (
         f"Victoria Park, {duration:.0f} s of data, {ds.counts().get('LandmarkReadings', 0)} "
         f"detection events, ids withheld (the feature index scores the association only). "
@@ -64,7 +65,9 @@ def main() -> str:
         f"seed 0. Load average (1 min) {load_before:.1f} before, {os.getloadavg()[0]:.1f} "
         f"after, on {os.cpu_count()} CPUs (OPENBLAS_NUM_THREADS="
         f"{os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}). GPS RMSE after SE(2) alignment "
-        f"at the fixes, outliers rejected (slamkit.eval.gps); dead reckoning: 92.8 m.\n\n"
+        f"at the fixes, outliers rejected (slamkit.eval.gps); dead reckoning: {dead:.1f} m. "
+        f"Settings: the data set's (FastSLAM: {ds.estimator_defaults.get('fastslam1', {})}, "
+        f"see slamkit.datasets.victoria_park), 100 particles.\n\n"
         f"{table}"
     )
     return write_results("victoria_park", records, notes=notes)

@@ -245,7 +245,9 @@ class Dataset:
     ``initial_pose``/``initial_cov`` is the prior an estimator may start from (absent for
     global localization and for data sets whose start is unknown). ``known_landmarks`` and
     ``known_grid`` are maps a *localization* estimator may use; SLAM estimators ignore them.
-    ``truth`` is for evaluation only: estimators must not read it.
+    ``truth`` is for evaluation only: estimators must not read it. ``estimator_defaults``
+    holds settings measured to suit this data set, per registered estimator name (see
+    :func:`slamkit.pipeline.run`: the caller's config wins over them).
     """
 
     name: str
@@ -260,6 +262,7 @@ class Dataset:
     truth: GroundTruth = field(default_factory=GroundTruth)
     description: str = ""
     metadata: dict[str, Any] = field(default_factory=dict)
+    estimator_defaults: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.initial_pose is not None:
