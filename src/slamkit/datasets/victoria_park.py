@@ -118,9 +118,9 @@ stamps lag the odometry by 0.06–0.09 s (fitted); the loader does not shift the
 a caller's config wins). Within one particle the pose is exact, so a re-observed tree is
 matched against its landmark's own covariance and the reading noise alone; EKF-SLAM's
 innovation also holds the pose uncertainty, FastSLAM's does not. The trunk's centre seen
-from another side, minutes later, is likely off by more than the
-2-s noise: the nominal noise leaves FastSLAM 1.0 starting new trees where it should match
-(whole run, no ids, 100 particles, seed 0: GPS RMSE 21.3 m, association accuracy 0.41).
+from another side, minutes later, is likely off by more than the 2-s noise: the nominal
+noise leaves FastSLAM 1.0 starting new trees where it should match (whole run, no ids,
+100 particles, seed 0: GPS RMSE 21.3 m, association accuracy 0.41).
 Measured on the whole run, seeds 0-3, ``measurement_noise_scale`` (standard deviations) ×
 ``motion_noise_scale`` (covariance), ``hit_weight`` 3: 4 × 1 gives 5.8, 16.6, 5.4, 8.8 m;
 4 × 0.5 gives 10.5, 6.6, 6.8, 7.4 m; **6 × 0.5** gives 5.1, 7.9, 6.9, 5.6 m (accuracy
