@@ -160,3 +160,23 @@ def test_animate_writes_a_gif_of_the_estimate_over_time(tmp_path):
     assert last is not None and final is not None
     np.testing.assert_array_equal(last.landmarks.positions, final.landmarks.positions)
     np.testing.assert_array_equal(result.frames[-1].pose, result.poses[-1])
+
+
+def test_a_run_job_uses_the_data_sets_estimator_defaults(tmp_path, monkeypatch):
+    """``slamkit run`` hands the config file's mapping to the runner, so the loader's
+    ``estimator_defaults`` apply under it, and config.json records what was used."""
+    import dataclasses
+
+    from slamkit.app import jobs
+
+    def tuned(name, **kwargs):
+        ds = load_dataset(name, **kwargs)
+        return dataclasses.replace(ds, estimator_defaults={"fastslam1": {"hit_weight": 4}})
+
+    monkeypatch.setattr(jobs, "load_dataset", tuned)
+    request = jobs.RunRequest("fastslam1", "five-features", tmp_path / "out",
+                              estimator_config={"n_particles": 20}, plots=False)  # fmt: skip
+    report = jobs.run_job(request)
+    cfg = json.loads((report.out_dir / "config.json").read_text())["estimator"]
+    assert cfg["hit_weight"] == 4 and cfg["n_particles"] == 20
+    assert report.result.config == {k: v for k, v in cfg.items() if k != "name"}

@@ -7,7 +7,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from slamkit.config import config_to_dict
 from slamkit.datasets import load_dataset
 from slamkit.io import atomic_folder, write_json, write_tum
 from slamkit.pipeline import Progress, Result, get_estimator_entry, run
@@ -52,7 +51,7 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
     ``trajectory.tum``, ``metrics.json``, ``config.json`` (the resolved configuration) and
     PNG plots. The folder is written completely or not at all."""
     entry = get_estimator_entry(request.estimator)
-    cfg = entry.make_config(request.estimator_config)  # fail on bad config before loading
+    entry.make_config(request.estimator_config)  # fail on bad config before loading
     dataset = load_dataset(
         request.dataset,
         seed=request.seed,
@@ -60,7 +59,15 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         data_root=request.data_root,
     )
     frames = ANIMATION_FRAMES if request.animate else 0
-    result = run(entry, dataset, config=cfg, seed=request.seed, progress=progress, frames=frames)
+    # The mapping, not the config object: the data set's estimator_defaults go under it.
+    result = run(
+        entry,
+        dataset,
+        config=request.estimator_config,
+        seed=request.seed,
+        progress=progress,
+        frames=frames,
+    )
     evaluation = evaluate(result, dataset)
     figures = {}
     if request.plots:
@@ -68,7 +75,7 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
 
         figures = run_figures(result, dataset, evaluation)
     resolved = {
-        "estimator": {"name": entry.name, **config_to_dict(cfg)},
+        "estimator": {"name": entry.name, **result.config},
         "dataset": {"name": dataset.name, **dataset.metadata.get("config", {})},
         "seed": request.seed,
     }
