@@ -66,6 +66,7 @@ from slamkit.pipeline.estimator import (
     InnovationLog,
     ParticleSnapshot,
     PoseEstimate,
+    SnapshotSchedule,
 )
 
 __all__ = [
@@ -920,7 +921,7 @@ class MonteCarloLocalization:
         self._innov_t: list[float] = []
         self._innov_nis: list[float] = []
         self._innov_id: list[int] = []
-        self._snapshot_times = sorted(config.snapshot_times)
+        self._schedule = SnapshotSchedule(config.snapshot_every, config.snapshot_times)
         if config.snapshot_every > 0:
             self._snapshot(dataset.start_time)
 
@@ -1158,14 +1159,7 @@ class MonteCarloLocalization:
         return True
 
     def _maybe_snapshot(self, t: float) -> None:
-        due = False
-        every = self._cfg.snapshot_every
-        if every > 0 and self._c.updates % every == 0:
-            due = True
-        while self._snapshot_times and self._snapshot_times[0] <= t:
-            self._snapshot_times.pop(0)
-            due = True
-        if due:
+        if self._schedule.due(t, self._c.updates):
             self._snapshot(t)
 
     def _snapshot(self, t: float) -> None:

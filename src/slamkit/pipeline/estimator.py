@@ -9,7 +9,7 @@ through :meth:`Estimator.handle`, reports its current pose estimate through
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -30,6 +30,7 @@ __all__ = [
     "LandmarkEstimate",
     "ParticleSnapshot",
     "PoseEstimate",
+    "SnapshotSchedule",
     "StepClock",
 ]
 
@@ -72,6 +73,28 @@ class ParticleSnapshot:
     t: float
     particles: FloatArray
     weights: FloatArray
+
+
+class SnapshotSchedule:
+    """When a particle filter keeps a :class:`ParticleSnapshot`: after every ``every``-th
+    measurement update (0: never) and at the first update at or after each of ``times``."""
+
+    def __init__(self, every: int, times: Iterable[float]) -> None:
+        self.every = int(every)
+        self._times = sorted(float(t) for t in times)
+
+    def due(self, t: float, updates: int) -> bool:
+        """Whether the update number ``updates``, at time ``t``, is to be kept."""
+        due = self.every > 0 and updates % self.every == 0
+        while self._times and self._times[0] <= t:
+            self._times.pop(0)
+            due = True
+        return due
+
+    @property
+    def pending(self) -> bool:
+        """Whether requested times are still ahead."""
+        return bool(self._times)
 
 
 @dataclass(frozen=True)

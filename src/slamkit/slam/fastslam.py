@@ -151,6 +151,7 @@ from slamkit.pipeline.estimator import (
     LandmarkEstimate,
     ParticleSnapshot,
     PoseEstimate,
+    SnapshotSchedule,
     StepClock,
 )
 from slamkit.prob import chi2_gate
@@ -2003,15 +2004,12 @@ class _FastSlam:
         # Per scan (time, ids (K,) or (K, P), status codes) and per resampling the parent
         # indices (P,): the association of any final particle, traced through its ancestors.
         self._history: list[tuple[float, IntArray, NDArray[np.int8]] | NDArray[np.intp]] = []
-        if config.snapshot_every > 0 or config.snapshot_times:
-            self._snapshot_times = sorted(config.snapshot_times)
-            if config.snapshot_every > 0:
-                self._snapshot(dataset.start_time)
-        elif config.n_snapshots > 0:
-            span = np.linspace(dataset.start_time, dataset.end_time, config.n_snapshots)
-            self._snapshot_times = span.tolist()
-        else:
-            self._snapshot_times = []
+        times: Any = config.snapshot_times
+        if config.snapshot_every == 0 and not times and config.n_snapshots > 0:
+            times = np.linspace(dataset.start_time, dataset.end_time, config.n_snapshots)
+        self._schedule = SnapshotSchedule(config.snapshot_every, times)
+        if config.snapshot_every > 0:
+            self._snapshot(dataset.start_time)
 
     # -- the Estimator protocol -------------------------------------------------------------
 
@@ -2067,7 +2065,7 @@ class _FastSlam:
             "ess_final": float(ess[-1]) if ess.size else None,
             "best_particle_weight": float(ps.weights[best]),
         }
-        if self._snapshot_times and (not self._snapshots or self._snapshots[-1].t < self._t):
+        if self._schedule.pending and (not self._snapshots or self._snapshots[-1].t < self._t):
             self._snapshot(self._t)  # times left after the last update: the final set
         _, chosen, status = self.reading_log()
         diagnostics["readings"] = int(chosen.size)
@@ -2156,14 +2154,7 @@ class _FastSlam:
         self._history.append((float(t), assoc, status))
 
     def _maybe_snapshot(self, t: float) -> None:
-        due = False
-        every = self._cfg.snapshot_every
-        if every > 0 and self._updates % every == 0:
-            due = True
-        while self._snapshot_times and self._snapshot_times[0] <= t:
-            self._snapshot_times.pop(0)
-            due = True
-        if due:
+        if self._schedule.due(t, self._updates):
             self._snapshot(t)
 
     def _snapshot(self, t: float) -> None:
