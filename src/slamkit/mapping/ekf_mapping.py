@@ -100,7 +100,9 @@ __all__ = [
     "LandmarkBelief",
     "ReadingsOutcome",
     "associate_nearest",
+    "associate_nearest_unchecked",
     "association_distances",
+    "association_probabilities",
     "dense_initialise_landmark",
     "dense_update_landmark",
     "initialise_landmarks",
@@ -362,7 +364,9 @@ def _distances(
     return mahalanobis_squared(nu, S)
 
 
-def _associate(d: FloatArray, gate: float, new_gate: float) -> NDArray[np.int64]:
+def associate_nearest_unchecked(d: FloatArray, gate: float, new_gate: float) -> NDArray[np.int64]:
+    """:func:`associate_nearest` without its input checks (``d`` finite or ``inf``, ``>= 0``):
+    the estimators' hot path."""
     k, n = d.shape
     out = np.full(k, REJECTED, dtype=np.int64)
     if n == 0:
@@ -426,7 +430,8 @@ def _process(
 
     unknown = np.flatnonzero((rid < 0) & usable)
     if unknown.size:
-        match = _associate(_distances(belief, x, z[unknown], R, model), gate, new_gate)
+        d = _distances(belief, x, z[unknown], R, model)
+        match = associate_nearest_unchecked(d, gate, new_gate)
         hit = unknown[match >= 0]
         if hit.size:
             rows = match[match >= 0]
@@ -500,6 +505,21 @@ def association_distances(
     return _distances(belief, x, za, R, model)
 
 
+def association_probabilities(gate: float, new_landmark: float) -> tuple[float, float]:
+    """Check a config's ``gate_probability`` and ``new_landmark_probability`` (each in
+    ``(0, 1)``, the new-landmark threshold the stricter one) and return them; a
+    :class:`~slamkit.errors.ConfigError` names the one that is wrong."""
+    for name, p in (("gate_probability", gate), ("new_landmark_probability", new_landmark)):
+        if not 0 < p < 1:
+            raise ConfigError(f"{name}: expected a probability in (0, 1), got {p}")
+    if new_landmark < gate:
+        raise ConfigError(
+            "new_landmark_probability: expected >= gate_probability (the new-landmark "
+            f"threshold is the stricter one), got {new_landmark} < {gate}"
+        )
+    return float(gate), float(new_landmark)
+
+
 def associate_nearest(d2: ArrayLike, gate: float, new_gate: float) -> NDArray[np.int64]:
     """Greedy global nearest-neighbour association of one scan.
 
@@ -515,7 +535,7 @@ def associate_nearest(d2: ArrayLike, gate: float, new_gate: float) -> NDArray[np
         raise InputError("d2: expected squared distances >= 0 (no NaN)")
     if not (0 < gate <= new_gate):
         raise InputError(f"gates: expected 0 < gate <= new_gate, got {gate}, {new_gate}")
-    return _associate(d, gate, new_gate)
+    return associate_nearest_unchecked(d, gate, new_gate)
 
 
 @dataclass(frozen=True)
@@ -669,16 +689,7 @@ class EkfMappingConfig:
     def __post_init__(self) -> None:
         if not (self.noise_scale > 0 and np.isfinite(self.noise_scale)):
             raise ConfigError(f"noise_scale: expected a number > 0, got {self.noise_scale}")
-        for name in ("gate_probability", "new_landmark_probability"):
-            p = getattr(self, name)
-            if not 0 < p < 1:
-                raise ConfigError(f"{name}: expected a probability in (0, 1), got {p}")
-        if self.new_landmark_probability < self.gate_probability:
-            raise ConfigError(
-                "new_landmark_probability: expected >= gate_probability (the new-landmark "
-                f"threshold is the stricter one), got {self.new_landmark_probability} < "
-                f"{self.gate_probability}"
-            )
+        association_probabilities(self.gate_probability, self.new_landmark_probability)
         if not (self.min_range >= 0 and np.isfinite(self.min_range)):
             raise ConfigError(f"min_range: expected a number >= 0, got {self.min_range}")
         if not self.pose_time_tolerance >= 0:

@@ -97,8 +97,9 @@ from slamkit.mapping.ekf_mapping import (
     TOO_CLOSE,
     UPDATED,
     InvertibleLandmarkModel,
+    association_probabilities,
 )
-from slamkit.mapping.ekf_mapping import _associate as _greedy_nearest_neighbour
+from slamkit.mapping.ekf_mapping import associate_nearest_unchecked as _greedy_nearest_neighbour
 from slamkit.maps import LandmarkMap
 from slamkit.models import MIN_RANGE, LandmarkModel, MotionModel, odometry_control
 from slamkit.models.measurement import _LandmarkBase
@@ -787,15 +788,7 @@ class EkfSlamConfig:
             )
         if self.association not in ("nn", "jcbb"):
             raise ConfigError(f"association: expected 'nn' or 'jcbb', got {self.association!r}")
-        for name in ("gate_probability", "new_landmark_probability"):
-            p = getattr(self, name)
-            if not 0 < p < 1:
-                raise ConfigError(f"{name}: expected a probability in (0, 1), got {p}")
-        if self.new_landmark_probability < self.gate_probability:
-            raise ConfigError(
-                "new_landmark_probability: expected >= gate_probability, got "
-                f"{self.new_landmark_probability} < {self.gate_probability}"
-            )
+        association_probabilities(self.gate_probability, self.new_landmark_probability)
         t = self.provisional_trace
         if t is not None and not (math.isfinite(t) and t > 0):
             raise ConfigError(f"provisional_trace: expected a number > 0 or None, got {t}")

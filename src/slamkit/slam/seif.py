@@ -111,8 +111,13 @@ from slamkit.errors import (
 from slamkit.geometry import wrap_angle
 from slamkit.geometry.angles import wrap_angle_float
 from slamkit.localization.kalman import _angular_indices, _motion_jacobians, _move
-from slamkit.mapping.ekf_mapping import NEW, REJECTED, InvertibleLandmarkModel
-from slamkit.mapping.ekf_mapping import _associate as _greedy_nearest_neighbour
+from slamkit.mapping.ekf_mapping import (
+    NEW,
+    REJECTED,
+    InvertibleLandmarkModel,
+    association_probabilities,
+)
+from slamkit.mapping.ekf_mapping import associate_nearest_unchecked as _greedy_nearest_neighbour
 from slamkit.maps import LandmarkMap
 from slamkit.models import MIN_RANGE, LandmarkModel, MotionModel, odometry_control
 from slamkit.models.measurement import _LandmarkBase
@@ -402,15 +407,7 @@ class SeifConfig:
             raise ConfigError(f"measurement_noise_scale: expected > 0, got {s}")
         if not (math.isfinite(self.prior_information) and self.prior_information > 0):
             raise ConfigError(f"prior_information: expected > 0, got {self.prior_information}")
-        for name in ("gate_probability", "new_landmark_probability"):
-            p = getattr(self, name)
-            if not 0 < p < 1:
-                raise ConfigError(f"{name}: expected a probability in (0, 1), got {p}")
-        if self.new_landmark_probability < self.gate_probability:
-            raise ConfigError(
-                "new_landmark_probability: expected >= gate_probability, got "
-                f"{self.new_landmark_probability} < {self.gate_probability}"
-            )
+        association_probabilities(self.gate_probability, self.new_landmark_probability)
         r = self.candidate_radius
         if not (math.isfinite(r) and r > 0):
             raise ConfigError(f"candidate_radius: expected a number > 0, got {r}")
