@@ -604,3 +604,17 @@ def test_landmark_map_type_of_the_output() -> None:
     np.testing.assert_array_equal(b.index_of([2, 4, 9]), [1, 0, -1])
     with pytest.raises(InputError):
         initialise_landmarks(b, [0, 0, 0], [[1.0, 1.0]], [4], np.eye(2), RelativePosition())
+
+
+def test_gate_probabilities_are_checked_in_one_place() -> None:
+    """EKF mapping, EKF-SLAM and SEIF configs share one check of their two gates."""
+    from slamkit.errors import ConfigError
+    from slamkit.mapping.ekf_mapping import EkfMappingConfig, association_probabilities
+    from slamkit.slam import EkfSlamConfig, SeifConfig
+
+    assert association_probabilities(0.99, 0.999) == (0.99, 0.999)
+    for cls in (EkfMappingConfig, EkfSlamConfig, SeifConfig):
+        with pytest.raises(ConfigError, match="gate_probability: expected a probability"):
+            cls(gate_probability=1.0)
+        with pytest.raises(ConfigError, match="new_landmark_probability: expected >="):
+            cls(gate_probability=0.999, new_landmark_probability=0.99)
