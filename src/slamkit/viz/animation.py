@@ -18,15 +18,13 @@ import numpy as np
 from matplotlib.animation import FuncAnimation, PillowWriter
 
 from slamkit.errors import InputError
-from slamkit.geometry.alignment import Similarity
 from slamkit.viz.plots import (
     new_figure,
     plot_covariance_ellipses,
     plot_landmark_estimates,
-    plot_landmarks,
-    plot_segments,
     plot_trajectory,
 )
+from slamkit.viz.report import plot_reference
 
 if TYPE_CHECKING:
     from matplotlib.artist import Artist
@@ -61,15 +59,9 @@ def save_animation(
     fig = new_figure(figsize=(6.4, 5.6), dpi=80.0)
     ax = fig.add_subplot()
     truth = dataset.truth
-    if truth.walls is not None:
-        plot_segments(ax, truth.walls)
-    if truth.landmarks is not None:
-        plot_landmarks(ax, truth.landmarks, label="true landmarks")
+    plot_reference(ax, truth, gps_alignment)
     if truth.poses is not None:
         plot_trajectory(ax, truth.poses, label="ground truth", color="black", linewidth=1.0)
-    if truth.positions is not None and gps_alignment is not None:
-        gps = Similarity.from_pose(gps_alignment).inverse().apply_to_points(truth.positions)
-        ax.plot(gps[:, 0], gps[:, 1], ".", ms=1.5, color="0.55", label="GPS (aligned)")
     _fix_limits(ax, result, dataset)
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")

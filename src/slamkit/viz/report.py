@@ -24,13 +24,30 @@ from slamkit.viz.plots import (
 )
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from slamkit.datasets import Dataset
+    from slamkit.datasets import Dataset, GroundTruth
     from slamkit.pipeline.evaluate import Evaluation
     from slamkit.pipeline.runner import Result
 
-__all__ = ["run_figures"]
+__all__ = ["plot_reference", "run_figures"]
+
+
+def plot_reference(
+    ax: Axes, truth: GroundTruth, gps_alignment: tuple[float, float, float] | None = None
+) -> None:
+    """What a data set knows of the world, under an estimate: its walls, its true landmarks
+    and — given ``gps_alignment``, the ``(tx, ty, angle)`` that maps the estimate into the
+    GPS frame (``metrics["gps"]``) — the GPS track in the estimate's frame."""
+    if truth.walls is not None:
+        plot_segments(ax, truth.walls)
+    if truth.landmarks is not None:
+        plot_landmarks(ax, truth.landmarks, label="true landmarks")
+    if truth.positions is not None and gps_alignment is not None:
+        to_gps = Similarity.from_pose(gps_alignment)
+        xy = to_gps.inverse().apply_to_points(truth.positions)
+        ax.plot(xy[:, 0], xy[:, 1], ".", ms=1.5, color="0.55", label="GPS (aligned)", zorder=1)
 
 
 def run_figures(
@@ -43,19 +60,14 @@ def run_figures(
     figs: dict[str, Figure] = {}
     fig = new_figure(figsize=(7.0, 6.0))
     ax = fig.add_subplot()
-    truth = dataset.truth
-    if truth.walls is not None:
-        plot_segments(ax, truth.walls)
-    if truth.landmarks is not None:
-        plot_landmarks(ax, truth.landmarks, label="true landmarks")
-    plot_trajectories(ax, truth=truth.poses, estimate=result.poses, legend=False)
     gps = evaluation.metrics.get("gps", {})
-    if truth.positions is not None and "alignment_tx" in gps:
-        to_gps = Similarity.from_pose(
-            (gps["alignment_tx"], gps["alignment_ty"], gps["alignment_angle"])
-        )
-        xy = to_gps.inverse().apply_to_points(truth.positions)
-        ax.plot(xy[:, 0], xy[:, 1], ".", ms=1.5, color="0.55", label="GPS (aligned)", zorder=1)
+    aligned = "alignment_tx" in gps
+    plot_reference(
+        ax,
+        dataset.truth,
+        (gps["alignment_tx"], gps["alignment_ty"], gps["alignment_angle"]) if aligned else None,
+    )
+    plot_trajectories(ax, truth=dataset.truth.poses, estimate=result.poses, legend=False)
     if result.covariances is not None and len(result) > 1:
         every = max(1, len(result) // 25)
         plot_covariance_ellipses(
