@@ -1178,23 +1178,24 @@ def test_visibility_is_judged_from_the_sensor_not_the_robot_origin() -> None:
 
 
 def test_the_sensor_offset_comes_from_the_data_set_or_the_config() -> None:
-    """Victoria Park's loader records the laser's offset in its metadata (until the sensor
-    specification carries it); other data sets have none; the config overrides both."""
+    """The landmark sensor's specification says where it sits (Victoria Park: the laser,
+    ahead of the axle); by default at the robot's origin; the config overrides it."""
     from slamkit.slam.fastslam import _sensor_offset
 
     ds = load_dataset("five-features", seed=0)
-    assert _sensor_offset(ds) == (0.0, 0.0)
+    assert ds.landmark_sensor is not None and _sensor_offset(ds) == (0.0, 0.0)
     rng = np.random.default_rng(0)
     assert FastSlam1(ds, FastSlamConfig(n_particles=5), rng).settings.sensor_offset == (0.0, 0.0)
-    moved = dataclasses.replace(ds, metadata={**ds.metadata, "landmark_sensor_offset": [1.5, -0.2]})
+    sensor = dataclasses.replace(ds.landmark_sensor, offset=(1.5, -0.2))
+    moved = dataclasses.replace(ds, landmark_sensor=sensor)
     assert _sensor_offset(moved) == (1.5, -0.2)
     est = FastSlam1(moved, FastSlamConfig(n_particles=5), rng)
     assert est.settings.sensor_offset == (1.5, -0.2)
     cfg = FastSlamConfig(n_particles=5, sensor_offset=(0.0, 0.0))
     assert FastSlam1(moved, cfg, rng).settings.sensor_offset == (0.0, 0.0)
-    bad = dataclasses.replace(ds, metadata={**ds.metadata, "landmark_sensor_offset": "front"})
-    with pytest.raises(InputError, match="offset"):
-        FastSlam1(bad, FastSlamConfig(n_particles=5), rng)
+    for bad in ("front", (1.0, float("nan"))):
+        with pytest.raises(InputError, match="offset"):
+            dataclasses.replace(ds.landmark_sensor, offset=bad)
     with pytest.raises(ConfigError):
         FastSlamConfig(sensor_offset=(1.0, 2.0, 3.0))  # type: ignore[arg-type]
 

@@ -118,6 +118,7 @@ def test_synthetic_files_convert_units_and_conventions(tmp_path: Path) -> None:
     sensor = ds.landmark_sensor
     assert sensor is not None and sensor.kind == "range-bearing" and not sensor.identities
     np.testing.assert_allclose(np.diag(sensor.noise_cov), [0.1**2, 0.01**2])
+    assert sensor.offset == (3.78, 0.5)  # the laser sees from here (FastSLAM's misses)
     # FastSLAM's measured settings ride along; EKF-SLAM keeps the nominal noise.
     fs = {"measurement_noise_scale": 6.0, "motion_noise_scale": 0.5, "hit_weight": 3}
     assert ds.estimator_defaults == {"fastslam1": fs, "fastslam2": fs}

@@ -137,8 +137,22 @@ class LandmarkSensorSpec:
     min_range: float = 0.0
     """Landmarks closer than this are not reported (real sensors have a minimum range; a
     bearing read at millimetres is meaningless and wrecks a linearised filter)."""
+    offset: tuple[float, float] = (0.0, 0.0)
+    """Where the sensor sits in the robot frame [m] (ahead, left). The readings are of the
+    landmark from the robot's pose all the same; the field of view (``fov``, centred ahead)
+    is the sensor's, from here: estimators that predict which landmarks should have been
+    seen (FastSLAM's existence counters) judge from this point."""
 
     def __post_init__(self) -> None:
+        try:
+            a, b = (float(v) for v in self.offset)
+        except (TypeError, ValueError) as exc:
+            raise InputError(
+                f"landmark sensor offset: expected two numbers [m], got {self.offset!r}"
+            ) from exc
+        if not (np.isfinite(a) and np.isfinite(b)):
+            raise InputError(f"landmark sensor offset: expected finite numbers, got {(a, b)}")
+        object.__setattr__(self, "offset", (a, b))
         if self.kind not in ("range-bearing", "range", "bearing", "position"):
             raise InputError(
                 f"landmark sensor kind: expected 'range-bearing', 'range', 'bearing' or "

@@ -49,7 +49,7 @@ Conversion (:func:`load_victoria_park`):
   not read.
 * **Where the laser sees.** The readings are moved to the rear axle, but the laser still
   sees from where it sits: its 180° field of view is the half-plane ahead of ``(a, b)``,
-  its ranges are measured from there. ``metadata["landmark_sensor_offset"] = [a, b]``
+  its ranges are measured from there. The sensor specification's ``offset = (a, b)``
   records it for estimators that predict which trees should be seen (FastSLAM's existence
   counters): from the axle, trees beside the cab, between axle and laser, would count as
   missed at every scan. (The sensor specification's ``max_range`` is the laser's 80 m plus
@@ -404,9 +404,6 @@ def load_victoria_park(
             "outside_odometry": int(outside.sum()),
         },
         "gps_fixes": n_gps,
-        # The landmark sensor's position in the robot frame [m]: the readings are given from
-        # the rear axle, the field of view and the ranges are the laser's from here.
-        "landmark_sensor_offset": [a_off, b_off],
         "vehicle": {
             "wheelbase": opts.wheelbase,
             "encoder_offset": opts.encoder_offset,
@@ -427,6 +424,7 @@ def load_victoria_park(
             max_range=LASER_MAX_RANGE + float(np.hypot(a_off, b_off)),
             fov=np.pi,
             identities=opts.identities,
+            offset=(a_off, b_off),
         ),
         initial_pose=np.zeros(3),
         initial_cov=np.zeros((3, 3)),
