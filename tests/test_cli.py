@@ -180,3 +180,4 @@ def test_a_run_job_uses_the_data_sets_estimator_defaults(tmp_path, monkeypatch):
     cfg = json.loads((report.out_dir / "config.json").read_text())["estimator"]
     assert cfg["hit_weight"] == 4 and cfg["n_particles"] == 20
     assert report.result.config == {k: v for k, v in cfg.items() if k != "name"}
+    assert report.dataset_settings == {"hit_weight": 4}

@@ -44,6 +44,8 @@ class RunReport:
     files: tuple[str, ...]
     metrics: dict[str, Any]
     result: Result
+    dataset_settings: dict[str, Any] = field(default_factory=dict)
+    """The data set's ``estimator_defaults`` the run used (those the config left unset)."""
 
 
 def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
@@ -97,4 +99,6 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
                 alignment = (gps["alignment_tx"], gps["alignment_ty"], gps["alignment_angle"])
             save_animation(result, dataset, tmp / "animation.gif", gps_alignment=alignment)
         files = tuple(sorted(p.name for p in tmp.iterdir()))
-    return RunReport(Path(request.out_dir), files, evaluation.metrics, result)
+    defaults = dataset.estimator_defaults.get(entry.name, {})
+    used = {k: v for k, v in defaults.items() if k not in request.estimator_config}
+    return RunReport(Path(request.out_dir), files, evaluation.metrics, result, used)

@@ -99,6 +99,9 @@ def _run(
     )
     with progress_bar(f"{estimator} on {data}") as progress:
         report = run_job(request, progress)
+    if report.dataset_settings:
+        used = ", ".join(f"{k}={v}" for k, v in report.dataset_settings.items())
+        console.print(f"settings measured for {data} (config.json has them all): {used}")
     console.print(_render_metrics(report.metrics))
     console.print(f"wrote {', '.join(report.files)} to [bold]{report.out_dir}[/]")
 
