@@ -592,6 +592,27 @@ _ALL_OK = np.ones((), dtype=bool)
 _ZH0, _ZH1, _H00, _H01, _H10, _H11, _T00, _T01, _T10, _T11, _I00, _I01, _I11, _LOGDET = range(14)
 
 
+def _times_symmetric(
+    a: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+    b: tuple[FloatArray, FloatArray, FloatArray],
+    out: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+    tmp: FloatArray,
+) -> None:
+    """``out = A B`` entry-wise over arrays of 2×2 matrices, in place: ``A`` as
+    ``(a00, a01, a10, a11)``, ``B`` symmetric as ``(b00, b01, b11)``."""
+    a00, a01, a10, a11 = a
+    b00, b01, b11 = b
+    o00, o01, o10, o11 = out
+    np.multiply(a00, b00, out=o00)
+    o00 += np.multiply(a01, b01, out=tmp)
+    np.multiply(a00, b01, out=o01)
+    o01 += np.multiply(a01, b11, out=tmp)
+    np.multiply(a10, b00, out=o10)
+    o10 += np.multiply(a11, b01, out=tmp)
+    np.multiply(a10, b01, out=o11)
+    o11 += np.multiply(a11, b11, out=tmp)
+
+
 def _landmark_terms(
     model: InvertibleLandmarkModel,
     pose: tuple[FloatArray, FloatArray, FloatArray],
@@ -653,14 +674,7 @@ def _landmark_terms(
         zh0[...], zh1[...] = z_hat[..., 0], z_hat[..., 1]
         h00[...], h01[...] = Hm[..., 0, 0], Hm[..., 0, 1]
         h10[...], h11[...] = Hm[..., 1, 0], Hm[..., 1, 1]
-    np.multiply(h00, s00, out=t00)  # T = H Σ
-    t00 += np.multiply(h01, s01, out=tmp)
-    np.multiply(h00, s01, out=t01)
-    t01 += np.multiply(h01, s11, out=tmp)
-    np.multiply(h10, s00, out=t10)
-    t10 += np.multiply(h11, s01, out=tmp)
-    np.multiply(h10, s01, out=t11)
-    t11 += np.multiply(h11, s11, out=tmp)
+    _times_symmetric((h00, h01, h10, h11), (s00, s01, s11), (t00, t01, t10, t11), tmp)  # T = H Σ
     np.multiply(t00, h00, out=q00)  # Q = T Hᵀ + R
     q00 += np.multiply(t01, h01, out=tmp)
     q00 += float(R[0, 0])
@@ -751,14 +765,7 @@ def _ekf(
     buf = np.empty((10, *g.shape[1:]))
     out = buf[:5]
     ox, oy, o00, o01, o11, k00, k01, k10, k11, tmp = buf
-    np.multiply(t00, i00, out=k00)  # K = Tᵀ Q⁻¹
-    k00 += np.multiply(t10, i01, out=tmp)
-    np.multiply(t00, i01, out=k01)
-    k01 += np.multiply(t10, i11, out=tmp)
-    np.multiply(t01, i00, out=k10)
-    k10 += np.multiply(t11, i01, out=tmp)
-    np.multiply(t01, i01, out=k11)
-    k11 += np.multiply(t11, i11, out=tmp)
+    _times_symmetric((t00, t10, t01, t11), (i00, i01, i11), (k00, k01, k10, k11), tmp)  # K = Tᵀ Q⁻¹
     np.multiply(k00, nu0, out=ox)  # μ + K ν
     ox += np.multiply(k01, nu1, out=tmp)
     ox += mx
