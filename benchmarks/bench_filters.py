@@ -178,15 +178,15 @@ class _ModelEKF(ExtendedKalmanFilter):  # type: ignore[misc]
     models' unchecked kernels), so that only the filter machinery differs."""
 
     def predict_x(self, u: np.ndarray = 0) -> None:  # type: ignore[assignment]
-        self.x = _EULER._g(self.x, u, DT)
+        self.x = _EULER.apply_unchecked(self.x, u, DT)
 
 
 def _model_h(x: np.ndarray, l: np.ndarray) -> np.ndarray:
-    return _RB._h(x, l)
+    return _RB.predict_unchecked(x, l)
 
 
 def _model_H(x: np.ndarray, l: np.ndarray) -> np.ndarray:
-    return _RB._jac(x, l)[0]
+    return _RB.jacobians_unchecked(x, l)[0]
 
 
 def filterpy_ekf_models(ds: Dataset, record: bool = False) -> np.ndarray | None:
@@ -195,7 +195,7 @@ def filterpy_ekf_models(ds: Dataset, record: bool = False) -> np.ndarray | None:
     ekf.P = ds.initial_cov.copy()
     out = []
     for u, z in _steps(ds):
-        ekf.F, V = _EULER._jac(ekf.x, u, DT)
+        ekf.F, V = _EULER.jacobians_unchecked(ekf.x, u, DT)
         ekf.Q = V @ Q_U @ V.T
         ekf.predict(u)
         for j in range(3):

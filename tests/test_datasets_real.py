@@ -372,13 +372,13 @@ def test_plaza_range_residuals(plaza: Dataset, data_root: Path) -> None:
 
 
 def test_pieces_cut_intervals_only_strictly_inside() -> None:
-    from slamkit.datasets.plaza import _pieces
+    from slamkit.datasets.plaza import cut_intervals
 
     t_start = np.array([0.0, 1.0, 2.0])
     t_end = np.array([1.0, 2.0, 3.0])
     # Before the first interval, on a boundary, twice inside the second, after the last.
     cuts = np.array([-1.0, 1.0, 1.25, 1.5, 2.5, 4.0])
-    ends, dts, owner = _pieces(t_start, t_end, cuts)
+    ends, dts, owner = cut_intervals(t_start, t_end, cuts)
     np.testing.assert_array_equal(ends, [1.0, 1.25, 1.5, 2.0, 2.5, 3.0])
     np.testing.assert_allclose(dts, [1.0, 0.25, 0.25, 0.5, 0.5, 0.5])
     np.testing.assert_array_equal(owner, [0, 1, 1, 1, 2, 2])

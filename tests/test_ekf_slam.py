@@ -41,7 +41,7 @@ from slamkit.slam import (
     slam_predict,
     slam_update,
 )
-from slamkit.slam.ekf_slam import OWN_ID_BASE, _h_jacobians
+from slamkit.slam.ekf_slam import OWN_ID_BASE, reading_jacobians
 
 R_RB = np.diag([0.1**2, np.deg2rad(2.0) ** 2])
 Q_U = np.diag([0.1**2, np.deg2rad(5.0) ** 2])
@@ -107,7 +107,7 @@ def test_five_column_update_equals_the_dense_update(model: RangeBearing) -> None
 @pytest.mark.parametrize("model", [RangeBearing(), RelativePosition()])
 def test_landmark_jacobian_is_minus_the_position_jacobian(model: RangeBearing) -> None:
     pose, lm = np.array([1.0, -2.0, 0.7]), np.array([4.0, 1.5])
-    h, Hr, Hj = _h_jacobians(model, pose, lm)
+    h, Hr, Hj = reading_jacobians(model, pose, lm)
     Hr_ref, Hj_ref = model.jacobians(pose, lm)
     np.testing.assert_allclose(h, model.predict(pose, lm), rtol=0, atol=1e-14)
     np.testing.assert_allclose(Hr, Hr_ref, rtol=0, atol=1e-14)

@@ -32,8 +32,8 @@ from slamkit.localization import GaussianBelief, predict
 from slamkit.localization.ekf import (
     EkfConfig,
     EkfLocalization,
-    _predict_arrays,
     ekf_predict,
+    ekf_predict_unchecked,
     ekf_update,
 )
 from slamkit.localization.kalman import kf_predict, kf_update
@@ -41,8 +41,8 @@ from slamkit.localization.ukf import (
     SigmaPointParams,
     UkfConfig,
     UkfLocalization,
-    _sqrt_psd,
-    _weights,
+    psd_sqrt,
+    sigma_point_weights,
     ukf_predict,
     ukf_update,
 )
@@ -212,18 +212,18 @@ def test_sigma_points_reproduce_mean_and_covariance():
     P = M @ M.T + 0.1 * np.eye(5)
     mu = rng.normal(size=5)
     for params in (SigmaPointParams(), SigmaPointParams(1e-2, 2.0, 0.0), SigmaPointParams(1, 0, 3)):
-        Wm, Wc, c = _weights(params, 5)
+        Wm, Wc, c = sigma_point_weights(params, 5)
         assert Wm.sum() == pytest.approx(1.0, abs=1e-9)
-        L = np.sqrt(c) * _sqrt_psd(P, "test")
+        L = np.sqrt(c) * psd_sqrt(P, "test")
         X = np.vstack([mu, mu + L.T, mu - L.T])
         np.testing.assert_allclose(Wm @ X, mu, atol=1e-8)
         D = X - mu
         np.testing.assert_allclose((D.T * Wc) @ D, P, atol=1e-8)
     # A singular PSD covariance (a known start) still has a square root.
-    S = _sqrt_psd(np.diag([1.0, 0.0, 0.0]), "test")
+    S = psd_sqrt(np.diag([1.0, 0.0, 0.0]), "test")
     np.testing.assert_allclose(S @ S.T, np.diag([1.0, 0.0, 0.0]), atol=1e-15)
     with pytest.raises(InputError):
-        _weights(SigmaPointParams(kappa=-5.0), 3)
+        sigma_point_weights(SigmaPointParams(kappa=-5.0), 3)
     with pytest.raises(ConfigError):
         SigmaPointParams(alpha=0.0)
 
@@ -249,7 +249,7 @@ def test_fast_prediction_equals_belief_predict(model, u, dt):
     b = GaussianBelief([1.0, 2.0, 3.0], 0.01 * (M @ M.T))
     Q = np.diag(rng.uniform(0.001, 0.01, model.control_dim))
     ref = predict(b, u, dt, model, Q)
-    mean, cov = _predict_arrays(b.mean, b.cov, np.asarray(u, float), dt, model, Q)
+    mean, cov = ekf_predict_unchecked(b.mean, b.cov, np.asarray(u, float), dt, model, Q)
     np.testing.assert_allclose(mean, ref.mean, rtol=0, atol=1e-12)
     np.testing.assert_allclose(cov, ref.cov, rtol=0, atol=1e-12)
 

@@ -30,9 +30,9 @@ from slamkit.errors import (
 from slamkit.eval import absolute_trajectory_error, landmark_map_error
 from slamkit.geometry.alignment import align_points_2d
 from slamkit.localization.particles import (
-    _low_variance_resample_unchecked,
     effective_sample_size,
     low_variance_resample,
+    low_variance_resample_unchecked,
     particle_estimate,
 )
 from slamkit.models import (
@@ -106,7 +106,7 @@ def _inverse(x, z):
     return m, Lz
 
 
-def _innovation(x, lm, z):
+def innovation_unchecked(x, lm, z):
     zh, Hx, Hm = _h_and_jac(x, lm["mu"])
     nu = z - zh
     nu[1] = _wrap(nu[1])
@@ -121,7 +121,7 @@ def _loglik(nu, S):
 
 
 def _ref_ekf(x, lm, z):
-    nu, _, H, Q = _innovation(x, lm, z)
+    nu, _, H, Q = innovation_unchecked(x, lm, z)
     K = lm["cov"] @ H.T @ np.linalg.inv(Q)
     A = np.eye(2) - K @ H
     P = A @ lm["cov"] @ A.T + K @ R @ K.T
@@ -156,7 +156,7 @@ def _ref_associate(x, lms, z, rid, s, seen, marginal=None):
     if s.use_ids and rid >= 0:
         for j, lm in enumerate(lms):
             if lm["id"] == rid:
-                nu, Hx, _, Q = _innovation(x, lm, z)
+                nu, Hx, _, Q = innovation_unchecked(x, lm, z)
                 L = Q if marginal is None else marginal(Hx, Q)
                 return j, _loglik(nu, L)
         return -1, math.log(s.p0)
@@ -164,7 +164,7 @@ def _ref_associate(x, lms, z, rid, s, seen, marginal=None):
     for j, lm in enumerate(lms):
         if j in seen:
             continue
-        nu, Hx, _, Q = _innovation(x, lm, z)
+        nu, Hx, _, Q = innovation_unchecked(x, lm, z)
         ll = _loglik(nu, Q if marginal is None else marginal(Hx, Q))
         if ll > best_ll:
             best, best_ll = j, ll
@@ -290,7 +290,7 @@ def ref_update2(ps: FastSlamParticles, u, dt, z, ids, s: UpdateSettings, draws, 
             j, ll = _ref_associate(xb, p["lms"], zk, rk, s, seen[i], marginal)
             p["logw"] += ll
             if j >= 0:
-                nu, Hx, _, Q = _innovation(xb, p["lms"][j], zk)
+                nu, Hx, _, Q = innovation_unchecked(xb, p["lms"][j], zk)
                 A = Hx @ V
                 L = A @ Se[i] @ A.T + Q
                 K = Se[i] @ A.T @ np.linalg.inv(L)
@@ -688,7 +688,7 @@ def test_move_particles_in_place_equals_apply(model) -> None:
     for dt in (0.1, 0.0):
         want = model.apply(x, u, dt)
         got = x.copy()
-        model._move_particles(got, u, dt)
+        model.move_particles(got, u, dt)
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
         assert np.all((got[:, 2] >= -np.pi) & (got[:, 2] < np.pi))
     np.testing.assert_array_equal(u, u_copy)
@@ -699,7 +699,7 @@ def test_move_particles_in_place_equals_apply(model) -> None:
     turning[:, -1] = np.clip(np.where(u[:, -1] < 0, -0.5, 0.5) + u[:, -1], -1.0, 1.0)
     for controls in (u, turning):
         got = x.copy()
-        model._move_particles(got, controls, 0.1)
+        model.move_particles(got, controls, 0.1)
         np.testing.assert_allclose(got, model.apply(x, controls, 0.1), rtol=0, atol=1e-12)
 
 
@@ -725,7 +725,7 @@ def test_unchecked_low_variance_resample_equals_the_validated_one() -> None:
         w /= w.sum()
         a, b = np.random.default_rng(9), np.random.default_rng(9)
         np.testing.assert_array_equal(
-            _low_variance_resample_unchecked(w, a, n), low_variance_resample(w, b)
+            low_variance_resample_unchecked(w, a, n), low_variance_resample(w, b)
         )
         assert a.bit_generator.state == b.bit_generator.state
 

@@ -438,7 +438,7 @@ def test_values_are_immutable_and_do_not_alias(group: type) -> None:
     with pytest.raises(AttributeError):
         x.anything = 1
     with pytest.raises(AttributeError):
-        x._params = params
+        x.parameters = params
 
 
 @pytest.mark.parametrize("group", GROUPS)
@@ -503,5 +503,5 @@ def test_quaternion_constructors_normalise_near_unit_only() -> None:
         SE3(np.concatenate([q, [0.0, 0.0, 0.0]]))
     with pytest.raises(InputError):
         SO2.from_unit_complex([0.5, 0.5])
-    drifted = SO3._wrap(unit * 1.001)
+    drifted = SO3.from_parameters_unchecked(unit * 1.001)
     np.testing.assert_allclose(np.linalg.norm(drifted.normalize().wxyz), 1.0, atol=1e-15)

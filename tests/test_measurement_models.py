@@ -259,7 +259,7 @@ def test_single_pose_kernel_agrees_with_the_batched_kernels(model):
     for _ in range(50):
         pose = np.array([*rng.normal(0, 5, 2), rng.uniform(-np.pi, np.pi)])
         lm = rng.normal(0, 5, 2)
-        h, H = model._h_and_pose_jacobian(pose, lm)
+        h, H = model.predict_with_pose_jacobian(pose, lm)
         np.testing.assert_allclose(h, model.predict(pose, lm), rtol=0, atol=1e-12)
         np.testing.assert_allclose(H, model.jacobians(pose, lm)[0], rtol=0, atol=1e-12)
         assert h.shape == (model.dim,) and H.shape == (model.dim, 3)

@@ -505,7 +505,7 @@ def test_single_pose_step_agrees_with_the_batched_kernels(model):
     for w in (0.0, 1e-9, 0.3, -0.5):  # Ackermann steering must stay below pi/2
         x = np.array([*rng.normal(0, 5, 2), rng.uniform(-np.pi, np.pi)])
         u = np.array([0.8, w, 0.1][: model.control_dim])
-        g, G, V = model._step_single(x, u, 0.1)
+        g, G, V = model.step_single(x, u, 0.1)
         np.testing.assert_allclose(g, model.apply(x, u, 0.1), rtol=0, atol=1e-12)
         G_ref, V_ref = model.jacobians(x, u, 0.1)
         np.testing.assert_allclose(G, G_ref, rtol=0, atol=1e-12)

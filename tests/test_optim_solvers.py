@@ -179,7 +179,7 @@ def test_normal_equations_match_dense_jacobian() -> None:
 
     def residual(delta: np.ndarray) -> np.ndarray:
         p, lm = problem.retract(p0, l0, delta)
-        rs = [problem._residuals(b, p, lm)[0].T.ravel() for b in problem.blocks]
+        rs = [problem.block_residuals(b, p, lm)[0].T.ravel() for b in problem.blocks]
         return np.concatenate(rs)
 
     r0 = residual(np.zeros(problem.n))

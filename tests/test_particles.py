@@ -192,12 +192,12 @@ def test_uniform_particles_in_free_space_only_in_free_cells() -> None:
 
 
 def test_unchecked_estimate_equals_the_validated_one() -> None:
-    from slamkit.localization.particles import _particle_estimate_unchecked
+    from slamkit.localization.particles import particle_estimate_unchecked
 
     rng = np.random.default_rng(7)
     poses = np.column_stack([rng.normal(size=(400, 2)), rng.uniform(-np.pi, np.pi, 400)])
     w = rng.random(400)
     mean, cov = particle_estimate(poses, w)
-    fast_mean, fast_cov = _particle_estimate_unchecked(poses, w / w.sum())
+    fast_mean, fast_cov = particle_estimate_unchecked(poses, w / w.sum())
     np.testing.assert_allclose(fast_mean, mean, rtol=0, atol=1e-12)
     np.testing.assert_allclose(fast_cov, cov, rtol=0, atol=1e-12)

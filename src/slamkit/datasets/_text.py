@@ -50,7 +50,7 @@ class NumericTable:
         return int(self.values.shape[0])
 
 
-def _read_text(path: Path) -> str:
+def read_text(path: Path) -> str:
     try:
         if path.suffix == ".gz":
             with gzip.open(path, "rt", encoding="utf-8") as fh:
@@ -110,7 +110,7 @@ def read_table(
     if columns < 1:
         raise ValueError(f"columns: expected a positive number, got {columns}")
     p = Path(path)
-    text = _read_text(p)
+    text = read_text(p)
 
     fields: list[str] = []
     numbers: list[int] = []

@@ -182,7 +182,7 @@ def _beacons(table: NumericTable, path: Path) -> LandmarkMap:
     return LandmarkMap(table.values[:, 1:3].copy(), ids.astype(np.int64))
 
 
-def _pieces(
+def cut_intervals(
     t_start: FloatArray, t_end: FloatArray, cuts: FloatArray
 ) -> tuple[FloatArray, FloatArray, np.ndarray]:
     """Cut the intervals ``(t_start[k], t_end[k]]`` at the times ``cuts`` that fall strictly
@@ -273,7 +273,7 @@ def load_plaza1(
 
     # ---- controls, cut at reading times ----------------------------------------------------
     if opts.split_at_readings:
-        ends, dts, owner = _pieces(t_begin, t_end, group_t)
+        ends, dts, owner = cut_intervals(t_begin, t_end, group_t)
     else:
         ends, dts, owner = t_end, span, np.arange(t_end.size)
     n_ctrl = int(np.searchsorted(ends, cut, side="right"))

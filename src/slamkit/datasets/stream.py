@@ -44,6 +44,7 @@ from slamkit.models import (
     RangeBearing,
     RangeOnly,
     RelativePosition,
+    motion_kernels,
 )
 
 __all__ = [
@@ -115,7 +116,7 @@ class MotionSpec:
     source: Literal["control", "odometry"] = "control"
 
     def __post_init__(self) -> None:
-        k = self.model.control_dim
+        k = motion_kernels(self.model).control_dim  # InputError naming what a model lacks
         cov = as_covariance(self.noise_cov, "motion noise_cov", k, semidefinite=True)
         object.__setattr__(self, "noise_cov", cov)
         if self.source == "odometry" and not isinstance(self.model, OdometryModel):

@@ -144,7 +144,7 @@ from slamkit._validation import FloatArray
 from slamkit.config import config_from_mapping, config_to_dict
 from slamkit.datasets._text import NumericTable, read_table
 from slamkit.datasets.paths import data_root as resolve_data_root
-from slamkit.datasets.plaza import _pieces
+from slamkit.datasets.plaza import cut_intervals
 from slamkit.datasets.stream import (
     Control,
     Dataset,
@@ -359,7 +359,7 @@ def load_victoria_park(
     # ---- controls, cut at detection times -------------------------------------------------
     t_begin, t_end = t_odo[:-1], t_odo[1:]
     if opts.split_at_readings:
-        ends, dts, owner = _pieces(t_begin, t_end, group_t)
+        ends, dts, owner = cut_intervals(t_begin, t_end, group_t)
     else:
         ends, dts, owner = t_end, t_end - t_begin, np.arange(t_end.size)
     n_ctrl = int(np.searchsorted(ends, cut, side="right"))

@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 
 from slamkit._validation import FloatArray
 from slamkit.errors import ConfigError, GeometryError, InputError
-from slamkit.eval.trajectory import _summary
+from slamkit.eval.trajectory import error_summary
 from slamkit.geometry.alignment import Similarity, align_points_2d
 from slamkit.maps.types import LandmarkMap
 
@@ -128,7 +128,7 @@ def landmark_map_error(
     aligned = alignment.apply_to_points(p_est)
     d = p_true - aligned
     errors = np.hypot(d[:, 0], d[:, 1])
-    s = _summary(errors)
+    s = error_summary(errors)
     return LandmarkError(
         ids=ids.astype(np.int64),
         errors=errors,

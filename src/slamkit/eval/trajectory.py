@@ -55,7 +55,7 @@ class _Summary:
     std: float
 
 
-def _summary(values: FloatArray) -> _Summary:
+def error_summary(values: FloatArray) -> _Summary:
     """RMSE, mean, median, max and (population) standard deviation of non-empty ``values``."""
     assert values.size > 0, "callers reject empty inputs"
     return _Summary(
@@ -217,7 +217,7 @@ def absolute_trajectory_error(
     err = pose_errors(aligned, tru)
     trans = np.hypot(err[:, 0], err[:, 1])
     head = err[:, 2]
-    s = _summary(trans)
+    s = error_summary(trans)
     return TrajectoryError(
         align=align,
         alignment=alignment,
@@ -335,7 +335,7 @@ def relative_pose_error(
     err = between(between(tru[i], tru[j]), between(est[i], est[j]))
     trans = np.hypot(err[:, 0], err[:, 1])
     rot = np.abs(err[:, 2])
-    st, sr = _summary(trans), _summary(rot)
+    st, sr = error_summary(trans), error_summary(rot)
     return RelativeError(
         delta=float(delta),
         unit=unit,

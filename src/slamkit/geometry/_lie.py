@@ -18,8 +18,9 @@ Conventions, fixed here for every group:
 * Equality is object identity; compare values with ``np.allclose`` on ``as_matrix()``
   (quaternions ``q`` and ``-q`` are the same rotation).
 
-Results of group operations are built by the private constructor :meth:`LieGroup._wrap`,
-which skips validation: the inputs were validated when they entered.
+Results of group operations are built by the unchecked constructor
+:meth:`LieGroup.from_parameters_unchecked`, which skips validation: the inputs were validated
+when they entered.
 """
 
 from __future__ import annotations
@@ -142,7 +143,7 @@ class LieGroup(abc.ABC):
         object.__setattr__(self, "_params", _readonly(self._checked_parameters(p, name)))
 
     @classmethod
-    def _wrap(cls, params: FloatArray) -> Self:
+    def from_parameters_unchecked(cls, params: FloatArray) -> Self:
         """Wrap an already valid parameter array without checks (for results of operations)."""
         obj = cls.__new__(cls)
         object.__setattr__(obj, "_params", _readonly(params))
@@ -187,7 +188,7 @@ class LieGroup(abc.ABC):
         params = self._params[(*key, slice(None))]
         if params.ndim == 0 or params.shape[-1] != self.parameters_dim:
             raise IndexError(f"index {index!r} reaches past the batch axes {self.batch_shape}")
-        return self._wrap(params)
+        return self.from_parameters_unchecked(params)
 
     # ----------------------------------------------------------------- the group
 

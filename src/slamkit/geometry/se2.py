@@ -85,14 +85,16 @@ class SE2(LieGroup):
     def identity(cls, batch_shape: BatchShape = ()) -> SE2:
         params = np.zeros((*batch_tuple(batch_shape), 4))
         params[..., 0] = 1.0
-        return cls._wrap(params)
+        return cls.from_parameters_unchecked(params)
 
     @classmethod
     def from_xy_theta(cls, xy_theta: ArrayLike) -> SE2:
         """From pose arrays ``(..., 3) = (x, y, θ)`` as used by :mod:`~slamkit.geometry.pose2`."""
         p = as_array(xy_theta, "xy_theta", (..., 3))
         theta = p[..., 2]
-        return cls._wrap(np.stack([np.cos(theta), np.sin(theta), p[..., 0], p[..., 1]], axis=-1))
+        return cls.from_parameters_unchecked(
+            np.stack([np.cos(theta), np.sin(theta), p[..., 0], p[..., 1]], axis=-1)
+        )
 
     @classmethod
     def from_rotation_and_translation(cls, rotation: SO2, translation: ArrayLike) -> SE2:
@@ -101,7 +103,7 @@ class SE2(LieGroup):
             raise InputError(f"rotation: expected an SO2, got {type(rotation).__name__}")
         t = as_array(translation, "translation", (..., 2))
         shape = broadcast_batch(rotation.batch_shape, t.shape[:-1], "SE2 rotation and translation")
-        return cls._wrap(
+        return cls.from_parameters_unchecked(
             np.concatenate(
                 [
                     np.broadcast_to(rotation.parameters, (*shape, 2)),
@@ -123,7 +125,9 @@ class SE2(LieGroup):
         check_homogeneous_row(M, "SE2 matrix")
         check_rotation_matrix(M[..., :2, :2], "SE2 matrix rotation block")
         rotation = SO2.from_matrix(M[..., :2, :2])
-        return cls._wrap(np.concatenate([rotation.parameters, M[..., :2, 2]], axis=-1))
+        return cls.from_parameters_unchecked(
+            np.concatenate([rotation.parameters, M[..., :2, 2]], axis=-1)
+        )
 
     @classmethod
     def sample_uniform(cls, rng: np.random.Generator, batch_shape: BatchShape = ()) -> SE2:
@@ -131,7 +135,7 @@ class SE2(LieGroup):
         shape = batch_tuple(batch_shape)
         rotation = SO2.sample_uniform(rng, shape)
         t = check_rng(rng).uniform(-1.0, 1.0, size=(*shape, 2))
-        return cls._wrap(np.concatenate([rotation.parameters, t], axis=-1))
+        return cls.from_parameters_unchecked(np.concatenate([rotation.parameters, t], axis=-1))
 
     # ----------------------------------------------------------------- accessors
 
@@ -141,7 +145,7 @@ class SE2(LieGroup):
         return self._params
 
     def rotation(self) -> SO2:
-        return SO2._wrap(self._params[..., :2])
+        return SO2.from_parameters_unchecked(self._params[..., :2])
 
     def translation(self) -> FloatArray:
         """``(..., 2)``: ``(x, y)``."""
@@ -167,9 +171,9 @@ class SE2(LieGroup):
         self._check_same_group(other, "compose")
         broadcast_batch(self.batch_shape, other.batch_shape, "SE2 compose")
         c1, s1, x1, y1 = (self._params[..., i] for i in range(4))
-        c2, s2, x2, y2 = (other._params[..., i] for i in range(4))
+        c2, s2, x2, y2 = (other.parameters[..., i] for i in range(4))
         # (R1, t1)(R2, t2) = (R1 R2, R1 t2 + t1).
-        return self._wrap(
+        return self.from_parameters_unchecked(
             np.stack(
                 [
                     c1 * c2 - s1 * s2,
@@ -184,7 +188,9 @@ class SE2(LieGroup):
     def inverse(self) -> SE2:
         c, s, x, y = (self._params[..., i] for i in range(4))
         # (R, t)⁻¹ = (Rᵀ, -Rᵀ t).
-        return self._wrap(np.stack([c, -s, -c * x - s * y, s * x - c * y], axis=-1))
+        return self.from_parameters_unchecked(
+            np.stack([c, -s, -c * x - s * y, s * x - c * y], axis=-1)
+        )
 
     def apply(self, points: ArrayLike) -> FloatArray:
         p = as_array(points, "points", (..., 2))
@@ -201,7 +207,7 @@ class SE2(LieGroup):
         # t = V(θ) v with V = [[A, -B], [B, A]], A = sin θ/θ, B = (1 - cos θ)/θ: the end point of
         # a constant-velocity arc.
         A, B = _sinc_and_cosc(theta)
-        return cls._wrap(
+        return cls.from_parameters_unchecked(
             np.stack([np.cos(theta), np.sin(theta), A * vx - B * vy, B * vx + A * vy], axis=-1)
         )
 
@@ -225,4 +231,4 @@ class SE2(LieGroup):
     def normalize(self) -> SE2:
         rot = self._params[..., :2]
         rot = rot / np.linalg.norm(rot, axis=-1, keepdims=True)
-        return self._wrap(np.concatenate([rot, self._params[..., 2:]], axis=-1))
+        return self.from_parameters_unchecked(np.concatenate([rot, self._params[..., 2:]], axis=-1))

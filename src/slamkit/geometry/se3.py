@@ -67,7 +67,7 @@ class SE3(LieGroup):
     def identity(cls, batch_shape: BatchShape = ()) -> SE3:
         params = np.zeros((*batch_tuple(batch_shape), 7))
         params[..., 0] = 1.0
-        return cls._wrap(params)
+        return cls.from_parameters_unchecked(params)
 
     @classmethod
     def from_rotation_and_translation(cls, rotation: SO3, translation: ArrayLike) -> SE3:
@@ -76,7 +76,7 @@ class SE3(LieGroup):
             raise InputError(f"rotation: expected an SO3, got {type(rotation).__name__}")
         t = as_array(translation, "translation", (..., 3))
         shape = broadcast_batch(rotation.batch_shape, t.shape[:-1], "SE3 rotation and translation")
-        return cls._wrap(
+        return cls.from_parameters_unchecked(
             np.concatenate(
                 [
                     np.broadcast_to(rotation.parameters, (*shape, 4)),
@@ -102,7 +102,9 @@ class SE3(LieGroup):
         M = as_array(matrix, "SE3 matrix", (..., 4, 4))
         check_homogeneous_row(M, "SE3 matrix")
         check_rotation_matrix(M[..., :3, :3], "SE3 matrix rotation block")
-        return cls._wrap(np.concatenate([matrix_to_quat(M[..., :3, :3]), M[..., :3, 3]], axis=-1))
+        return cls.from_parameters_unchecked(
+            np.concatenate([matrix_to_quat(M[..., :3, :3]), M[..., :3, 3]], axis=-1)
+        )
 
     @classmethod
     def sample_uniform(cls, rng: np.random.Generator, batch_shape: BatchShape = ()) -> SE3:
@@ -110,7 +112,7 @@ class SE3(LieGroup):
         shape = batch_tuple(batch_shape)
         rotation = SO3.sample_uniform(rng, shape)
         t = check_rng(rng).uniform(-1.0, 1.0, size=(*shape, 3))
-        return cls._wrap(np.concatenate([rotation.parameters, t], axis=-1))
+        return cls.from_parameters_unchecked(np.concatenate([rotation.parameters, t], axis=-1))
 
     # ----------------------------------------------------------------- accessors
 
@@ -120,7 +122,7 @@ class SE3(LieGroup):
         return self._params
 
     def rotation(self) -> SO3:
-        return SO3._wrap(self._params[..., :4])
+        return SO3.from_parameters_unchecked(self._params[..., :4])
 
     def translation(self) -> FloatArray:
         """``(..., 3)``: ``(x, y, z)``."""
@@ -143,14 +145,18 @@ class SE3(LieGroup):
         self._check_same_group(other, "compose")
         broadcast_batch(self.batch_shape, other.batch_shape, "SE3 compose")
         q1, t1 = self._params[..., :4], self._params[..., 4:]
-        q2, t2 = other._params[..., :4], other._params[..., 4:]
+        q2, t2 = other.parameters[..., :4], other.parameters[..., 4:]
         # (R1, t1)(R2, t2) = (R1 R2, R1 t2 + t1).
-        return self._wrap(np.concatenate([quat_multiply(q1, q2), quat_rotate(q1, t2) + t1], -1))
+        return self.from_parameters_unchecked(
+            np.concatenate([quat_multiply(q1, q2), quat_rotate(q1, t2) + t1], -1)
+        )
 
     def inverse(self) -> SE3:
         q_inv = self._params[..., :4] * np.array([1.0, -1.0, -1.0, -1.0])
         # (R, t)⁻¹ = (Rᵀ, -Rᵀ t).
-        return self._wrap(np.concatenate([q_inv, -quat_rotate(q_inv, self._params[..., 4:])], -1))
+        return self.from_parameters_unchecked(
+            np.concatenate([q_inv, -quat_rotate(q_inv, self._params[..., 4:])], -1)
+        )
 
     def apply(self, points: ArrayLike) -> FloatArray:
         p = as_array(points, "points", (..., 3))
@@ -171,7 +177,7 @@ class SE3(LieGroup):
         C = np.where(small, 1.0 / 6.0 - t2 / 120.0 + t2 * t2 / 5040.0, (t - np.sin(t)) / t**3)
         wxv = cross(omega, v)
         trans = v + B[..., None] * wxv + C[..., None] * cross(omega, wxv)
-        return cls._wrap(np.concatenate([quat_exp(omega), trans], axis=-1))
+        return cls.from_parameters_unchecked(np.concatenate([quat_exp(omega), trans], axis=-1))
 
     def log(self) -> FloatArray:
         omega = quat_log(self._params[..., :4])
@@ -202,4 +208,4 @@ class SE3(LieGroup):
     def normalize(self) -> SE3:
         q = self._params[..., :4]
         q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-        return self._wrap(np.concatenate([q, self._params[..., 4:]], axis=-1))
+        return self.from_parameters_unchecked(np.concatenate([q, self._params[..., 4:]], axis=-1))

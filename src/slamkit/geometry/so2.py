@@ -51,13 +51,13 @@ class SO2(LieGroup):
     def identity(cls, batch_shape: BatchShape = ()) -> SO2:
         params = np.zeros((*batch_tuple(batch_shape), 2))
         params[..., 0] = 1.0
-        return cls._wrap(params)
+        return cls.from_parameters_unchecked(params)
 
     @classmethod
     def from_angle(cls, theta: ArrayLike) -> SO2:
         """Rotations by ``theta`` radians (any shape; that shape becomes the batch shape)."""
         t = as_array(theta, "theta")
-        return cls._wrap(np.stack([np.cos(t), np.sin(t)], axis=-1))
+        return cls.from_parameters_unchecked(np.stack([np.cos(t), np.sin(t)], axis=-1))
 
     @classmethod
     def from_unit_complex(cls, unit_complex: ArrayLike) -> SO2:
@@ -72,13 +72,15 @@ class SO2(LieGroup):
         c = 0.5 * (R[..., 0, 0] + R[..., 1, 1])
         s = 0.5 * (R[..., 1, 0] - R[..., 0, 1])
         params = np.stack([c, s], axis=-1)
-        return cls._wrap(params / np.linalg.norm(params, axis=-1, keepdims=True))
+        return cls.from_parameters_unchecked(
+            params / np.linalg.norm(params, axis=-1, keepdims=True)
+        )
 
     @classmethod
     def sample_uniform(cls, rng: np.random.Generator, batch_shape: BatchShape = ()) -> SO2:
         """Angles uniform on ``[-π, π)``."""
         theta = check_rng(rng).uniform(-np.pi, np.pi, size=batch_tuple(batch_shape))
-        return cls._wrap(np.stack([np.cos(theta), np.sin(theta)], axis=-1))
+        return cls.from_parameters_unchecked(np.stack([np.cos(theta), np.sin(theta)], axis=-1))
 
     # ----------------------------------------------------------------- accessors
 
@@ -100,14 +102,14 @@ class SO2(LieGroup):
     def compose(self, other: SO2) -> SO2:
         self._check_same_group(other, "compose")
         broadcast_batch(self.batch_shape, other.batch_shape, "SO2 compose")
-        a, b = self._params, other._params
+        a, b = self._params, other.parameters
         # Complex multiplication (c1 + i s1)(c2 + i s2).
         c = a[..., 0] * b[..., 0] - a[..., 1] * b[..., 1]
         s = a[..., 1] * b[..., 0] + a[..., 0] * b[..., 1]
-        return self._wrap(np.stack([c, s], axis=-1))
+        return self.from_parameters_unchecked(np.stack([c, s], axis=-1))
 
     def inverse(self) -> SO2:
-        return self._wrap(self._params * np.array([1.0, -1.0]))
+        return self.from_parameters_unchecked(self._params * np.array([1.0, -1.0]))
 
     def apply(self, points: ArrayLike) -> FloatArray:
         p = as_array(points, "points", (..., 2))
@@ -118,7 +120,7 @@ class SO2(LieGroup):
     @classmethod
     def exp(cls, tangent: ArrayLike) -> SO2:
         omega = as_array(tangent, "SO2 tangent", (..., 1))[..., 0]
-        return cls._wrap(np.stack([np.cos(omega), np.sin(omega)], axis=-1))
+        return cls.from_parameters_unchecked(np.stack([np.cos(omega), np.sin(omega)], axis=-1))
 
     def log(self) -> FloatArray:
         return self.angle()[..., None]
@@ -128,4 +130,6 @@ class SO2(LieGroup):
         return np.ones((*self.batch_shape, 1, 1))
 
     def normalize(self) -> SO2:
-        return self._wrap(self._params / np.linalg.norm(self._params, axis=-1, keepdims=True))
+        return self.from_parameters_unchecked(
+            self._params / np.linalg.norm(self._params, axis=-1, keepdims=True)
+        )

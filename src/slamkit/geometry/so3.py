@@ -183,7 +183,7 @@ class SO3(LieGroup):
     def identity(cls, batch_shape: BatchShape = ()) -> SO3:
         params = np.zeros((*batch_tuple(batch_shape), 4))
         params[..., 0] = 1.0
-        return cls._wrap(params)
+        return cls.from_parameters_unchecked(params)
 
     @classmethod
     def from_quaternion_wxyz(cls, quat_wxyz: ArrayLike) -> SO3:
@@ -204,7 +204,7 @@ class SO3(LieGroup):
         cp, sp = np.cos(a[..., 1]), np.sin(a[..., 1])
         cy, sy = np.cos(a[..., 2]), np.sin(a[..., 2])
         # q = q_z(yaw) q_y(pitch) q_x(roll), multiplied out.
-        return cls._wrap(
+        return cls.from_parameters_unchecked(
             np.stack(
                 [
                     cr * cp * cy + sr * sp * sy,
@@ -220,13 +220,13 @@ class SO3(LieGroup):
     def from_matrix(cls, matrix: ArrayLike) -> SO3:
         R = as_array(matrix, "SO3 matrix", (..., 3, 3))
         check_rotation_matrix(R, "SO3 matrix")
-        return cls._wrap(matrix_to_quat(R))
+        return cls.from_parameters_unchecked(matrix_to_quat(R))
 
     @classmethod
     def sample_uniform(cls, rng: np.random.Generator, batch_shape: BatchShape = ()) -> SO3:
         """Uniform (Haar) rotations: a normalised 4-D standard normal is uniform on S³."""
         q = check_rng(rng).standard_normal(size=(*batch_tuple(batch_shape), 4))
-        return cls._wrap(q / np.linalg.norm(q, axis=-1, keepdims=True))
+        return cls.from_parameters_unchecked(q / np.linalg.norm(q, axis=-1, keepdims=True))
 
     # ----------------------------------------------------------------- accessors
 
@@ -269,11 +269,11 @@ class SO3(LieGroup):
     def compose(self, other: SO3) -> SO3:
         self._check_same_group(other, "compose")
         broadcast_batch(self.batch_shape, other.batch_shape, "SO3 compose")
-        return self._wrap(quat_multiply(self._params, other._params))
+        return self.from_parameters_unchecked(quat_multiply(self._params, other.parameters))
 
     def inverse(self) -> SO3:
         # The conjugate is the inverse of a unit quaternion.
-        return self._wrap(self._params * np.array([1.0, -1.0, -1.0, -1.0]))
+        return self.from_parameters_unchecked(self._params * np.array([1.0, -1.0, -1.0, -1.0]))
 
     def apply(self, points: ArrayLike) -> FloatArray:
         p = as_array(points, "points", (..., 3))
@@ -282,7 +282,7 @@ class SO3(LieGroup):
 
     @classmethod
     def exp(cls, tangent: ArrayLike) -> SO3:
-        return cls._wrap(quat_exp(as_array(tangent, "SO3 tangent", (..., 3))))
+        return cls.from_parameters_unchecked(quat_exp(as_array(tangent, "SO3 tangent", (..., 3))))
 
     def log(self) -> FloatArray:
         return quat_log(self._params)
@@ -292,4 +292,6 @@ class SO3(LieGroup):
         return self.as_matrix()
 
     def normalize(self) -> SO3:
-        return self._wrap(self._params / np.linalg.norm(self._params, axis=-1, keepdims=True))
+        return self.from_parameters_unchecked(
+            self._params / np.linalg.norm(self._params, axis=-1, keepdims=True)
+        )

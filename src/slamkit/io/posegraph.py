@@ -81,7 +81,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 
-from slamkit.datasets._text import _read_text
+from slamkit.datasets._text import read_text
 from slamkit.errors import InputError
 from slamkit.io.graphfiles.families import FILE_FAMILIES, detect_family, family_for_suffix
 from slamkit.io.graphfiles.reader import group_lines, parse_graph_text
@@ -134,7 +134,7 @@ def read_graph_report(
     """
     fam = _check_family(family)
     p = Path(path)
-    parsed = parse_graph_text(_read_text(p), p, family=fam, lenient=lenient)
+    parsed = parse_graph_text(read_text(p), p, family=fam, lenient=lenient)
     return GraphReadReport(
         parsed.graph, parsed.family, MappingProxyType(parsed.skipped_tags), parsed.skipped_lines
     )
@@ -154,7 +154,7 @@ def detect_graph_family(path: str | os.PathLike[str]) -> GraphFamily:
     """The family :func:`read_graph` would read ``path`` as (from its tags and its name)."""
     p = Path(path)
     base = p.with_suffix("") if p.suffix == ".gz" else p
-    return detect_family(list(group_lines(_read_text(p))), base.suffix, base.stem)
+    return detect_family(list(group_lines(read_text(p))), base.suffix, base.stem)
 
 
 def _write_family(graph: GraphData, path: Path | None, family: str | None) -> GraphFamily:

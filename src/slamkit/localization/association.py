@@ -22,8 +22,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.errors import InputError
+from slamkit.estimation.gaussian import angular_indices, measure_unchecked, wrap_array
 from slamkit.localization.belief import GaussianBelief
-from slamkit.localization.kalman import _angular_indices, _measure, _wrap_array
 from slamkit.maps import LandmarkMap
 from slamkit.models import MIN_RANGE, LandmarkModel
 from slamkit.prob import chi2_gate, mahalanobis_squared
@@ -66,16 +66,16 @@ def _distances(
     if K == 0 or not seen.any():
         return d2
     pos = positions[seen]
-    z_hat, Hp = _measure(model, np.broadcast_to(pose, (pos.shape[0], 3)), pos)  # (M', m)
+    z_hat, Hp = measure_unchecked(model, np.broadcast_to(pose, (pos.shape[0], 3)), pos)  # (M', m)
     S = Hp @ pose_cov @ np.swapaxes(Hp, -1, -2) + R  # (M', m, m): H_j P H_jᵀ + R
     nu = z[:, None, :] - z_hat[None, :, :]  # (K, M', m)
-    for i in _angular_indices(model):
-        nu[..., i] = _wrap_array(nu[..., i])
+    for i in angular_indices(model):
+        nu[..., i] = wrap_array(nu[..., i])
     d2[:, seen] = mahalanobis_squared(nu, S)
     return d2
 
 
-def _associate_arrays(
+def associate_arrays_unchecked(
     pose: FloatArray,
     pose_cov: FloatArray,
     z: FloatArray,
@@ -119,4 +119,4 @@ def associate_ml(
     if not isinstance(landmarks, LandmarkMap):
         raise InputError(f"landmarks: expected a LandmarkMap, got {type(landmarks).__name__}")
     gate = chi2_gate(m, gate_probability)
-    return _associate_arrays(belief.pose, belief.pose_cov, za, landmarks, model, Ra, gate)
+    return associate_arrays_unchecked(belief.pose, belief.pose_cov, za, landmarks, model, Ra, gate)

@@ -2,7 +2,7 @@
 
 No measurement is used, so the covariance grows without bound (``C ← A C Aᵀ + B Q Bᵀ``). It is
 the baseline every filter must beat, and the simplest example of the :class:`Estimator`
-protocol (see :mod:`slamkit.pipeline.estimator`).
+protocol (see :mod:`slamkit.estimation.contract`).
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ import numpy as np
 
 from slamkit.datasets.stream import Control, Dataset, Event, Odometry
 from slamkit.errors import ConfigError, InputError
+from slamkit.estimation.contract import EstimatorOutput, PoseEstimate
 from slamkit.localization.belief import GaussianBelief, predict_unchecked
 from slamkit.models import odometry_control
-from slamkit.pipeline.estimator import EstimatorOutput, PoseEstimate
 
 __all__ = ["DeadReckoning", "DeadReckoningConfig"]
 

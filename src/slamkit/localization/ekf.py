@@ -14,7 +14,7 @@ Several readings of one time step are applied one at a time, each linearised at 
 previous one left (*Probabilistic Robotics*, table 7.2).
 
 :class:`EkfLocalization` is the estimator around these functions (see
-:mod:`slamkit.pipeline.estimator`); it shares its event handling with
+:mod:`slamkit.estimation.contract`); it shares its event handling with
 :class:`~slamkit.localization.ukf.UkfLocalization`.
 """
 
@@ -30,25 +30,32 @@ from numpy.typing import ArrayLike, NDArray
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.datasets.stream import Control, Dataset, Event, LandmarkReadings, Odometry
 from slamkit.errors import ConfigError, GeometryError, InputError, SlamkitError
-from slamkit.localization.association import _associate_arrays
-from slamkit.localization.belief import GaussianBelief, predict
-from slamkit.localization.kalman import (
-    UpdateInfo,
-    _angular_indices,
-    _check_finite,
-    _gain_update,
-    _innovation,
-    _measure,
-    _motion_jacobians,
-    _move,
-    _wrap_components,
+from slamkit.estimation.contract import EstimatorOutput, InnovationLog, PoseEstimate
+from slamkit.estimation.gaussian import (
+    angular_indices,
+    check_finite_covariance,
+    gain_update,
+    innovation_unchecked,
+    measure_unchecked,
+    wrap_components,
 )
+from slamkit.localization.association import associate_arrays_unchecked
+from slamkit.localization.belief import GaussianBelief, predict
+from slamkit.localization.kalman import UpdateInfo
 from slamkit.models import LandmarkModel, MotionModel, odometry_control
-from slamkit.models.motion import _MotionBase
-from slamkit.pipeline.estimator import EstimatorOutput, InnovationLog, PoseEstimate
+from slamkit.models.motion import motion_kernels
 from slamkit.prob import chi2_gate
 
-__all__ = ["EkfConfig", "EkfLocalization", "ekf_predict", "ekf_update"]
+__all__ = [
+    "EkfConfig",
+    "EkfLocalization",
+    "GaussianFilterConfig",
+    "GaussianLocalization",
+    "check_reading",
+    "ekf_predict",
+    "ekf_predict_unchecked",
+    "ekf_update",
+]
 
 
 # --------------------------------------------------------------------------------------------
@@ -68,7 +75,7 @@ def ekf_predict(
     return predict(belief, u, dt, model, control_cov)
 
 
-def _predict_arrays(
+def ekf_predict_unchecked(
     mean: FloatArray,
     cov: FloatArray,
     u: FloatArray,
@@ -79,10 +86,7 @@ def _predict_arrays(
     """:func:`ekf_predict` on validated arrays (the estimators' fast path; same equations as
     :func:`slamkit.localization.belief.predict`, checked against it in the tests)."""
     x = mean[:3]
-    if isinstance(model, _MotionBase):  # one pose: the fused plain-float kernel
-        moved, G, V = model._step_single(x, u, dt)
-    else:
-        moved, (G, V) = _move(model, x, u, dt), _motion_jacobians(model, x, u, dt)
+    moved, G, V = motion_kernels(model).step_single(x, u, dt)  # the fused one-pose kernel
     if mean.size == 3:
         new_mean = moved
         new_cov = G @ cov @ G.T + V @ Q @ V.T
@@ -94,7 +98,7 @@ def _predict_arrays(
         new_cov[:3, 3:] = G @ cov[:3, 3:]
         new_cov[3:, :3] = new_cov[:3, 3:].T
     new_cov = 0.5 * (new_cov + new_cov.T)
-    _check_finite(new_cov, "ekf predict")
+    check_finite_covariance(new_cov, "ekf predict")
     return new_mean, new_cov
 
 
@@ -109,20 +113,20 @@ def _ekf_update_arrays(
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, float]:
     """:func:`ekf_update` on validated arrays: ``(mean, cov, ν, S, nis)``. ``angular`` are the
     indices of the model's angular components."""
-    z_hat, Hp = _measure(model, mean[:3], landmark)
-    nu = _innovation(model, z, z_hat, angular)  # z ⊖ h(μ): bearings wrapped
+    z_hat, Hp = measure_unchecked(model, mean[:3], landmark)
+    nu = innovation_unchecked(model, z, z_hat, angular)  # z ⊖ h(μ): bearings wrapped
     n = mean.size
     if n == 3:
         H = Hp
     else:  # the reading depends on the pose only
         H = np.zeros((Hp.shape[0], n))
         H[:, :3] = Hp
-    new_mean, new_cov, S, nis = _gain_update(mean, cov, nu, H, R, "ekf_update")
-    _wrap_components(new_mean, (2,))
+    new_mean, new_cov, S, nis = gain_update(mean, cov, nu, H, R, "ekf_update")
+    wrap_components(new_mean, (2,))
     return new_mean, new_cov, nu, S, nis
 
 
-def _check_reading(
+def check_reading(
     z: ArrayLike, landmark: ArrayLike, model: LandmarkModel, R: ArrayLike
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     if not isinstance(model, LandmarkModel):
@@ -153,8 +157,8 @@ def ekf_update(
     :class:`~slamkit.errors.GeometryError` if the landmark sits on the sensor and
     :class:`~slamkit.errors.ConvergenceError` if the covariance stops being one.
     """
-    za, la, Ra = _check_reading(z, landmark, model, R)
-    idx = _angular_indices(model)
+    za, la, Ra = check_reading(z, landmark, model, R)
+    idx = angular_indices(model)
     mean, cov, nu, S, nis = _ekf_update_arrays(belief.mean, belief.cov, za, la, model, Ra, idx)
     return GaussianBelief(mean, cov), UpdateInfo(nu, S, nis)
 
@@ -165,7 +169,7 @@ def ekf_update(
 
 
 @dataclass(frozen=True)
-class _GaussianFilterConfig:
+class GaussianFilterConfig:
     """Settings shared by :class:`EkfConfig` and the UKF's config."""
 
     motion_noise_scale: float = 1.0
@@ -185,7 +189,7 @@ class _GaussianFilterConfig:
 
     The same probability tests every static fix the filter starts (or re-starts) from: a fix
     whose residual χ² exceeds ``χ²_d⁻¹(gate_probability)``, ``d`` the number of its scalar
-    readings beyond the unknowns, is refused (see :class:`_GaussianLocalization`). ``None``
+    readings beyond the unknowns, is refused (see :class:`GaussianLocalization`). ``None``
     accepts every fix."""
     relocalize_after: int | None = 10
     """Lock-out guard: after this many *consecutive* readings rejected by the gate (no update
@@ -231,7 +235,7 @@ class _GaussianFilterConfig:
 
 
 @dataclass(frozen=True)
-class EkfConfig(_GaussianFilterConfig):
+class EkfConfig(GaussianFilterConfig):
     """Settings of :class:`EkfLocalization` (all shared with the UKF's config)."""
 
 
@@ -253,7 +257,7 @@ def _fix_residual_chi2(residuals: FloatArray, R: FloatArray, kind: str) -> tuple
     return chi2, e.size - _FIX_UNKNOWNS.get(kind, 3)
 
 
-class _GaussianLocalization:
+class GaussianLocalization:
     """Event handling shared by the EKF and UKF localization estimators.
 
     Controls (or consecutive odometry poses) drive the prediction; every landmark reading
@@ -295,7 +299,7 @@ class _GaussianLocalization:
     name = "gaussian"
 
     def __init__(
-        self, dataset: Dataset, config: _GaussianFilterConfig, rng: np.random.Generator
+        self, dataset: Dataset, config: GaussianFilterConfig, rng: np.random.Generator
     ) -> None:
         missing = [
             what
@@ -318,7 +322,7 @@ class _GaussianLocalization:
         self._R = as_covariance(
             config.measurement_noise_scale * dataset.landmark_sensor.noise_cov, "R", None
         )
-        self._angular = _angular_indices(self._meas)
+        self._angular = angular_indices(self._meas)
         self._landmarks = dataset.known_landmarks
         self._row_of = {int(i): r for r, i in enumerate(self._landmarks.ids.tolist())}
         p = config.gate_probability
@@ -475,7 +479,7 @@ class _GaussianLocalization:
         self._counts["readings"] += k
         if self._config.association == "ml":
             assert self._mean is not None and self._cov is not None
-            assoc = _associate_arrays(
+            assoc = associate_arrays_unchecked(
                 self._mean[:3], self._cov[:3, :3], z, self._landmarks, self._meas, self._R,
                 self._gate,
             )  # fmt: skip
@@ -515,10 +519,10 @@ class _GaussianLocalization:
                 self._log_id.append(lid)
 
 
-class EkfLocalization(_GaussianLocalization):
+class EkfLocalization(GaussianLocalization):
     """EKF localization with point landmarks of a known map (range-bearing, range-only or
     bearing-only readings, known or unknown correspondences). Configured by
-    :class:`EkfConfig`; see :class:`_GaussianLocalization` for the event handling."""
+    :class:`EkfConfig`; see :class:`GaussianLocalization` for the event handling."""
 
     name = "EKF localization"
 
@@ -527,7 +531,9 @@ class EkfLocalization(_GaussianLocalization):
 
     def _predict(self, u: FloatArray, dt: float) -> None:
         assert self._mean is not None and self._cov is not None
-        self._mean, self._cov = _predict_arrays(self._mean, self._cov, u, dt, self._motion, self._Q)
+        self._mean, self._cov = ekf_predict_unchecked(
+            self._mean, self._cov, u, dt, self._motion, self._Q
+        )
 
     def _update(self, z: FloatArray, landmark: FloatArray, gate: float) -> tuple[float, bool]:
         assert self._mean is not None and self._cov is not None

@@ -24,6 +24,7 @@ import numpy as np
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Control, Dataset, Event, LandmarkReadings, Odometry
 from slamkit.errors import ConfigError, GeometryError, InputError
+from slamkit.estimation.contract import EstimatorOutput, PoseEstimate
 from slamkit.eval import associate, nees, pose_errors
 from slamkit.localization.belief import GaussianBelief, predict
 from slamkit.localization.static import (
@@ -35,7 +36,6 @@ from slamkit.localization.static import (
 )
 from slamkit.maps import LandmarkMap
 from slamkit.models import odometry_control
-from slamkit.pipeline.estimator import EstimatorOutput, PoseEstimate
 
 __all__ = [
     "LeastSquaresConfig",

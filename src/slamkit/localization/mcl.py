@@ -47,27 +47,27 @@ from slamkit.datasets.stream import (
     Odometry,
 )
 from slamkit.errors import ConfigError, ConvergenceError, GeometryError, InputError
-from slamkit.geometry.angles import wrap_angle
-from slamkit.localization.likelihood_field import LikelihoodField, log_likelihood, usable_beams
-from slamkit.localization.particles import (
-    ParticleSet,
-    _particle_estimate_unchecked,
-    effective_sample_size,
-    low_variance_resample,
-    normalize_log_weights,
-    uniform_particles_in_box,
-    uniform_particles_in_free_space,
-)
-from slamkit.maps import LandmarkMap
-from slamkit.models import LandmarkModel, MotionModel, odometry_control
-from slamkit.models.motion import _MotionBase
-from slamkit.pipeline.estimator import (
+from slamkit.estimation.contract import (
     EstimatorOutput,
     InnovationLog,
     ParticleSnapshot,
     PoseEstimate,
     SnapshotSchedule,
 )
+from slamkit.geometry.angles import wrap_angle
+from slamkit.localization.likelihood_field import LikelihoodField, log_likelihood, usable_beams
+from slamkit.localization.particles import (
+    ParticleSet,
+    effective_sample_size,
+    low_variance_resample,
+    normalize_log_weights,
+    particle_estimate_unchecked,
+    uniform_particles_in_box,
+    uniform_particles_in_free_space,
+)
+from slamkit.maps import LandmarkMap
+from slamkit.models import LandmarkModel, MotionModel, odometry_control
+from slamkit.models.motion import motion_kernels
 
 __all__ = [
     "Augmentation",
@@ -135,9 +135,7 @@ def _predict_unchecked(
     hundred particles."""
     k = noise_root.shape[0]
     eps = rng.standard_normal((poses.shape[0], k)) @ noise_root.T  # ε ~ N(0, A Aᵀ)
-    if isinstance(model, _MotionBase):
-        return model._g(poses, u + eps, dt)
-    return model.apply(poses, u + eps, dt)
+    return motion_kernels(model).apply_unchecked(poses, u + eps, dt)
 
 
 @dataclass(frozen=True)
@@ -736,7 +734,7 @@ class MclConfig:
     record_innovations: bool = True
     """Landmark readings: keep every used reading's NIS against the particle mean and
     covariance before the update (see :func:`landmark_innovations`) in the output's
-    :class:`~slamkit.pipeline.estimator.InnovationLog`, as the EKF does."""
+    :class:`~slamkit.estimation.contract.InnovationLog`, as the EKF does."""
     snapshot_every: int = 0
     """Keep a copy of the particle set every this many measurement updates (0: never),
     plus the initial set."""
@@ -957,7 +955,7 @@ class MonteCarloLocalization:
     def estimate(self) -> PoseEstimate:
         ps = self._particles
         if self._estimate_of is not ps:  # the set changed since the last call
-            mean, cov = _particle_estimate_unchecked(ps.poses, ps.weights)
+            mean, cov = particle_estimate_unchecked(ps.poses, ps.weights)
             self._estimate, self._estimate_of = PoseEstimate(mean, cov), ps
         assert self._estimate is not None
         return PoseEstimate(
@@ -1087,7 +1085,7 @@ class MonteCarloLocalization:
         innov = None
         if self._cfg.record_innovations:
             ps = self._particles
-            mean, cov = _particle_estimate_unchecked(ps.poses, ps.weights)
+            mean, cov = particle_estimate_unchecked(ps.poses, ps.weights)
             try:
                 innov = _landmark_innovations_unchecked(
                     mean, cov, zk, used, lm, model, self._lm_cov

@@ -155,10 +155,10 @@ def low_variance_resample(
     count = w.size if n is None else int(n)
     if count < 1:
         raise InputError(f"n: expected at least one draw, got {n}")
-    return _low_variance_resample_unchecked(w, rng, count)
+    return low_variance_resample_unchecked(w, rng, count)
 
 
-def _low_variance_resample_unchecked(
+def low_variance_resample_unchecked(
     w: FloatArray, rng: np.random.Generator, count: int
 ) -> NDArray[np.intp]:
     """:func:`low_variance_resample` of validated weights ``(P,)`` (float64, non-negative,
@@ -186,10 +186,10 @@ def particle_estimate(poses: ArrayLike, weights: ArrayLike) -> tuple[FloatArray,
     total = float(w.sum())
     if p.shape[0] == 0 or np.any(w < 0) or not total > 0:
         raise InputError("weights: expected non-negative weights with a positive sum")
-    return _particle_estimate_unchecked(p, w / total)
+    return particle_estimate_unchecked(p, w / total)
 
 
-def _particle_estimate_unchecked(p: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
+def particle_estimate_unchecked(p: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
     """:func:`particle_estimate` of validated poses ``(P, 3)`` and normalised weights: the
     filter's per-step kernel (the checks cost more than the arithmetic for a few hundred
     particles). A test checks it equals the validated function."""

@@ -86,9 +86,9 @@ MIN_READINGS: Final[dict[str, int]] = {"range-bearing": 2, "position": 2, "range
 UNIFORM_HEADING_VARIANCE: Final = float(np.pi**2 / 3.0)
 """Variance of a heading uniform on ``[-pi, pi)``: ``(2 pi)² / 12``."""
 
-# The solvers call the models' array kernels (``_h``, ``_jac``) directly: the inputs are
-# validated once at the entry point, and skipping the per-call checks inside the Gauss–Newton
-# loop makes a fix several times faster (it runs ~10 times per snapshot).
+# The solvers call the models' array kernels (``predict_unchecked``, ``jacobians_unchecked``)
+# directly: the inputs are validated once at the entry point, and skipping the per-call checks
+# inside the Gauss–Newton loop makes a fix several times faster (~10 iterations a snapshot).
 _RANGE, _BEARING, _RANGE_BEARING = RangeOnly(), BearingOnly(), RangeBearing()
 
 
@@ -479,8 +479,8 @@ def trilaterate(
 
     def fn(p: FloatArray) -> tuple[FloatArray, FloatArray]:
         pose = _at_landmarks(np.array([p[0], p[1], 0.0]), lm)
-        e = r - _RANGE._h(pose, lm)[:, 0]
-        Hp, _ = _RANGE._jac(pose, lm)
+        e = r - _RANGE.predict_unchecked(pose, lm)[:, 0]
+        Hp, _ = _RANGE.jacobians_unchecked(pose, lm)
         return e, Hp[:, 0, :2]
 
     out = _gauss_newton(
@@ -571,8 +571,8 @@ def triangulate(
 
     def fn(x: FloatArray) -> tuple[FloatArray, FloatArray]:
         pose = _at_landmarks(x, lm)
-        e = wrap_angle(beta - _BEARING._h(pose, lm)[:, 0])
-        Hp, _ = _BEARING._jac(pose, lm)
+        e = wrap_angle(beta - _BEARING.predict_unchecked(pose, lm)[:, 0])
+        Hp, _ = _BEARING.jacobians_unchecked(pose, lm)
         return e, Hp[:, 0, :]
 
     out = _gauss_newton(
@@ -611,9 +611,9 @@ def localize_range_bearing(
 
     def fn(x: FloatArray) -> tuple[FloatArray, FloatArray]:
         pose = _at_landmarks(x, lm)
-        e = za - _RANGE_BEARING._h(pose, lm)
+        e = za - _RANGE_BEARING.predict_unchecked(pose, lm)
         e[:, 1] = wrap_angle(e[:, 1])
-        Hp, _ = _RANGE_BEARING._jac(pose, lm)
+        Hp, _ = _RANGE_BEARING.jacobians_unchecked(pose, lm)
         return e.reshape(-1), Hp.reshape(-1, 3)
 
     # Readings independent: block-diagonal (2K, 2K).

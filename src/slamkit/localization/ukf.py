@@ -40,23 +40,31 @@ from numpy.typing import ArrayLike
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.datasets.stream import Dataset
 from slamkit.errors import ConfigError, ConvergenceError, InputError
+from slamkit.estimation.gaussian import (
+    angular_indices,
+    check_covariance,
+    innovation_unchecked,
+    move_unchecked,
+    predict_measurement_unchecked,
+    solve_innovation,
+    wrap_array,
+    wrap_components,
+)
 from slamkit.geometry import circular_mean, wrap_angle
 from slamkit.localization.belief import GaussianBelief
-from slamkit.localization.ekf import _check_reading, _GaussianFilterConfig, _GaussianLocalization
-from slamkit.localization.kalman import (
-    UpdateInfo,
-    _angular_indices,
-    _check_covariance,
-    _innovation,
-    _move,
-    _predict_measurement,
-    _solve_innovation,
-    _wrap_array,
-    _wrap_components,
-)
+from slamkit.localization.ekf import GaussianFilterConfig, GaussianLocalization, check_reading
+from slamkit.localization.kalman import UpdateInfo
 from slamkit.models import LandmarkModel, MotionModel
 
-__all__ = ["SigmaPointParams", "UkfConfig", "UkfLocalization", "ukf_predict", "ukf_update"]
+__all__ = [
+    "SigmaPointParams",
+    "UkfConfig",
+    "UkfLocalization",
+    "psd_sqrt",
+    "sigma_point_weights",
+    "ukf_predict",
+    "ukf_update",
+]
 
 
 @dataclass(frozen=True)
@@ -86,7 +94,7 @@ class SigmaPointParams:
 
 
 @lru_cache(maxsize=64)
-def _weights(params: SigmaPointParams, n: int) -> tuple[FloatArray, FloatArray, float]:
+def sigma_point_weights(params: SigmaPointParams, n: int) -> tuple[FloatArray, FloatArray, float]:
     """``(Wm (2n+1,), Wc (2n+1,), c)`` with ``c = α² (n + κ)`` (read-only arrays)."""
     c = params.alpha**2 * (n + params.kappa)
     if not c > 0:
@@ -104,7 +112,7 @@ def _weights(params: SigmaPointParams, n: int) -> tuple[FloatArray, FloatArray, 
     return Wm, Wc, c
 
 
-def _sqrt_psd(P: FloatArray, where: str) -> FloatArray:
+def psd_sqrt(P: FloatArray, where: str) -> FloatArray:
     """A square root ``L`` with ``L Lᵀ = P``: the Cholesky factor when ``P`` is positive
     definite, else (a singular PSD ``P``, e.g. a known start) a symmetric root from ``eigh``."""
     try:
@@ -141,10 +149,10 @@ def _ukf_predict_arrays(
     """:func:`ukf_predict` on validated arrays; ``sqrt_Q`` may carry a precomputed root of Q."""
     n, k = mean.size, u.size
     N = n + k
-    Wm, Wc, c = _weights(params, N)
+    Wm, Wc, c = sigma_point_weights(params, N)
     s = math.sqrt(c)
-    Lx = _sqrt_psd(cov, "ukf_predict")
-    Lq = _sqrt_psd(Q, "ukf_predict control noise") if sqrt_Q is None else sqrt_Q
+    Lx = psd_sqrt(cov, "ukf_predict")
+    Lq = psd_sqrt(Q, "ukf_predict control noise") if sqrt_Q is None else sqrt_Q
     # Augmented sigma points [x, ε]: the centre, then +√c and −√c times the columns of
     # blockdiag(Lx, Lq). Rows 1..n and N+1..N+n move the state, the others the control noise.
     X = np.tile(mean, (2 * N + 1, 1))
@@ -154,14 +162,14 @@ def _ukf_predict_arrays(
     E[n + 1 : N + 1] = s * Lq.T
     E[N + n + 1 :] = -s * Lq.T
     Y = X  # moved in place: the pose part through g, the rest (if any) unchanged
-    Y[:, :3] = _move(model, X[:, :3], u + E, dt)
+    Y[:, :3] = move_unchecked(model, X[:, :3], u + E, dt)
     new_mean = Wm @ Y
     new_mean[2] = _circular_mean_about(Y[:, 2], Wm, float(Y[0, 2]))
     D = Y - new_mean
-    D[:, 2] = _wrap_array(D[:, 2])  # heading residuals wrapped before the outer products
+    D[:, 2] = wrap_array(D[:, 2])  # heading residuals wrapped before the outer products
     new_cov = (D.T * Wc) @ D
     new_cov = 0.5 * (new_cov + new_cov.T)
-    _check_covariance(new_cov, "ukf_predict")
+    check_covariance(new_cov, "ukf_predict")
     return new_mean, new_cov
 
 
@@ -177,33 +185,33 @@ def _ukf_update_arrays(
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, float]:
     """:func:`ukf_update` on validated arrays: ``(mean, cov, ν, S, nis)``."""
     n = mean.size
-    Wm, Wc, c = _weights(params, n)
-    L = math.sqrt(c) * _sqrt_psd(cov, "ukf_update")
+    Wm, Wc, c = sigma_point_weights(params, n)
+    L = math.sqrt(c) * psd_sqrt(cov, "ukf_update")
     dX = np.zeros((2 * n + 1, n))  # χᵢ − μ: the sigma offsets
     dX[1 : n + 1] = L.T
     dX[n + 1 :] = -L.T
     X = mean + dX
-    Z = _predict_measurement(model, X[:, :3], landmark)  # (2n+1, m)
+    Z = predict_measurement_unchecked(model, X[:, :3], landmark)  # (2n+1, m)
     z_hat = Wm @ Z
     for i in angular:
         z_hat[i] = _circular_mean_about(Z[:, i], Wm, float(Z[0, i]))
     dZ = Z - z_hat
     for i in angular:
-        dZ[:, i] = _wrap_array(dZ[:, i])  # bearing residuals wrapped before the outer products
+        dZ[:, i] = wrap_array(dZ[:, i])  # bearing residuals wrapped before the outer products
     WdZ = dZ.T * Wc  # (m, 2n+1)
     S = WdZ @ dZ + R
     S = 0.5 * (S + S.T)
     Pxz = (WdZ @ dX).T  # Σ Wcᵢ (χᵢ − μ)(Zᵢ − ẑ)ᵀ, (n, m)
-    nu = _innovation(model, z, z_hat, angular)
+    nu = innovation_unchecked(model, z, z_hat, angular)
     # One solve S X = [P_xzᵀ | ν] (no S⁻¹): X[:, :n] = Kᵀ (S symmetric), X[:, n] = S⁻¹ ν.
-    sol = _solve_innovation(S, np.column_stack((Pxz.T, nu)), "ukf_update")
+    sol = solve_innovation(S, np.column_stack((Pxz.T, nu)), "ukf_update")
     K = sol[:, :n].T
     nis = float(nu @ sol[:, n])
     new_mean = mean + K @ nu
-    _wrap_components(new_mean, (2,))
+    wrap_components(new_mean, (2,))
     new_cov = cov - K @ S @ K.T
     new_cov = 0.5 * (new_cov + new_cov.T)
-    _check_covariance(new_cov, "ukf_update")
+    check_covariance(new_cov, "ukf_update")
     return new_mean, new_cov, nu, S, nis
 
 
@@ -249,9 +257,9 @@ def ukf_update(
     measurement model ``model`` and noise ``R (m, m)`` (module docstring). Returns the new
     belief and the innovation statistics. Errors as :func:`slamkit.localization.ekf.ekf_update`.
     """
-    za, la, Ra = _check_reading(z, landmark, model, R)
+    za, la, Ra = check_reading(z, landmark, model, R)
     p = SigmaPointParams() if params is None else params
-    idx = _angular_indices(model)
+    idx = angular_indices(model)
     mean, cov, nu, S, nis = _ukf_update_arrays(belief.mean, belief.cov, za, la, model, Ra, p, idx)
     return GaussianBelief(mean, cov), UpdateInfo(nu, S, nis)
 
@@ -262,14 +270,14 @@ def ukf_update(
 
 
 @dataclass(frozen=True)
-class UkfConfig(_GaussianFilterConfig):
+class UkfConfig(GaussianFilterConfig):
     """Settings of :class:`UkfLocalization`: those of the EKF plus the sigma points."""
 
     sigma_points: SigmaPointParams = field(default_factory=SigmaPointParams)
     """α, β, κ of the scaled sigma points (a ``[estimator.sigma_points]`` table in a file)."""
 
 
-class UkfLocalization(_GaussianLocalization):
+class UkfLocalization(GaussianLocalization):
     """UKF localization with point landmarks of a known map; the same events, association
     and diagnostics as :class:`~slamkit.localization.ekf.EkfLocalization`, configured by
     :class:`UkfConfig`."""
@@ -279,10 +287,10 @@ class UkfLocalization(_GaussianLocalization):
     def __init__(self, dataset: Dataset, config: UkfConfig, rng: np.random.Generator) -> None:
         super().__init__(dataset, config, rng)
         self._params = config.sigma_points
-        self._sqrt_Q = _sqrt_psd(self._Q, "control noise")
+        self._sqrt_Q = psd_sqrt(self._Q, "control noise")
         # Fail at construction, not at the first step, if the sigma points are degenerate.
-        _weights(self._params, 3)
-        _weights(self._params, 3 + self._Q.shape[0])
+        sigma_point_weights(self._params, 3)
+        sigma_point_weights(self._params, 3 + self._Q.shape[0])
 
     def _predict(self, u: FloatArray, dt: float) -> None:
         assert self._mean is not None and self._cov is not None

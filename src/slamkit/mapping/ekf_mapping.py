@@ -77,13 +77,13 @@ from scipy.linalg import cho_factor, cho_solve
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.datasets.stream import Dataset, Event, LandmarkReadings
 from slamkit.errors import ConfigError, InputError, ShapeError
-from slamkit.maps import LandmarkMap
-from slamkit.pipeline.estimator import (
+from slamkit.estimation.contract import (
     EstimatorOutput,
     InnovationLog,
     LandmarkEstimate,
     PoseEstimate,
 )
+from slamkit.maps import LandmarkMap
 from slamkit.prob import chi2_gate, mahalanobis_squared, symmetrize
 
 __all__ = [

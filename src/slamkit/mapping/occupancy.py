@@ -63,6 +63,7 @@ from slamkit._validation import FloatArray, as_array
 from slamkit.config import config_to_dict
 from slamkit.datasets.stream import Dataset, Event, LaserScan, LaserSpec, Odometry
 from slamkit.errors import ConfigError, InputError, NonFiniteError, ShapeError
+from slamkit.estimation.contract import EstimatorOutput, PoseEstimate
 from slamkit.geometry.angles import wrap_angle
 from slamkit.mapping.bresenham import (
     MAX_SEGMENT_STEPS,
@@ -84,7 +85,6 @@ from slamkit.mapping.inverse_model import (
     ray_region_limits,
 )
 from slamkit.maps import OccupancyGrid
-from slamkit.pipeline.estimator import EstimatorOutput, PoseEstimate
 
 __all__ = [
     "MappingStats",

@@ -28,12 +28,13 @@ from numpy.typing import ArrayLike
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.errors import GeometryError, InputError, ShapeError
 from slamkit.geometry.angles import wrap_angle, wrap_angle_float
-from slamkit.models.motion import _gaussian_draws
+from slamkit.prob.gaussian import gaussian_draws
 
 __all__ = [
     "MIN_RANGE",
     "BearingOnly",
     "LandmarkModel",
+    "LandmarkModelBase",
     "RangeBearing",
     "RangeOnly",
     "RelativePosition",
@@ -112,34 +113,48 @@ def _offsets_single(p: FloatArray, l: FloatArray) -> tuple[float, float, float]:
     return dx, dy, r
 
 
-class _LandmarkBase:
-    """Validation, residuals and sampling shared by the landmark models."""
+class LandmarkModelBase:
+    """The base of every slamkit landmark model: the estimators' fast-path contract.
+
+    A subclass sets ``dim`` and ``angular`` and implements two kernels on validated,
+    broadcast float64 arrays — ``predict_unchecked`` (``h``) and ``jacobians_unchecked``
+    (``H_pose, H_landmark``) — and inherits the validating :class:`LandmarkModel` methods
+    (``predict``, ``jacobians``, ``residual``, ``sample``) and the fused single-reading
+    kernel :meth:`predict_with_pose_jacobian` that EKF updates call. Estimators evaluate a
+    model that only satisfies the :class:`LandmarkModel` protocol through its public methods
+    (:mod:`slamkit.estimation.gaussian`), with the same numbers.
+    """
 
     dim: ClassVar[int]
     angular: ClassVar[tuple[bool, ...]]
 
-    def _h(self, p: FloatArray, l: FloatArray) -> FloatArray:
-        raise NotImplementedError
+    def predict_unchecked(self, p: FloatArray, l: FloatArray) -> FloatArray:
+        """``h(p, l)`` ``(..., m)`` for a validated pose ``(..., 3)`` and landmark
+        ``(..., 2)`` of the same batch shape (or broadcasting); angles wrapped."""
+        raise NotImplementedError(f"{type(self).__name__} does not implement predict_unchecked")
 
-    def _jac(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
-        raise NotImplementedError
+    def jacobians_unchecked(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``(H_pose (..., m, 3), H_landmark (..., m, 2))`` for validated arguments."""
+        raise NotImplementedError(f"{type(self).__name__} does not implement jacobians_unchecked")
 
-    def _h_and_pose_jacobian(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def predict_with_pose_jacobian(
+        self, p: FloatArray, l: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
         """``(h (m,), H_pose (m, 3))`` for ONE validated pose ``(3,)`` and landmark ``(2,)``:
         what an EKF update needs. Subclasses override it with plain-float arithmetic (NumPy's
         per-call overhead on 0-d arrays is ~20x the arithmetic); a test checks every override
-        against the batched kernels ``_h`` and ``_jac``."""
-        return self._h(p, l), self._jac(p, l)[0]
+        against the batched kernels ``predict_unchecked`` and ``jacobians_unchecked``."""
+        return self.predict_unchecked(p, l), self.jacobians_unchecked(p, l)[0]
 
     def predict(self, pose: ArrayLike, landmark: ArrayLike) -> FloatArray:
         """Expected measurement ``(..., m)`` of ``landmark (..., 2)`` from ``pose (..., 3)``."""
         p, l = _prepare(pose, landmark)
-        return self._h(p, l)
+        return self.predict_unchecked(p, l)
 
     def jacobians(self, pose: ArrayLike, landmark: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """``(H_pose (..., m, 3), H_landmark (..., m, 2))``; GeometryError at zero range."""
         p, l = _prepare(pose, landmark)
-        return self._jac(p, l)
+        return self.jacobians_unchecked(p, l)
 
     def residual(self, z: ArrayLike, z_hat: ArrayLike) -> FloatArray:
         """``z - z_hat`` ``(..., m)``, angular components wrapped to ``[-pi, pi)``."""
@@ -163,13 +178,13 @@ class _LandmarkBase:
         """
         p, l = _prepare(pose, landmark)
         q = as_covariance(cov, "measurement cov", self.dim, semidefinite=True)
-        z = self._h(p, l)
-        z = z + _gaussian_draws(q, z.shape[:-1], rng)
+        z = self.predict_unchecked(p, l)
+        z = z + gaussian_draws(q, z.shape[:-1], rng)
         return np.where(np.array(self.angular), wrap_angle(z), z)
 
 
 @dataclass(frozen=True)
-class RangeBearing(_LandmarkBase):
+class RangeBearing(LandmarkModelBase):
     """``z = (range, bearing)`` of a point landmark, plus its inverse for initialisation.
 
     With ``(dx, dy) = l - p``, ``q = dx² + dy²`` and ``r = sqrt(q)``:
@@ -180,11 +195,11 @@ class RangeBearing(_LandmarkBase):
     dim: ClassVar[int] = 2
     angular: ClassVar[tuple[bool, ...]] = (False, True)
 
-    def _h(self, p: FloatArray, l: FloatArray) -> FloatArray:
+    def predict_unchecked(self, p: FloatArray, l: FloatArray) -> FloatArray:
         dx, dy, r = _offsets(p, l, need_direction=True)
         return np.stack([r, wrap_angle(np.arctan2(dy, dx) - p[..., 2])], axis=-1)
 
-    def _jac(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def jacobians_unchecked(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
         dx, dy, r = _offsets(p, l, need_direction=True)
         q = r * r
         batch = r.shape
@@ -198,7 +213,9 @@ class RangeBearing(_LandmarkBase):
         Hp[..., 1, 2] = -1.0
         return Hp, Hl
 
-    def _h_and_pose_jacobian(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def predict_with_pose_jacobian(
+        self, p: FloatArray, l: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
         dx, dy, r = _offsets_single(p, l)
         q = r * r
         bearing = wrap_angle_float(math.atan2(dy, dx) - float(p[2]))
@@ -246,7 +263,7 @@ class RangeBearing(_LandmarkBase):
 
 
 @dataclass(frozen=True)
-class RangeOnly(_LandmarkBase):
+class RangeOnly(LandmarkModelBase):
     """``z = (range,)``: distance to a point landmark (e.g. a radio beacon), metres.
 
     Predicting is defined at zero range; the Jacobians are not (GeometryError).
@@ -255,15 +272,17 @@ class RangeOnly(_LandmarkBase):
     dim: ClassVar[int] = 1
     angular: ClassVar[tuple[bool, ...]] = (False,)
 
-    def _h(self, p: FloatArray, l: FloatArray) -> FloatArray:
+    def predict_unchecked(self, p: FloatArray, l: FloatArray) -> FloatArray:
         _, _, r = _offsets(p, l, need_direction=False)
         return r[..., None]
 
-    def _h_and_pose_jacobian(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def predict_with_pose_jacobian(
+        self, p: FloatArray, l: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
         dx, dy, r = _offsets_single(p, l)
         return np.array([r]), np.array([[-dx / r, -dy / r, 0.0]])
 
-    def _jac(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def jacobians_unchecked(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
         dx, dy, r = _offsets(p, l, need_direction=True)
         Hl = np.stack([dx / r, dy / r], axis=-1)[..., None, :]
         Hp = np.concatenate([-Hl, np.zeros((*r.shape, 1, 1))], axis=-1)
@@ -271,23 +290,25 @@ class RangeOnly(_LandmarkBase):
 
 
 @dataclass(frozen=True)
-class BearingOnly(_LandmarkBase):
+class BearingOnly(LandmarkModelBase):
     """``z = (bearing,)``: direction of a point landmark relative to the heading, radians."""
 
     dim: ClassVar[int] = 1
     angular: ClassVar[tuple[bool, ...]] = (True,)
 
-    def _h(self, p: FloatArray, l: FloatArray) -> FloatArray:
+    def predict_unchecked(self, p: FloatArray, l: FloatArray) -> FloatArray:
         dx, dy, _ = _offsets(p, l, need_direction=True)
         return wrap_angle(np.arctan2(dy, dx) - p[..., 2])[..., None]
 
-    def _h_and_pose_jacobian(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def predict_with_pose_jacobian(
+        self, p: FloatArray, l: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
         dx, dy, r = _offsets_single(p, l)
         q = r * r
         bearing = wrap_angle_float(math.atan2(dy, dx) - float(p[2]))
         return np.array([bearing]), np.array([[dy / q, -dx / q, -1.0]])
 
-    def _jac(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def jacobians_unchecked(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
         dx, dy, r = _offsets(p, l, need_direction=True)
         q = r * r
         Hl = np.stack([-dy / q, dx / q], axis=-1)[..., None, :]
@@ -327,7 +348,7 @@ def _prepare_pose_and_z(pose: ArrayLike, z: ArrayLike, m: int) -> tuple[FloatArr
 
 
 @dataclass(frozen=True)
-class RelativePosition(_LandmarkBase):
+class RelativePosition(LandmarkModelBase):
     """``z = (x, y)`` of a point landmark in the ROBOT frame (metres): ``z = R(θ)ᵀ (l − t)``.
 
     This is what pose-graph files with landmarks store (iSAM's ``LANDMARK`` lines, GTSAM's
@@ -346,12 +367,12 @@ class RelativePosition(_LandmarkBase):
     dim: ClassVar[int] = 2
     angular: ClassVar[tuple[bool, ...]] = (False, False)
 
-    def _h(self, p: FloatArray, l: FloatArray) -> FloatArray:
+    def predict_unchecked(self, p: FloatArray, l: FloatArray) -> FloatArray:
         c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
         dx, dy = l[..., 0] - p[..., 0], l[..., 1] - p[..., 1]
         return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
 
-    def _jac(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def jacobians_unchecked(self, p: FloatArray, l: FloatArray) -> tuple[FloatArray, FloatArray]:
         c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
         dx, dy = l[..., 0] - p[..., 0], l[..., 1] - p[..., 1]
         zx, zy = c * dx + s * dy, -s * dx + c * dy

@@ -16,7 +16,8 @@ Conventions shared by every model here:
   noise model that :func:`propagate_gaussian` linearises (``G C Gᵀ + V Q Vᵀ``).
 
 Inputs are never modified; every function returns new arrays (the one exception is the
-private particle-filter kernel ``_move_particles``, which moves the poses it is given).
+particle-filter kernel :meth:`MotionModelBase.move_particles`, which moves the poses it is
+given in place). :class:`MotionModelBase` is the fast-path contract the estimators use.
 """
 
 from __future__ import annotations
@@ -31,14 +32,17 @@ from numpy.typing import ArrayLike
 from slamkit._validation import FloatArray, as_array, as_covariance, as_positive
 from slamkit.errors import GeometryError, InputError, ShapeError
 from slamkit.geometry.angles import wrap_angle, wrap_angle_float
+from slamkit.prob.gaussian import gaussian_draws
 
 __all__ = [
     "Ackermann",
     "DifferentialDrive",
     "MotionModel",
+    "MotionModelBase",
     "OdometryModel",
     "UnicycleArc",
     "UnicycleEuler",
+    "motion_kernels",
     "odometry_control",
     "odometry_noise_cov",
     "propagate_gaussian",
@@ -104,22 +108,6 @@ def _prepare(x: ArrayLike, u: ArrayLike, k: int) -> tuple[FloatArray, FloatArray
     return np.broadcast_to(xa, (*batch, 3)), np.broadcast_to(ua, (*batch, k))
 
 
-def _gaussian_draws(
-    cov: FloatArray, batch: tuple[int, ...], rng: np.random.Generator
-) -> FloatArray:
-    """Draws ``(..., k)`` from ``N(0, cov)`` for a (batch of) PSD ``cov (..., k, k)``.
-
-    A symmetric square root from ``eigh`` (negative round-off eigenvalues clipped to zero)
-    works for singular covariances too, where a Cholesky factor would fail.
-    """
-    k = cov.shape[-1]
-    eigval, eigvec = np.linalg.eigh(cov)
-    root = eigvec * np.sqrt(np.clip(eigval, 0.0, None))[..., None, :]
-    shape = np.broadcast_shapes(batch, cov.shape[:-2])
-    z = rng.standard_normal((*shape, k))
-    return np.einsum("...ij,...j->...i", root, z)
-
-
 def _wrap_in_place(theta: FloatArray) -> None:
     """Headings wrapped to ``[-pi, pi)`` in place; :func:`wrap_angle` returns angles in
     range bit-identical, so it is called only when one is out of range (two reductions
@@ -130,7 +118,8 @@ def _wrap_in_place(theta: FloatArray) -> None:
 
 def _advance_in_place(x: FloatArray, heading: FloatArray, distance: FloatArray) -> None:
     """``x += distance cos(heading)``, ``y += distance sin(heading)`` in place for particle
-    poses ``x (P, 3)`` (the products in the order of the models' ``_g``: bit-identical)."""
+    poses ``x (P, 3)`` (the products in the order of the models' ``apply_unchecked``, so
+    the result is bit-identical)."""
     t = np.cos(heading)
     t *= distance
     x[:, 0] += t
@@ -139,48 +128,64 @@ def _advance_in_place(x: FloatArray, heading: FloatArray, distance: FloatArray) 
     x[:, 1] += t
 
 
-class _MotionBase:
-    """Validation, broadcasting and sampling shared by the concrete models.
+class MotionModelBase:
+    """The base of every slamkit motion model: the estimators' fast-path contract.
 
-    Subclasses implement ``_g`` and ``_jac`` on validated, broadcast arrays.
+    A subclass sets ``control_dim`` and ``control_names`` and implements two kernels on
+    validated, broadcast float64 arrays — ``apply_unchecked`` (``g``) and
+    ``jacobians_unchecked`` (``G, V``). It inherits the validating public methods of
+    :class:`MotionModel` (``apply``, ``jacobians``, ``sample``) and the two fused kernels that
+    estimators call in their loops: :meth:`step_single` (an EKF prediction of one pose) and
+    :meth:`move_particles` (a particle filter's prediction, in place). Overriding those two
+    with faster arithmetic is optional; an override must agree with the batch kernels (the
+    built-in models each have a test to 1e-12).
+
+    A model written elsewhere that only satisfies the :class:`MotionModel` protocol gets the
+    same kernels through :func:`motion_kernels`, which wraps its public methods.
     """
 
     control_dim: ClassVar[int]
     control_names: ClassVar[tuple[str, ...]]
 
-    def _g(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
-        raise NotImplementedError
+    def apply_unchecked(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
+        """``g(x, u, dt)`` for validated poses ``(..., 3)`` and controls ``(..., k)`` of the
+        same batch shape, ``dt >= 0``; heading wrapped."""
+        raise NotImplementedError(f"{type(self).__name__} does not implement apply_unchecked")
 
-    def _jac(self, x: FloatArray, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
-        raise NotImplementedError
+    def jacobians_unchecked(
+        self, x: FloatArray, u: FloatArray, dt: float
+    ) -> tuple[FloatArray, FloatArray]:
+        """``(G (..., 3, 3), V (..., 3, k))`` for validated arguments as in
+        :meth:`apply_unchecked`."""
+        raise NotImplementedError(f"{type(self).__name__} does not implement jacobians_unchecked")
 
-    def _step_single(
+    def step_single(
         self, x: FloatArray, u: FloatArray, dt: float
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """``(g, G, V)`` for ONE validated pose ``(3,)`` and control ``(k,)``: an EKF
         prediction. Overrides use plain floats (NumPy's per-call overhead on 0-d arrays
-        dominates there); a test checks each against the batched ``_g`` and ``_jac``."""
-        G, V = self._jac(x, u, dt)
-        return self._g(x, u, dt), G, V
+        dominates there); a test checks each against the batch kernels."""
+        G, V = self.jacobians_unchecked(x, u, dt)
+        return self.apply_unchecked(x, u, dt), G, V
 
-    def _move_particles(self, x: FloatArray, u: FloatArray, dt: float) -> None:
+    def move_particles(self, x: FloatArray, u: FloatArray, dt: float) -> None:
         """``x ← g(x, u, dt)`` IN PLACE for validated particle poses ``x (P, 3)`` (float64,
         writeable, not aliasing ``u``) and controls ``u (P, k)``: a particle filter's
         prediction, once per control. Overrides write the result into ``x`` column by column
-        with the same operations as ``_g`` (bit-identical; a test checks 1e-12) and skip
-        the wrapping of headings that are already in range; at a few hundred particles
-        stacking a new array and wrapping every heading cost as much as the motion."""
-        x[...] = self._g(x, u, dt)
+        with the operations of ``apply_unchecked`` (bit-identical; a test checks 1e-12) and
+        skip the wrapping of headings already in range; at a few hundred particles stacking
+        a new array and wrapping every heading cost as much as the motion."""
+        x[...] = self.apply_unchecked(x, u, dt)
 
     def apply(self, x: ArrayLike, u: ArrayLike, dt: float) -> FloatArray:
         """``g(x, u, dt)``: poses ``(..., 3)`` after one step, heading in ``[-pi, pi)``."""
         xa, ua = _prepare(x, u, self.control_dim)
-        return self._g(xa, ua, _as_dt(dt))
+        return self.apply_unchecked(xa, ua, _as_dt(dt))
 
     def jacobians(self, x: ArrayLike, u: ArrayLike, dt: float) -> tuple[FloatArray, FloatArray]:
         """``(G, V)``: ``G = dg/dx`` ``(..., 3, 3)`` and ``V = dg/du`` ``(..., 3, k)``."""
         xa, ua = _prepare(x, u, self.control_dim)
-        return self._jac(xa, ua, _as_dt(dt))
+        return self.jacobians_unchecked(xa, ua, _as_dt(dt))
 
     def sample(
         self,
@@ -199,10 +204,59 @@ class _MotionBase:
         xa, ua = _prepare(x, u, k)
         dt = _as_dt(dt)
         q = as_covariance(control_cov, "control_cov", k, semidefinite=True)
-        eps = _gaussian_draws(q, xa.shape[:-1], rng)
+        eps = gaussian_draws(q, xa.shape[:-1], rng)
         batch = eps.shape[:-1]
         xa = np.broadcast_to(xa, (*batch, 3))
-        return self._g(xa, ua + eps, dt)
+        return self.apply_unchecked(xa, ua + eps, dt)
+
+
+_MOTION_MEMBERS = ("control_dim", "control_names", "apply", "jacobians", "sample")
+
+
+class _ProtocolMotion(MotionModelBase):
+    """The kernels of a :class:`MotionModel` that is not a :class:`MotionModelBase`, through
+    its public (validating) methods."""
+
+    def __init__(self, model: MotionModel) -> None:
+        self.model = model
+        self.control_dim = int(model.control_dim)  # type: ignore[misc]
+        self.control_names = tuple(model.control_names)  # type: ignore[misc]
+
+    def apply_unchecked(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
+        return np.asarray(self.model.apply(x, u, dt), dtype=np.float64)
+
+    def jacobians_unchecked(
+        self, x: FloatArray, u: FloatArray, dt: float
+    ) -> tuple[FloatArray, FloatArray]:
+        G, V = self.model.jacobians(x, u, dt)
+        return np.asarray(G, dtype=np.float64), np.asarray(V, dtype=np.float64)
+
+    def sample(
+        self,
+        x: ArrayLike,
+        u: ArrayLike,
+        dt: float,
+        control_cov: ArrayLike,
+        rng: np.random.Generator,
+    ) -> FloatArray:
+        return np.asarray(self.model.sample(x, u, dt, control_cov, rng), dtype=np.float64)
+
+
+def motion_kernels(model: object) -> MotionModelBase:
+    """The fast-path kernels of a motion model: the model itself when it is a
+    :class:`MotionModelBase` (every slamkit model), else the kernels of a
+    :class:`MotionModel` through its public methods (same numbers, without the fused
+    arithmetic). Raise :class:`~slamkit.errors.InputError` naming what a model lacks."""
+    if isinstance(model, MotionModelBase):
+        return model
+    missing = [m for m in _MOTION_MEMBERS if not hasattr(model, m)]
+    if missing:
+        raise InputError(
+            f"motion model {type(model).__name__}: expected the MotionModel protocol "
+            f"(control_dim, control_names, apply, jacobians, sample); missing "
+            f"{', '.join(missing)}"
+        )
+    return _ProtocolMotion(model)  # type: ignore[arg-type]
 
 
 # --------------------------------------------------------------------------------------------
@@ -332,7 +386,7 @@ def _arc_jac(
 
 
 @dataclass(frozen=True)
-class UnicycleEuler(_MotionBase):
+class UnicycleEuler(MotionModelBase):
     """Velocity model with controls ``(v, omega)`` (m/s, rad/s), one Euler step.
 
     ``x' = x + v cos(theta) dt``, ``y' = y + v sin(theta) dt``, ``theta' = theta + omega dt``
@@ -344,10 +398,10 @@ class UnicycleEuler(_MotionBase):
     control_dim: ClassVar[int] = 2
     control_names: ClassVar[tuple[str, ...]] = ("v", "omega")
 
-    def _g(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
+    def apply_unchecked(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
         return _euler_g(x, u[..., 0], u[..., 1], dt)
 
-    def _move_particles(self, x: FloatArray, u: FloatArray, dt: float) -> None:
+    def move_particles(self, x: FloatArray, u: FloatArray, dt: float) -> None:
         # _euler_g in place: x += v cos(θ) dt, y += v sin(θ) dt, θ += ω dt
         th = x[:, 2]
         v = u[:, 0]
@@ -362,7 +416,7 @@ class UnicycleEuler(_MotionBase):
         th += np.multiply(u[:, 1], dt, out=t)
         _wrap_in_place(th)
 
-    def _step_single(
+    def step_single(
         self, x: FloatArray, u: FloatArray, dt: float
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         th, v, w = float(x[2]), float(u[0]), float(u[1])
@@ -372,12 +426,14 @@ class UnicycleEuler(_MotionBase):
         V = np.array([[c * dt, 0.0], [s * dt, 0.0], [0.0, dt]])
         return g, G, V
 
-    def _jac(self, x: FloatArray, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
+    def jacobians_unchecked(
+        self, x: FloatArray, u: FloatArray, dt: float
+    ) -> tuple[FloatArray, FloatArray]:
         return _euler_jac(x, u[..., 0], u[..., 1], dt)
 
 
 @dataclass(frozen=True)
-class UnicycleArc(_MotionBase):
+class UnicycleArc(MotionModelBase):
     """Velocity model with controls ``(v, omega)`` (m/s, rad/s), integrated exactly.
 
     With constant ``(v, omega)`` the robot drives a circular arc of radius ``v / omega``:
@@ -392,10 +448,10 @@ class UnicycleArc(_MotionBase):
     control_dim: ClassVar[int] = 2
     control_names: ClassVar[tuple[str, ...]] = ("v", "omega")
 
-    def _g(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
+    def apply_unchecked(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
         return _arc_g(x, u[..., 0], u[..., 1], dt)
 
-    def _move_particles(self, x: FloatArray, u: FloatArray, dt: float) -> None:
+    def move_particles(self, x: FloatArray, u: FloatArray, dt: float) -> None:
         # _arc_g in place: the chord v dt s(φ) along θ + φ/2, then θ += φ
         th = x[:, 2]
         phi = u[:, 1] * dt
@@ -407,7 +463,7 @@ class UnicycleArc(_MotionBase):
         th += phi
         _wrap_in_place(th)
 
-    def _step_single(
+    def step_single(
         self, x: FloatArray, u: FloatArray, dt: float
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         # The same chord form as _arc_g / _arc_jac, in plain floats.
@@ -429,12 +485,14 @@ class UnicycleArc(_MotionBase):
         )
         return g, G, V
 
-    def _jac(self, x: FloatArray, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
+    def jacobians_unchecked(
+        self, x: FloatArray, u: FloatArray, dt: float
+    ) -> tuple[FloatArray, FloatArray]:
         return _arc_jac(x, u[..., 0], u[..., 1], dt)
 
 
 @dataclass(frozen=True)
-class DifferentialDrive(_MotionBase):
+class DifferentialDrive(MotionModelBase):
     """Two-wheel (tank) drive with controls ``(v_left, v_right)``: wheel ground speeds, m/s.
 
     Both wheels drive forward for positive speeds. The body velocities are
@@ -467,11 +525,13 @@ class DifferentialDrive(_MotionBase):
         vl, vr = u[..., 0], u[..., 1]
         return 0.5 * (vl + vr), (vr - vl) / self.wheel_distance
 
-    def _g(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
+    def apply_unchecked(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
         v, w = self._vw(u)
         return (_arc_g if self.exact else _euler_g)(x, v, w, dt)
 
-    def _jac(self, x: FloatArray, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
+    def jacobians_unchecked(
+        self, x: FloatArray, u: FloatArray, dt: float
+    ) -> tuple[FloatArray, FloatArray]:
         v, w = self._vw(u)
         G, V_vw = (_arc_jac if self.exact else _euler_jac)(x, v, w, dt)
         inv_d = 1.0 / self.wheel_distance
@@ -486,7 +546,7 @@ class DifferentialDrive(_MotionBase):
 
 
 @dataclass(frozen=True)
-class OdometryModel(_MotionBase):
+class OdometryModel(MotionModelBase):
     """The odometry motion model of *Probabilistic Robotics* (ch. 5.4).
 
     The control ``u = (rot1, trans, rot2)`` describes the motion between two odometry
@@ -507,14 +567,14 @@ class OdometryModel(_MotionBase):
     def apply(self, x: ArrayLike, u: ArrayLike, dt: float = 0.0) -> FloatArray:
         """``g(x, u)``: the pose after ``(rot1, trans, rot2)``; ``dt`` is ignored."""
         xa, ua = _prepare(x, u, 3)
-        return self._g(xa, ua, 0.0)
+        return self.apply_unchecked(xa, ua, 0.0)
 
     def jacobians(
         self, x: ArrayLike, u: ArrayLike, dt: float = 0.0
     ) -> tuple[FloatArray, FloatArray]:
         """``(G (..., 3, 3), V (..., 3, 3))``; ``dt`` is ignored."""
         xa, ua = _prepare(x, u, 3)
-        return self._jac(xa, ua, 0.0)
+        return self.jacobians_unchecked(xa, ua, 0.0)
 
     def sample(
         self,
@@ -527,7 +587,7 @@ class OdometryModel(_MotionBase):
         """``g(x, u + eps)`` with ``eps ~ N(0, control_cov)``; ``dt`` is ignored."""
         return super().sample(x, u, 0.0, control_cov, rng)
 
-    def _g(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
+    def apply_unchecked(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
         rot1, trans, rot2 = u[..., 0], u[..., 1], u[..., 2]
         th = x[..., 2]
         heading = th + rot1
@@ -540,7 +600,7 @@ class OdometryModel(_MotionBase):
             axis=-1,
         )
 
-    def _move_particles(self, x: FloatArray, u: FloatArray, dt: float) -> None:
+    def move_particles(self, x: FloatArray, u: FloatArray, dt: float) -> None:
         # _g in place: turn rot1, drive trans, turn rot2
         th = x[:, 2]
         heading = th + u[:, 0]
@@ -548,7 +608,9 @@ class OdometryModel(_MotionBase):
         np.add(heading, u[:, 2], out=th)
         _wrap_in_place(th)
 
-    def _jac(self, x: FloatArray, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
+    def jacobians_unchecked(
+        self, x: FloatArray, u: FloatArray, dt: float
+    ) -> tuple[FloatArray, FloatArray]:
         rot1, trans = u[..., 0], u[..., 1]
         heading = x[..., 2] + rot1
         c, s = np.cos(heading), np.sin(heading)
@@ -617,7 +679,7 @@ def odometry_noise_cov(u: ArrayLike, alphas: ArrayLike) -> FloatArray:
 
 
 @dataclass(frozen=True)
-class Ackermann(_MotionBase):
+class Ackermann(MotionModelBase):
     """Car-like vehicle with controls ``(speed, steering)`` (m/s, rad), one Euler step.
 
     Geometry (all in metres, in the vehicle frame whose origin is the centre of the rear axle,
@@ -682,7 +744,7 @@ class Ackermann(_MotionBase):
         v_c = speed / D
         return v_c, v_c * tan_a / L, tan_a, 1.0 / (cos_a * cos_a), D
 
-    def _g(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
+    def apply_unchecked(self, x: FloatArray, u: FloatArray, dt: float) -> FloatArray:
         v_c, w, _, _, _ = self._rates(u)
         a, b = self.sensor_offset
         phi = x[..., 2]
@@ -696,7 +758,7 @@ class Ackermann(_MotionBase):
             axis=-1,
         )
 
-    def _move_particles(self, x: FloatArray, u: FloatArray, dt: float) -> None:
+    def move_particles(self, x: FloatArray, u: FloatArray, dt: float) -> None:
         # _g in place (the same expressions, evaluated before any column is overwritten)
         v_c, w, _, _, _ = self._rates(u)
         a, b = self.sensor_offset
@@ -718,7 +780,9 @@ class Ackermann(_MotionBase):
         h = abs(self.encoder_offset)
         return math.pi / 2 if h == 0 else min(math.pi / 2, math.atan(self.wheelbase / h))
 
-    def _jac(self, x: FloatArray, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
+    def jacobians_unchecked(
+        self, x: FloatArray, u: FloatArray, dt: float
+    ) -> tuple[FloatArray, FloatArray]:
         v_c, w, tan_a, sec2, D = self._rates(u)
         speed = u[..., 0]
         a, b = self.sensor_offset

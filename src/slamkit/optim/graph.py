@@ -69,7 +69,7 @@ def edge_location(data: GraphData, edges: EdgeSet, k: int) -> str:
     return f"{what} (#{k} of its set)"
 
 
-def _lookup(ids: IntArray, query: IntArray) -> tuple[IntArray, IntArray]:
+def lookup_rows(ids: IntArray, query: IntArray) -> tuple[IntArray, IntArray]:
     """Rows of ``query`` in ``ids`` and a mask of the ones found."""
     order = np.argsort(ids, kind="stable")
     sorted_ids = ids[order]
@@ -239,14 +239,14 @@ class GraphProblem:
         blocks_raw: list[tuple[EdgeSet, IntArray, IntArray | None, bool]] = []
         for es in data.edges:
             _, _, second = _KINDS[es.kind]
-            a, found = _lookup(pose_ids, es.i)
+            a, found = lookup_rows(pose_ids, es.i)
             if not found.all():
                 k = int(np.flatnonzero(~found)[0])
                 raise InputError(f"{edge_location(data, es, k)}: pose {int(es.i[k])} has no vertex")
             a = alias[a]
             b: IntArray | None = None
             if second == "pose":
-                b, found = _lookup(pose_ids, es.j)
+                b, found = lookup_rows(pose_ids, es.j)
                 if not found.all():
                     k = int(np.flatnonzero(~found)[0])
                     raise InputError(
@@ -270,7 +270,7 @@ class GraphProblem:
                     )
                     a, b = a[keep], b[keep]
             elif second == "landmark":
-                b, found = _lookup(landmark_ids, es.j)
+                b, found = lookup_rows(landmark_ids, es.j)
                 if not found.all():
                     k = int(np.flatnonzero(~found)[0])
                     raise InputError(
@@ -280,7 +280,7 @@ class GraphProblem:
         n_poses = pose_ids.shape[0]
         fixed = np.zeros(n_poses, dtype=bool)
         if data.fixed_ids.shape[0]:
-            rows, found = _lookup(pose_ids, data.fixed_ids)
+            rows, found = lookup_rows(pose_ids, data.fixed_ids)
             if not found.all():
                 bad = int(data.fixed_ids[np.flatnonzero(~found)[0]])
                 raise InputError(f"fixed pose {bad} has no vertex")
@@ -346,8 +346,8 @@ class GraphProblem:
         eq = np.asarray(data.equivalences, dtype=np.int64).reshape(-1, 2)
         if not eq.shape[0]:
             return alias
-        ra, fa = _lookup(pose_ids, eq[:, 0])
-        rb, fb = _lookup(pose_ids, eq[:, 1])
+        ra, fa = lookup_rows(pose_ids, eq[:, 0])
+        rb, fb = lookup_rows(pose_ids, eq[:, 1])
         if not (fa.all() and fb.all()):
             k = int(np.flatnonzero(~(fa & fb))[0])
             raise InputError(f"EQUIV {eq[k, 0]} {eq[k, 1]}: a pose has no vertex")
@@ -511,7 +511,7 @@ class GraphProblem:
         return self._pattern
 
     # ------------------------------------------------------------------ evaluation
-    def _residuals(
+    def block_residuals(
         self, blk: _Block, poses: FloatArray, landmarks: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
         """Whitened residual ``U e`` and Jacobians ``U ∂e/∂δ``: edge-last ``(m, E)``,
@@ -594,7 +594,7 @@ class GraphProblem:
         gw: list[FloatArray] = []
         robust = kernel is not None and kernel.name != "none"
         for blk in self.blocks:
-            r, A, B = self._residuals(blk, poses, landmarks)
+            r, A, B = self.block_residuals(blk, poses, landmarks)
             s = _squared_norms(blk, r)
             chi2 += float(s.sum())
             if robust:
@@ -638,7 +638,7 @@ class GraphProblem:
         out = []
         for blk in self.blocks:
             if kind is None or blk.kind == kind:
-                r, _, _ = self._residuals(blk, poses, landmarks)
+                r, _, _ = self.block_residuals(blk, poses, landmarks)
                 out.append(_squared_norms(blk, r))
         return out
 
@@ -663,12 +663,12 @@ class GraphProblem:
         sesync_blocks = self._other_blocks if self.objective == "g2o" else self.blocks
         chi2 = 0.0
         for blk in g2o_blocks:
-            r, _, _ = self._residuals(blk, poses, landmarks)
+            r, _, _ = self.block_residuals(blk, poses, landmarks)
             chi2 += float(_squared_norms(blk, r).sum())
         F = 0.0
         for blk in sesync_blocks:
             if blk.kind in ("se2", "se3"):
-                r, _, _ = self._residuals(blk, poses, landmarks)
+                r, _, _ = self.block_residuals(blk, poses, landmarks)
                 F += float(_squared_norms(blk, r).sum())
         return chi2, F
 

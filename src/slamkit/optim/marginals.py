@@ -18,8 +18,8 @@ from numpy.typing import ArrayLike
 
 from slamkit.errors import GeometryError, InputError
 from slamkit.optim.data import FloatArray, GraphData, IntArray
-from slamkit.optim.graph import GraphProblem, _lookup
-from slamkit.optim.solvers import OptimizerConfig, OptimizeResult, _indeterminate
+from slamkit.optim.graph import GraphProblem, lookup_rows
+from slamkit.optim.solvers import OptimizerConfig, OptimizeResult, indeterminate_error
 from slamkit.optim.sparse import SingularSystem, make_factorizer
 
 __all__ = ["Marginals", "marginal_covariances"]
@@ -61,14 +61,14 @@ def marginal_covariances(
     try:
         fac.factor(lin.H)
     except SingularSystem as exc:
-        raise GeometryError(f"marginals: {_indeterminate(problem, exc, lin.H)}") from None
+        raise GeometryError(f"marginals: {indeterminate_error(problem, exc, lin.H)}") from None
 
     p_ids = np.asarray(pose_ids, dtype=np.int64).reshape(-1)
     l_ids = np.asarray(landmark_ids, dtype=np.int64).reshape(-1)
-    p_rows, found = _lookup(problem.pose_ids, p_ids)
+    p_rows, found = lookup_rows(problem.pose_ids, p_ids)
     if not found.all():
         raise InputError(f"marginals: pose {int(p_ids[~found][0])} is not in the graph")
-    l_rows, found = _lookup(problem.landmark_ids, l_ids)
+    l_rows, found = lookup_rows(problem.landmark_ids, l_ids)
     if not found.all():
         raise InputError(f"marginals: landmark {int(l_ids[~found][0])} is not in the graph")
     # (first column, size) of every requested variable; -1 for a fixed pose.

@@ -273,7 +273,7 @@ class _Solver:
         return delta
 
 
-def _indeterminate(problem: GraphProblem, exc: SingularSystem, H: FloatArray) -> GeometryError:
+def indeterminate_error(problem: GraphProblem, exc: SingularSystem, H: FloatArray) -> GeometryError:
     """The error for a singular ``H``, naming the variable of the failed pivot and every
     variable whose own diagonal block is singular."""
     parts = []
@@ -557,7 +557,7 @@ def _gauss_newton(
         try:
             delta = s.solve(lin.H, lin.g, None)
         except SingularSystem as exc:
-            raise _indeterminate(s.problem, exc, lin.H) from None
+            raise indeterminate_error(s.problem, exc, lin.H) from None
         poses, landmarks = s.problem.retract(poses, landmarks, delta)
         new = s.linearize(poses, landmarks)
         if not np.isfinite(new.cost):
@@ -646,7 +646,7 @@ def _dogleg(
         try:
             h_gn = s.solve(H, g, None)
         except SingularSystem as exc:
-            raise _indeterminate(s.problem, exc, H) from None
+            raise indeterminate_error(s.problem, exc, H) from None
         Hg = s.pattern.matvec(H, g)
         gg = float(g @ g)
         gHg = float(g @ Hg)

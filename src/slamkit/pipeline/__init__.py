@@ -4,7 +4,7 @@ Data flows ``Dataset → run(estimator) → Result → evaluate → metrics``; `
 results and ``slamkit.viz`` draws them.
 """
 
-from slamkit.pipeline.estimator import (
+from slamkit.estimation.contract import (
     Estimator,
     EstimatorOutput,
     InnovationLog,

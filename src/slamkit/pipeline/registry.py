@@ -1,7 +1,7 @@
 """The one list of every estimator, by name.
 
 To add an estimator: write a config dataclass and a class with the
-:class:`~slamkit.pipeline.estimator.Estimator` methods whose constructor takes
+:class:`~slamkit.estimation.contract.Estimator` methods whose constructor takes
 ``(dataset, config, rng)``, then add one :class:`EstimatorEntry` below. The runner and the
 CLI (``slamkit run NAME``) find it here. Targets are imported on use, so listing is cheap.
 """
@@ -18,7 +18,7 @@ import numpy as np
 from slamkit.config import config_from_mapping
 from slamkit.datasets.stream import Dataset
 from slamkit.errors import InputError, UnknownNameError
-from slamkit.pipeline.estimator import Estimator, EstimatorFactory
+from slamkit.estimation.contract import Estimator, EstimatorFactory
 
 __all__ = ["ESTIMATORS", "EstimatorEntry", "get_estimator_entry", "list_estimators"]
 

@@ -14,7 +14,14 @@ from slamkit._validation import FloatArray
 from slamkit.config import config_to_dict
 from slamkit.datasets.stream import Dataset, group_by_time
 from slamkit.errors import ConvergenceError, InputError
-from slamkit.pipeline.estimator import Estimator, EstimatorOutput, Frame, PoseEstimate
+from slamkit.estimation.contract import (
+    Estimator,
+    EstimatorOutput,
+    Frame,
+    LandmarkView,
+    ParticleView,
+    PoseEstimate,
+)
 from slamkit.pipeline.registry import EstimatorEntry, get_estimator_entry
 
 __all__ = ["Progress", "Result", "run"]
@@ -62,15 +69,14 @@ def _record(est: PoseEstimate, step: int) -> tuple[np.ndarray, np.ndarray | None
 
 
 def _frame(est: Estimator, t: float, pose: np.ndarray, cov: np.ndarray | None) -> Frame:
-    """A snapshot through the estimator's optional ``landmark_estimate``/``particle_poses``."""
-    landmarks = getattr(est, "landmark_estimate", None)
-    particles = getattr(est, "particle_poses", None)
+    """A snapshot through the views the estimator offers (:class:`LandmarkView`,
+    :class:`ParticleView`)."""
     return Frame(
         t,
         pose,
         cov,
-        landmarks() if callable(landmarks) else None,
-        None if not callable(particles) else np.array(particles(), dtype=float),
+        est.landmark_estimate() if isinstance(est, LandmarkView) else None,
+        np.array(est.particle_poses(), dtype=float) if isinstance(est, ParticleView) else None,
     )
 
 

@@ -33,6 +33,7 @@ __all__ = [
     "covariance_trace",
     "ellipse_points",
     "gaussian_cdf",
+    "gaussian_draws",
     "gaussian_logpdf",
     "gaussian_pdf",
     "mahalanobis",
@@ -359,3 +360,17 @@ def symmetrize(cov: ArrayLike) -> FloatArray:
     updates accumulate. The one place slamkit writes this operation. Returns a new array."""
     c = _square(cov, "cov")
     return 0.5 * (c + np.swapaxes(c, -1, -2))
+
+
+def gaussian_draws(cov: FloatArray, batch: tuple[int, ...], rng: np.random.Generator) -> FloatArray:
+    """Draws ``(..., k)`` from ``N(0, cov)`` for a (batch of) PSD ``cov (..., k, k)``.
+
+    A symmetric square root from ``eigh`` (negative round-off eigenvalues clipped to zero)
+    works for singular covariances too, where a Cholesky factor would fail.
+    """
+    k = cov.shape[-1]
+    eigval, eigvec = np.linalg.eigh(cov)
+    root = eigvec * np.sqrt(np.clip(eigval, 0.0, None))[..., None, :]
+    shape = np.broadcast_shapes(batch, cov.shape[:-2])
+    z = rng.standard_normal((*shape, k))
+    return np.einsum("...ij,...j->...i", root, z)

@@ -77,18 +77,23 @@ from slamkit.errors import (
     NonFiniteError,
     ShapeError,
 )
+from slamkit.estimation.contract import (
+    EstimatorOutput,
+    InnovationLog,
+    LandmarkEstimate,
+    PoseEstimate,
+    StepClock,
+)
+from slamkit.estimation.gaussian import (
+    angular_indices,
+    check_covariance,
+    measure_unchecked,
+    small_spd_inverse,
+    wrap_components,
+)
 from slamkit.geometry import wrap_angle
 from slamkit.geometry.angles import wrap_angle_float
-from slamkit.localization.kalman import (
-    UpdateInfo,
-    _angular_indices,
-    _check_covariance,
-    _measure,
-    _motion_jacobians,
-    _move,
-    _small_spd_inverse,
-    _wrap_components,
-)
+from slamkit.localization.kalman import UpdateInfo
 from slamkit.mapping.ekf_mapping import (
     DISCARDED,
     INITIALISED,
@@ -102,15 +107,8 @@ from slamkit.mapping.ekf_mapping import (
 from slamkit.mapping.ekf_mapping import associate_nearest_unchecked as _greedy_nearest_neighbour
 from slamkit.maps import LandmarkMap
 from slamkit.models import MIN_RANGE, LandmarkModel, MotionModel, odometry_control
-from slamkit.models.measurement import _LandmarkBase
-from slamkit.models.motion import _MotionBase
-from slamkit.pipeline.estimator import (
-    EstimatorOutput,
-    InnovationLog,
-    LandmarkEstimate,
-    PoseEstimate,
-    StepClock,
-)
+from slamkit.models.measurement import LandmarkModelBase
+from slamkit.models.motion import motion_kernels
 from slamkit.prob import chi2_gate
 
 __all__ = [
@@ -238,10 +236,7 @@ def _predict_inplace(
 ) -> None:
     """The prediction on ``mean (n,)`` and ``cov (n, n)`` (views of the active state)."""
     x = mean[:3]
-    if isinstance(model, _MotionBase):  # one pose: the fused plain-float kernel
-        moved, G, V = model._step_single(x, u, dt)
-    else:
-        moved, (G, V) = _move(model, x, u, dt), _motion_jacobians(model, x, u, dt)
+    moved, G, V = motion_kernels(model).step_single(x, u, dt)  # the fused one-pose kernel
     mean[:3] = moved
     P = G @ cov[:3, :3] @ G.T + V @ Q @ V.T  # Σ_rr ← G Σ_rr Gᵀ + V Q Vᵀ
     cov[:3, :3] = 0.5 * (P + P.T)
@@ -253,7 +248,7 @@ def _predict_inplace(
         raise ConvergenceError("ekf-slam predict: the pose or its covariance became non-finite")
 
 
-def _h_jacobians(
+def reading_jacobians(
     model: LandmarkModel, pose: FloatArray, landmark: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """``(h (m,), H_r (m, 3), H_j (m, 2))`` for one pose and one landmark.
@@ -263,8 +258,8 @@ def _h_jacobians(
     ``∂h/∂m = −∂h/∂t``: the landmark Jacobian is minus the first two columns of the pose
     Jacobian, which the fused single-reading kernel already gives. (Checked against
     ``model.jacobians`` in the tests.) Other models are asked for both."""
-    if isinstance(model, _LandmarkBase):
-        h, Hr = _measure(model, pose, landmark)
+    if isinstance(model, LandmarkModelBase):
+        h, Hr = measure_unchecked(model, pose, landmark)
         return h, Hr, -Hr[:, :2]
     h = np.asarray(model.predict(pose, landmark), dtype=np.float64)
     Hr, Hj = model.jacobians(pose, landmark)
@@ -307,12 +302,12 @@ def _update_inplace(
         Σ_ff ← Σ_ff − K_f (H Σ)_:,f − (H Σ)_:,fᵀ K_fᵀ + K_f S K_fᵀ
     """
     s = slot
-    h, Hr, Hj = _h_jacobians(model, mean[:3], mean[s : s + 2])
-    nu = _wrap_components(z - h, angular)  # ν = z ⊖ h: bearing wrapped
+    h, Hr, Hj = reading_jacobians(model, mean[:3], mean[s : s + 2])
+    nu = wrap_components(z - h, angular)  # ν = z ⊖ h: bearing wrapped
     HS = Hr @ cov[:3, :] + Hj @ cov[s : s + 2, :]  # H Σ from five rows (m × n)
     S = HS[:, :3] @ Hr.T + HS[:, s : s + 2] @ Hj.T + R
     S = 0.5 * (S + S.T)
-    S_inv = _small_spd_inverse(S, "ekf-slam update")
+    S_inv = small_spd_inverse(S, "ekf-slam update")
     if S_inv is None:  # readings of more than two components
         S_inv = _spd_inverse(S)
     Sinv_nu = S_inv @ nu
@@ -333,7 +328,7 @@ def _update_inplace(
     if not math.isfinite(float(Kt.sum() + nis)):
         raise ConvergenceError("ekf-slam update: the gain became non-finite")
     mean += HS.T @ Sinv_nu  # x + K ν with K ν = Σ Hᵀ S⁻¹ ν
-    _wrap_components(mean, (2,))
+    wrap_components(mean, (2,))
     # Joseph form multiplied out: Σ + D Kᵀ + K Dᵀ with D = K S / 2 − Σ Hᵀ (module docstring).
     Dt = 0.5 * (S @ Kt) - HS  # Dᵀ (m × n)
     _rank_update(cov, np.concatenate((Dt, Kt)), np.concatenate((Kt, Dt)), scratch)
@@ -439,7 +434,7 @@ def slam_update(
     mean, cov = belief.mean.copy(), belief.cov.copy()
     scratch = np.empty(max(_SCRATCH_BYTES // 8, mean.size))
     nis, nu, S = _update_inplace(
-        mean, cov, 3 + 2 * int(index), za, model, Ra, _angular_indices(model), scratch,
+        mean, cov, 3 + 2 * int(index), za, model, Ra, angular_indices(model), scratch,
         consider=consider,
     )  # fmt: skip
     return SlamBelief(mean, cov, belief.ids.copy()), UpdateInfo(nu, S, nis)
@@ -804,7 +799,7 @@ class EkfSlamConfig:
                 raise ConfigError(f"{name}: expected an integer >= 1, got {v!r}")
 
 
-def _scan_readings(
+def scan_readings(
     event: LandmarkReadings, m: int, use_ids: bool
 ) -> tuple[FloatArray, NDArray[np.int64]]:
     """A scan's readings ``(K, m)``, checked (shape, finite), and the ids to use: the
@@ -904,7 +899,7 @@ class EkfSlam:
         self._model: LandmarkModel = sensor.model()
         self._R = as_covariance(config.measurement_noise_scale * sensor.noise_cov, "R", None)
         self._m = int(self._R.shape[0])
-        self._angular = _angular_indices(self._model)
+        self._angular = angular_indices(self._model)
         self._sensor = sensor
         self._gate = chi2_gate(self._m, config.gate_probability)
         self._new_gate = chi2_gate(self._m, config.new_landmark_probability)
@@ -991,7 +986,7 @@ class EkfSlam:
             elif isinstance(event, LandmarkReadings):
                 self._scan(event)
             if self._config.check_every is not None and step % self._config.check_every == 0:
-                _check_covariance(self._views()[1], "ekf-slam")
+                check_covariance(self._views()[1], "ekf-slam")
 
     def estimate(self) -> PoseEstimate:
         return PoseEstimate(self._mean_buf[:3].copy(), self._cov_buf[:3, :3].copy())
@@ -1129,8 +1124,8 @@ class EkfSlam:
         lm = mean[3:].reshape(-1, 2)[sel]
         pose = np.broadcast_to(mean[:3], (U, 3))
         model = self._model
-        if isinstance(model, _LandmarkBase):
-            z_hat, (Hr, Hj) = model._h(pose, lm), model._jac(pose, lm)
+        if isinstance(model, LandmarkModelBase):
+            z_hat, (Hr, Hj) = model.predict_unchecked(pose, lm), model.jacobians_unchecked(pose, lm)
         else:
             z_hat, (Hr, Hj) = model.predict(pose, lm), model.jacobians(pose, lm)
         C = cov[:3, 3:].reshape(3, -1, 2)[:, sel, :].transpose(1, 0, 2)  # Σ_r,j (U, 3, 2)
@@ -1229,14 +1224,14 @@ class EkfSlam:
         sub = cov[np.ix_(idx, idx)]
         J = np.zeros((U * m, idx.size))
         for a, j in enumerate(cand.tolist()):
-            _, Hr, Hj = _h_jacobians(self._model, mean[:3], mean[3 + 2 * j : 5 + 2 * j])
+            _, Hr, Hj = reading_jacobians(self._model, mean[:3], mean[3 + 2 * j : 5 + 2 * j])
             J[a * m : (a + 1) * m, :3] = Hr
             J[a * m : (a + 1) * m, 3 + 2 * a : 5 + 2 * a] = Hj
         M = J @ sub @ J.T
         return 0.5 * (M + M.T)
 
     def _scan(self, event: LandmarkReadings) -> None:
-        z, ids = _scan_readings(event, self._m, self._use_ids)
+        z, ids = scan_readings(event, self._m, self._use_ids)
         t = float(event.t)
         K = z.shape[0]
         self._counts["readings"] += K
@@ -1343,7 +1338,7 @@ class EkfSlam:
         mean = self._mean_buf
         s = 3 + 2 * j
         try:
-            _, _, Hj = _h_jacobians(self._model, mean[:3], mean[s : s + 2])
+            _, _, Hj = reading_jacobians(self._model, mean[:3], mean[s : s + 2])
         except GeometryError:
             return
         self._info[j] += Hj.T @ self._R_inv @ Hj

@@ -128,12 +128,20 @@ from numpy.typing import ArrayLike, NDArray
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.datasets.stream import Control, Dataset, Event, LandmarkReadings, Odometry
 from slamkit.errors import ConfigError, ConvergenceError, InputError, ShapeError
+from slamkit.estimation.contract import (
+    EstimatorOutput,
+    LandmarkEstimate,
+    ParticleSnapshot,
+    PoseEstimate,
+    SnapshotSchedule,
+    StepClock,
+)
 from slamkit.geometry.angles import wrap_angle
 from slamkit.localization.particles import (
-    _low_variance_resample_unchecked,
-    _particle_estimate_unchecked,
     low_variance_resample,
+    low_variance_resample_unchecked,
     normalize_log_weights,
+    particle_estimate_unchecked,
 )
 from slamkit.mapping.ekf_mapping import (
     DISCARDED,
@@ -144,16 +152,8 @@ from slamkit.mapping.ekf_mapping import (
 )
 from slamkit.maps import LandmarkMap
 from slamkit.models import MIN_RANGE, Ackermann, MotionModel, RangeBearing, odometry_control
-from slamkit.models.measurement import _LandmarkBase
-from slamkit.models.motion import _MotionBase, propagate_gaussian_unchecked
-from slamkit.pipeline.estimator import (
-    EstimatorOutput,
-    LandmarkEstimate,
-    ParticleSnapshot,
-    PoseEstimate,
-    SnapshotSchedule,
-    StepClock,
-)
+from slamkit.models.measurement import LandmarkModelBase
+from slamkit.models.motion import motion_kernels, propagate_gaussian_unchecked
 from slamkit.prob import chi2_gate
 
 __all__ = [
@@ -631,7 +631,8 @@ def _landmark_terms(
     operation. Range-bearing, the common case, is written out here (``ẑ = (r, atan2(dy, dx)
     − θ)``, ``H = [[dx/r, dy/r], [−dy/r², dx/r²]]``, the convention of
     :class:`~slamkit.models.RangeBearing`); other models go through their batch kernels
-    ``_h``/``_jac``. A test checks both against the models' validated methods."""
+    ``predict_unchecked``/``jacobians_unchecked``. A test checks both against the models'
+    validated methods."""
     px, py, pth = pose
     batch = g.shape[1:]
     buf = np.empty((20, *batch))  # the terms and, after them, scratch
@@ -667,8 +668,8 @@ def _landmark_terms(
         p = np.empty((*batch, 3))
         p[..., 0], p[..., 1], p[..., 2] = px, py, pth
         m = np.stack((p[..., 0] + dx, p[..., 1] + dy), axis=-1)
-        if isinstance(model, _LandmarkBase):
-            z_hat, (_, Hm) = model._h(p, m), model._jac(p, m)
+        if isinstance(model, LandmarkModelBase):
+            z_hat, (_, Hm) = model.predict_unchecked(p, m), model.jacobians_unchecked(p, m)
         else:  # pragma: no cover - every invertible model of slamkit has the kernels
             z_hat, (_, Hm) = model.predict(p, m), model.jacobians(p, m)
         zh0[...], zh1[...] = z_hat[..., 0], z_hat[..., 1]
@@ -1297,9 +1298,10 @@ def _terms(
     landmarks ``(..., 2)``, ``(..., 2, 2)`` and readings ``(..., 2)`` (broadcast).
 
     A landmark closer than ``MIN_RANGE`` to the pose has no bearing: it is evaluated at a
-    stand-in point and flagged ``ok = False``. The models' batch kernels ``_h`` and ``_jac``
-    are called directly: the inputs were validated once (data set, public functions), and
-    the checks of ``predict``/``jacobians`` cost more than the arithmetic here."""
+    stand-in point and flagged ``ok = False``. The models' batch kernels
+    ``predict_unchecked`` and ``jacobians_unchecked`` are called directly: the inputs were
+    validated once (data set, public functions), and the checks of ``predict``/``jacobians``
+    cost more than the arithmetic here."""
     batch = np.broadcast_shapes(poses.shape[:-1], mu.shape[:-1])
     p = np.broadcast_to(poses, (*batch, 3))
     m = np.broadcast_to(mu, (*batch, 2))
@@ -1307,9 +1309,9 @@ def _terms(
     ok = np.hypot(d[..., 0], d[..., 1]) >= 2.0 * MIN_RANGE
     if not ok.all():
         m = np.where(ok[..., None], m, p[..., :2] + np.array([1.0, 0.0]))
-    if isinstance(model, _LandmarkBase):
-        z_hat = model._h(p, m)
-        Hx, Hm = model._jac(p, m)
+    if isinstance(model, LandmarkModelBase):
+        z_hat = model.predict_unchecked(p, m)
+        Hx, Hm = model.jacobians_unchecked(p, m)
     else:  # pragma: no cover - every invertible model of slamkit has the kernels
         z_hat = model.predict(p, m)
         Hx, Hm = model.jacobians(p, m)
@@ -1977,7 +1979,7 @@ class _FastSlam:
         self._w = _Work.of(ps)
         self._w.common = True
         self._w.maybe_prunable = False  # no landmark yet
-        self._fast_motion = isinstance(self._motion, _MotionBase)
+        self._kernels = motion_kernels(self._motion)
         self._steering_limit = _steering_limit(self._motion)
         self._pending: tuple[FloatArray, float] | None = None  # 2.0: a motion not yet sampled
         # 2.0: the earlier controls since the last scan, as each particle's Gaussian (mean
@@ -2027,7 +2029,7 @@ class _FastSlam:
             poses, covs = self._pending_gaussian()
             spread = np.einsum("p,pij->ij", self._weights, covs)
         # The weights are normalised by construction, the poses the filter's own.
-        mean, cov = _particle_estimate_unchecked(poses, self._weights)
+        mean, cov = particle_estimate_unchecked(poses, self._weights)
         if spread is not None:
             cov = cov + spread
         if self._cfg.estimate == "best":
@@ -2156,7 +2158,7 @@ class _FastSlam:
     def _resample_if_due(self) -> None:
         if self._resample_pending:
             # The weights are normalised and finite by construction: the unchecked kernel.
-            idx = _low_variance_resample_unchecked(self._weights, self._rng, self._weights.size)
+            idx = low_variance_resample_unchecked(self._weights, self._rng, self._weights.size)
             n = idx.size
             self._history.append(idx)
             self._poses = self._poses[idx]
@@ -2179,10 +2181,7 @@ class _FastSlam:
         eps += u
         if self._steering_limit is not None:  # Ackermann: keep sampled steering in its domain
             np.clip(eps[:, 1], -self._steering_limit, self._steering_limit, out=eps[:, 1])
-        if self._fast_motion:  # validated once (data set, config): the in-place kernel
-            self._motion._move_particles(poses, eps, dt)  # type: ignore[attr-defined]
-        else:  # pragma: no cover - every motion model of slamkit has the kernel
-            self._poses = self._motion.apply(poses, eps, dt)
+        self._kernels.move_particles(poses, eps, dt)  # validated once: the in-place kernel
 
     def _motion_step(self, u: FloatArray, dt: float) -> None:
         self._predict(u, dt)

@@ -108,9 +108,16 @@ from slamkit.errors import (
     GeometryError,
     InputError,
 )
+from slamkit.estimation.contract import (
+    EstimatorOutput,
+    InnovationLog,
+    LandmarkEstimate,
+    PoseEstimate,
+    StepClock,
+)
+from slamkit.estimation.gaussian import angular_indices
 from slamkit.geometry import wrap_angle
 from slamkit.geometry.angles import wrap_angle_float
-from slamkit.localization.kalman import _angular_indices, _motion_jacobians, _move
 from slamkit.mapping.ekf_mapping import (
     NEW,
     REJECTED,
@@ -120,24 +127,17 @@ from slamkit.mapping.ekf_mapping import (
 from slamkit.mapping.ekf_mapping import associate_nearest_unchecked as _greedy_nearest_neighbour
 from slamkit.maps import LandmarkMap
 from slamkit.models import MIN_RANGE, LandmarkModel, MotionModel, odometry_control
-from slamkit.models.measurement import _LandmarkBase
-from slamkit.models.motion import _MotionBase
-from slamkit.pipeline.estimator import (
-    EstimatorOutput,
-    InnovationLog,
-    LandmarkEstimate,
-    PoseEstimate,
-    StepClock,
-)
+from slamkit.models.measurement import LandmarkModelBase
+from slamkit.models.motion import motion_kernels
 from slamkit.prob import chi2_gate
 from slamkit.slam.ekf_slam import (
     DISCARDED,
     INITIALISED,
     OWN_ID_BASE,
     UPDATED,
-    _h_jacobians,
-    _scan_readings,
-    _wrap_components,
+    reading_jacobians,
+    scan_readings,
+    wrap_components,
 )
 
 __all__ = [
@@ -182,10 +182,7 @@ def _motion_block(
     docstring); ``Ω``, ``ξ``, ``μ`` are changed in place."""
     x = mu[:3].copy()
     x[2] = wrap_angle_float(float(x[2]))  # models want a wrapped heading
-    if isinstance(model, _MotionBase):
-        moved, G, V = model._step_single(x, u, dt)
-    else:
-        moved, (G, V) = _move(model, x, u, dt), _motion_jacobians(model, x, u, dt)
+    moved, G, V = motion_kernels(model).step_single(x, u, dt)  # the fused one-pose kernel
     delta = moved - x
     delta[2] = wrap_angle_float(float(delta[2]))  # the heading inside stays unwrapped
     Rx = V @ Q @ V.T
@@ -219,8 +216,8 @@ def _measurement_block(
     returns ``(ν, H)``."""
     x = mu[:3].copy()
     x[2] = wrap_angle_float(float(x[2]))
-    h, Hr, Hj = _h_jacobians(model, x, mu[slot : slot + 2])
-    nu = _wrap_components(z - h, angular)
+    h, Hr, Hj = reading_jacobians(model, x, mu[slot : slot + 2])
+    nu = wrap_components(z - h, angular)
     H = np.hstack((Hr, Hj))  # (m, 5)
     idx = np.array([0, 1, 2, slot, slot + 1])
     HtRi = H.T @ R_inv
@@ -308,9 +305,7 @@ def seif_measurement_update(
     O, x, m = _check_info(omega, xi, mu)
     za = as_array(z, "z", (model.dim,))
     Ra = as_covariance(R, "R", model.dim)
-    _measurement_block(
-        O, x, m, 3 + 2 * int(index), za, model, _inverse(Ra), _angular_indices(model)
-    )
+    _measurement_block(O, x, m, 3 + 2 * int(index), za, model, _inverse(Ra), angular_indices(model))
     return O, x
 
 
@@ -465,7 +460,7 @@ class Seif:
         self._R = as_covariance(config.measurement_noise_scale * sensor.noise_cov, "R")
         self._R_inv = _inverse(self._R)
         self._m = int(self._R.shape[0])
-        self._angular = _angular_indices(self._model)
+        self._angular = angular_indices(self._model)
         self._use_ids = config.use_ids and sensor.identities
         self._gate = chi2_gate(self._m, config.gate_probability)
         self._new_gate = chi2_gate(self._m, config.new_landmark_probability)
@@ -680,7 +675,7 @@ class Seif:
         self._read_status.append(status)
 
     def _readings(self, event: LandmarkReadings) -> None:
-        z, ids = _scan_readings(event, self._m, self._use_ids)
+        z, ids = scan_readings(event, self._m, self._use_ids)
         t = float(event.t)
         K = z.shape[0]
         self._counts["readings"] += K
@@ -768,8 +763,8 @@ class Seif:
         lm = self._mu[3 : self._n].reshape(-1, 2)[cand]
         pose = np.broadcast_to(x, (U, 3))
         model = self._model
-        if isinstance(model, _LandmarkBase):
-            z_hat, (Hr, Hj) = model._h(pose, lm), model._jac(pose, lm)
+        if isinstance(model, LandmarkModelBase):
+            z_hat, (Hr, Hj) = model.predict_unchecked(pose, lm), model.jacobians_unchecked(pose, lm)
         else:
             z_hat, (Hr, Hj) = model.predict(pose, lm), model.jacobians(pose, lm)
         # H = [H_r H_j] over (x, m_j): S = H Σ_(x,j) Hᵀ + R, Σ_(x,j) = Y_selᵀ Y_sel

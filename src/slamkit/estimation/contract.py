@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,7 +28,9 @@ __all__ = [
     "Frame",
     "InnovationLog",
     "LandmarkEstimate",
+    "LandmarkView",
     "ParticleSnapshot",
+    "ParticleView",
     "PoseEstimate",
     "SnapshotSchedule",
     "StepClock",
@@ -158,9 +160,9 @@ class StepClock:
 class Estimator(Protocol):
     """What the runner needs of an estimator (see the module docstring).
 
-    Two optional methods feed the frames of an animation (:func:`slamkit.pipeline.run` with
-    ``frames``): ``landmark_estimate() -> LandmarkEstimate | None``, the current map, and
-    ``particle_poses() -> FloatArray | None``, the current particle poses ``(P, 3)``.
+    An estimator may also offer the views :class:`LandmarkView` (its current map) and
+    :class:`ParticleView` (its current particle poses), which feed the frames of an
+    animation (:func:`slamkit.pipeline.run` with ``frames``).
     """
 
     def handle(self, event: Event) -> None: ...
@@ -168,6 +170,20 @@ class Estimator(Protocol):
     def estimate(self) -> PoseEstimate: ...
 
     def finish(self) -> EstimatorOutput: ...
+
+
+@runtime_checkable
+class LandmarkView(Protocol):
+    """An estimator that can show its current landmark map (``None``: no map yet)."""
+
+    def landmark_estimate(self) -> LandmarkEstimate | None: ...
+
+
+@runtime_checkable
+class ParticleView(Protocol):
+    """A particle filter that can show its current particle poses ``(P, 3)``."""
+
+    def particle_poses(self) -> FloatArray: ...
 
 
 class EstimatorFactory(Protocol):

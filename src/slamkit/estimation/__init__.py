@@ -1,0 +1,43 @@
+"""The estimation core under every estimator of ``localization``, ``mapping`` and ``slam``.
+
+* :mod:`~slamkit.estimation.contract` — what the runner needs of an estimator (``handle``,
+  ``estimate``, ``finish``), the values it returns (:class:`PoseEstimate`,
+  :class:`EstimatorOutput`, ...) and the optional views an estimator may offer
+  (:class:`LandmarkView`, :class:`ParticleView`) for animation frames.
+* :mod:`~slamkit.estimation.gaussian` — the Gaussian-filter kernels shared by every
+  Kalman-type estimator: covariance checks, the gain with the Joseph update, angle wrapping of
+  innovations, model evaluation on validated arrays (the fast path).
+
+Layers: this package imports ``models``, ``maps``, ``datasets``, ``prob`` and ``geometry``;
+``localization``, ``mapping``, ``slam`` and ``pipeline`` import it.
+"""
+
+from slamkit.estimation.contract import (
+    Estimator,
+    EstimatorFactory,
+    EstimatorOutput,
+    Frame,
+    InnovationLog,
+    LandmarkEstimate,
+    LandmarkView,
+    ParticleSnapshot,
+    ParticleView,
+    PoseEstimate,
+    SnapshotSchedule,
+    StepClock,
+)
+
+__all__ = [
+    "Estimator",
+    "EstimatorFactory",
+    "EstimatorOutput",
+    "Frame",
+    "InnovationLog",
+    "LandmarkEstimate",
+    "LandmarkView",
+    "ParticleSnapshot",
+    "ParticleView",
+    "PoseEstimate",
+    "SnapshotSchedule",
+    "StepClock",
+]
