@@ -4,6 +4,8 @@
   ``estimate``, ``finish``), the values it returns (:class:`PoseEstimate`,
   :class:`EstimatorOutput`, ...) and the optional views an estimator may offer
   (:class:`LandmarkView`, :class:`ParticleView`) for animation frames.
+* :mod:`~slamkit.estimation.readings` — the status of each landmark reading and the codes
+  of data association, as ``IntEnum``.
 * :mod:`~slamkit.estimation.gaussian` — the Gaussian-filter kernels shared by every
   Kalman-type estimator: covariance checks, the gain with the Joseph update, angle wrapping of
   innovations, model evaluation on validated arrays (the fast path).
@@ -26,8 +28,10 @@ from slamkit.estimation.contract import (
     SnapshotSchedule,
     StepClock,
 )
+from slamkit.estimation.readings import AssociationCode, ReadingStatus
 
 __all__ = [
+    "AssociationCode",
     "Estimator",
     "EstimatorFactory",
     "EstimatorOutput",
@@ -38,6 +42,7 @@ __all__ = [
     "ParticleSnapshot",
     "ParticleView",
     "PoseEstimate",
+    "ReadingStatus",
     "SnapshotSchedule",
     "StepClock",
 ]

@@ -68,7 +68,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol, runtime_checkable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -83,7 +83,9 @@ from slamkit.estimation.contract import (
     LandmarkEstimate,
     PoseEstimate,
 )
+from slamkit.estimation.readings import AssociationCode, ReadingStatus
 from slamkit.maps import LandmarkMap
+from slamkit.models.measurement import InvertibleLandmarkModel
 from slamkit.prob import chi2_gate, mahalanobis_squared, symmetrize
 
 __all__ = [
@@ -110,44 +112,13 @@ __all__ = [
     "update_landmarks",
 ]
 
-NEW = -1
-"""Association code: the reading starts a new landmark."""
-REJECTED = -2
-"""Association code: the reading is ambiguous (between the gate and the new-landmark
-threshold) and is not used."""
-
-UPDATED = 0
-"""Reading status: the reading updated a mapped landmark."""
-INITIALISED = 1
-"""Reading status: the reading started a new landmark."""
-DISCARDED = 2
-"""Reading status: the reading was rejected by data association and not used."""
-TOO_CLOSE = 3
-"""Reading status: the reading places its landmark closer than ``min_range`` to the sensor
-and was not used."""
-
-
-@runtime_checkable
-class InvertibleLandmarkModel(Protocol):
-    """A landmark model whose single reading determines the landmark: it has the inverse
-    ``g(pose, z)`` and its Jacobians (range-bearing and relative-position models do; range-
-    only and bearing-only models do not)."""
-
-    @property
-    def dim(self) -> int: ...
-
-    @property
-    def angular(self) -> tuple[bool, ...]: ...
-
-    def predict(self, pose: ArrayLike, landmark: ArrayLike) -> FloatArray: ...
-
-    def jacobians(self, pose: ArrayLike, landmark: ArrayLike) -> tuple[FloatArray, FloatArray]: ...
-
-    def residual(self, z: ArrayLike, z_hat: ArrayLike) -> FloatArray: ...
-
-    def inverse(self, pose: ArrayLike, z: ArrayLike) -> FloatArray: ...
-
-    def inverse_jacobians(self, pose: ArrayLike, z: ArrayLike) -> tuple[FloatArray, FloatArray]: ...
+# The codes as module constants (the values of the enums in slamkit.estimation.readings).
+NEW = AssociationCode.NEW
+REJECTED = AssociationCode.REJECTED
+UPDATED = ReadingStatus.UPDATED
+INITIALISED = ReadingStatus.INITIALISED
+DISCARDED = ReadingStatus.DISCARDED
+TOO_CLOSE = ReadingStatus.TOO_CLOSE
 
 
 def _require_invertible(model: object) -> InvertibleLandmarkModel:

@@ -4,6 +4,7 @@ from slamkit.models.laser import LaserScanner, cast_rays_grid, cast_rays_segment
 from slamkit.models.measurement import (
     MIN_RANGE,
     BearingOnly,
+    InvertibleLandmarkModel,
     LandmarkModel,
     LandmarkModelBase,
     RangeBearing,
@@ -31,6 +32,7 @@ __all__ = [
     "Ackermann",
     "BearingOnly",
     "DifferentialDrive",
+    "InvertibleLandmarkModel",
     "LandmarkModel",
     "LandmarkModelBase",
     "LaserScanner",

@@ -33,6 +33,7 @@ from slamkit.prob.gaussian import gaussian_draws
 __all__ = [
     "MIN_RANGE",
     "BearingOnly",
+    "InvertibleLandmarkModel",
     "LandmarkModel",
     "LandmarkModelBase",
     "RangeBearing",
@@ -413,3 +414,26 @@ class RelativePosition(LandmarkModelBase):
         Lx[..., 0, 2] = -s * zx - c * zy  # ∂(R(θ) z)/∂θ
         Lx[..., 1, 2] = c * zx - s * zy
         return Lx, Lz
+
+
+@runtime_checkable
+class InvertibleLandmarkModel(Protocol):
+    """A landmark model whose single reading determines the landmark: it has the inverse
+    ``g(pose, z)`` and its Jacobians (range-bearing and relative-position models do; range-
+    only and bearing-only models do not)."""
+
+    @property
+    def dim(self) -> int: ...
+
+    @property
+    def angular(self) -> tuple[bool, ...]: ...
+
+    def predict(self, pose: ArrayLike, landmark: ArrayLike) -> FloatArray: ...
+
+    def jacobians(self, pose: ArrayLike, landmark: ArrayLike) -> tuple[FloatArray, FloatArray]: ...
+
+    def residual(self, z: ArrayLike, z_hat: ArrayLike) -> FloatArray: ...
+
+    def inverse(self, pose: ArrayLike, z: ArrayLike) -> FloatArray: ...
+
+    def inverse_jacobians(self, pose: ArrayLike, z: ArrayLike) -> tuple[FloatArray, FloatArray]: ...

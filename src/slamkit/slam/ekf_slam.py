@@ -91,6 +91,7 @@ from slamkit.estimation.gaussian import (
     small_spd_inverse,
     wrap_components,
 )
+from slamkit.estimation.readings import ReadingStatus
 from slamkit.geometry import wrap_angle
 from slamkit.geometry.angles import wrap_angle_float
 from slamkit.localization.kalman import UpdateInfo
@@ -101,13 +102,12 @@ from slamkit.mapping.ekf_mapping import (
     REJECTED,
     TOO_CLOSE,
     UPDATED,
-    InvertibleLandmarkModel,
     association_probabilities,
 )
 from slamkit.mapping.ekf_mapping import associate_nearest_unchecked as _greedy_nearest_neighbour
 from slamkit.maps import LandmarkMap
 from slamkit.models import MIN_RANGE, LandmarkModel, MotionModel, odometry_control
-from slamkit.models.measurement import LandmarkModelBase
+from slamkit.models.measurement import InvertibleLandmarkModel, LandmarkModelBase
 from slamkit.models.motion import motion_kernels
 from slamkit.prob import chi2_gate
 
@@ -130,11 +130,9 @@ __all__ = [
     "slam_update",
 ]
 
-TRACKED = 4
+TRACKED = ReadingStatus.TRACKED
 """Reading status: the reading updated a provisional feature (the feature only; see
-:class:`EkfSlam`). The other codes are those of :mod:`slamkit.mapping.ekf_mapping`:
-:data:`UPDATED` 0, :data:`INITIALISED` 1, :data:`DISCARDED` 2 (rejected by data
-association), :data:`TOO_CLOSE` 3."""
+:class:`EkfSlam`); every code is a :class:`~slamkit.estimation.readings.ReadingStatus`."""
 
 OWN_ID_BASE = 1_000_000
 """Ids the estimator gives the features it names itself (readings without ids) start here,

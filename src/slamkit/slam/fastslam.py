@@ -148,11 +148,10 @@ from slamkit.mapping.ekf_mapping import (
     INITIALISED,
     TOO_CLOSE,
     UPDATED,
-    InvertibleLandmarkModel,
 )
 from slamkit.maps import LandmarkMap
 from slamkit.models import MIN_RANGE, Ackermann, MotionModel, RangeBearing, odometry_control
-from slamkit.models.measurement import LandmarkModelBase
+from slamkit.models.measurement import InvertibleLandmarkModel, LandmarkModelBase
 from slamkit.models.motion import motion_kernels, propagate_gaussian_unchecked
 from slamkit.prob import chi2_gate
 

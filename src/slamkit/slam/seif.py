@@ -121,13 +121,12 @@ from slamkit.geometry.angles import wrap_angle_float
 from slamkit.mapping.ekf_mapping import (
     NEW,
     REJECTED,
-    InvertibleLandmarkModel,
     association_probabilities,
 )
 from slamkit.mapping.ekf_mapping import associate_nearest_unchecked as _greedy_nearest_neighbour
 from slamkit.maps import LandmarkMap
 from slamkit.models import MIN_RANGE, LandmarkModel, MotionModel, odometry_control
-from slamkit.models.measurement import LandmarkModelBase
+from slamkit.models.measurement import InvertibleLandmarkModel, LandmarkModelBase
 from slamkit.models.motion import motion_kernels
 from slamkit.prob import chi2_gate
 from slamkit.slam.ekf_slam import (
