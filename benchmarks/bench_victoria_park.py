@@ -17,14 +17,16 @@ import time
 from typing import Any
 
 from _common import Record, write_results
+from slamkit.app.presets import get_preset
 from slamkit.datasets import find_data_root, load_dataset
 from slamkit.pipeline import run
 from slamkit.pipeline.evaluate import evaluate
 
+PRESET = get_preset("victoria-park-fastslam")
 CASES: tuple[tuple[str, str, dict[str, Any]], ...] = (
     ("EKF-SLAM, nearest neighbour", "ekf-slam", {}),
-    ("FastSLAM 1.0, 100 particles", "fastslam1", {"n_particles": 100}),
-    ("FastSLAM 2.0, 100 particles", "fastslam2", {"n_particles": 100}),
+    ("FastSLAM 1.0, 100 particles", "fastslam1", {**PRESET.settings, "n_particles": 100}),
+    ("FastSLAM 2.0, 100 particles", "fastslam2", {**PRESET.settings, "n_particles": 100}),
 )
 
 
@@ -66,8 +68,8 @@ def main() -> str:
         f"after, on {os.cpu_count()} CPUs (OPENBLAS_NUM_THREADS="
         f"{os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}). GPS RMSE after SE(2) alignment "
         f"at the fixes, outliers rejected (slamkit.eval.gps); dead reckoning: {dead:.1f} m. "
-        f"Settings: the data set's (FastSLAM: {ds.estimator_defaults.get('fastslam1', {})}, "
-        f"see slamkit.datasets.victoria_park), 100 particles.\n\n"
+        f"Settings: FastSLAM with the preset {PRESET.name} ({dict(PRESET.settings)}, see "
+        f"docs/presets.md), 100 particles.\n\n"
         f"{table}"
     )
     return write_results("victoria_park", records, notes=notes)

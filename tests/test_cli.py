@@ -162,22 +162,30 @@ def test_animate_writes_a_gif_of_the_estimate_over_time(tmp_path):
     np.testing.assert_array_equal(result.frames[-1].pose, result.poses[-1])
 
 
-def test_a_run_job_uses_the_data_sets_estimator_defaults(tmp_path, monkeypatch):
-    """``slamkit run`` hands the config file's mapping to the runner, so the loader's
-    ``estimator_defaults`` apply under it, and config.json records what was used."""
-    import dataclasses
+def test_a_run_job_lays_the_matching_preset_under_the_config(tmp_path, monkeypatch):
+    """``slamkit run`` resolves the preset measured for the estimator on the data set, lays
+    the config file's mapping over it, and config.json records the preset and every
+    setting used."""
+    from slamkit.app import jobs, presets
+    from slamkit.errors import InputError
 
-    from slamkit.app import jobs
-
-    def tuned(name, **kwargs):
-        ds = load_dataset(name, **kwargs)
-        return dataclasses.replace(ds, estimator_defaults={"fastslam1": {"hit_weight": 4}})
-
-    monkeypatch.setattr(jobs, "load_dataset", tuned)
+    tuned = presets.Preset("test-preset", ("fastslam1",), ("five-features",), {"hit_weight": 4})
+    monkeypatch.setitem(presets.PRESETS, "test-preset", tuned)
     request = jobs.RunRequest("fastslam1", "five-features", tmp_path / "out",
                               estimator_config={"n_particles": 20}, plots=False)  # fmt: skip
     report = jobs.run_job(request)
-    cfg = json.loads((report.out_dir / "config.json").read_text())["estimator"]
+    written = json.loads((report.out_dir / "config.json").read_text())
+    cfg = written["estimator"]
     assert cfg["hit_weight"] == 4 and cfg["n_particles"] == 20
+    assert written["preset"] == "test-preset"
     assert report.result.config == {k: v for k, v in cfg.items() if k != "name"}
-    assert report.dataset_settings == {"hit_weight": 4}
+    assert report.preset == "test-preset" and report.preset_settings == {"hit_weight": 4}
+    # no preset: the estimator's own defaults
+    plain = jobs.run_job(
+        jobs.RunRequest("fastslam1", "five-features", tmp_path / "plain", plots=False, preset=None)
+    )
+    assert plain.result.config["hit_weight"] == 1 and plain.preset is None
+    with pytest.raises(InputError, match="test-preset"):
+        jobs.run_job(
+            jobs.RunRequest("ekf-slam", "five-features", tmp_path / "x", preset="test-preset")
+        )

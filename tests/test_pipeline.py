@@ -73,26 +73,18 @@ def test_evaluate_dead_reckoning_against_truth():
     json.dumps(m2, allow_nan=False)
 
 
-def test_a_data_sets_estimator_defaults_sit_under_the_callers_config():
-    """``Dataset.estimator_defaults[name]`` fills the keys the caller leaves out; a config
-    object is taken as it is; other estimators are untouched."""
-    import dataclasses
-
+def test_run_uses_the_callers_config_only():
+    """The runner builds the estimator from the caller's config and nothing else (presets
+    are the app layer's); a config object is taken as it is."""
     from slamkit.slam import FastSlamConfig
 
-    base = load_dataset("five-features", seed=0)
-    ds = dataclasses.replace(
-        base, estimator_defaults={"fastslam1": {"n_particles": 7, "hit_weight": 2}}
-    )
-    r = run("fastslam1", ds)
-    assert r.config["n_particles"] == 7 and r.config["hit_weight"] == 2
+    ds = load_dataset("five-features", seed=0)
     r = run("fastslam1", ds, config={"n_particles": 9})
-    assert r.config["n_particles"] == 9 and r.config["hit_weight"] == 2
+    assert r.config["n_particles"] == 9 and r.config["hit_weight"] == 1
     r = run("fastslam1", ds, config=FastSlamConfig(n_particles=5))
-    assert r.config["n_particles"] == 5 and r.config["hit_weight"] == 1
-    assert run("fastslam2", ds, config={"n_particles": 5}).config["hit_weight"] == 1
+    assert r.config["n_particles"] == 5
     with pytest.raises(ConfigError, match="fastslam1"):
-        run("fastslam1", dataclasses.replace(base, estimator_defaults={"fastslam1": {"x": 1}}))
+        run("fastslam1", ds, config={"x": 1})
 
 
 def test_registries_resolve_and_reject_unknown_names():

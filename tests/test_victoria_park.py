@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from slamkit.app.presets import preset_for
 from slamkit.datasets import Control, Dataset, LandmarkReadings, load_dataset
 from slamkit.datasets._text import read_table
 from slamkit.datasets.victoria_park import (
@@ -119,9 +120,12 @@ def test_synthetic_files_convert_units_and_conventions(tmp_path: Path) -> None:
     assert sensor is not None and sensor.kind == "range-bearing" and not sensor.identities
     np.testing.assert_allclose(np.diag(sensor.noise_cov), [0.1**2, 0.01**2])
     assert sensor.offset == (3.78, 0.5)  # the laser sees from here (FastSLAM's misses)
-    # FastSLAM's measured settings ride along; EKF-SLAM keeps the nominal noise.
+    # FastSLAM's measured settings are a preset of the app layer; EKF-SLAM has none.
     fs = {"measurement_noise_scale": 6.0, "motion_noise_scale": 0.5, "hit_weight": 3}
-    assert ds.estimator_defaults == {"fastslam1": fs, "fastslam2": fs}
+    for name in ("fastslam1", "fastslam2"):
+        preset = preset_for(name, "victoria-park")
+        assert preset is not None and dict(preset.settings) == fs
+    assert preset_for("ekf-slam", "victoria-park") is None
 
 
 def test_synthetic_options(tmp_path: Path) -> None:

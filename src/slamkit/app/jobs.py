@@ -7,7 +7,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from slamkit.app.presets import resolve_preset
 from slamkit.datasets import load_dataset
+from slamkit.eval.records import RunScores
 from slamkit.io import atomic_folder, write_json, write_tum
 from slamkit.pipeline import Progress, Result, get_estimator_entry, run
 from slamkit.pipeline.evaluate import evaluate
@@ -34,6 +36,10 @@ class RunRequest:
     overwrite: bool = False
     animate: bool = False
     """Also write ``animation.gif``: the estimate over time (:data:`ANIMATION_FRAMES` frames)."""
+    preset: str | None = "auto"
+    """Settings measured for this estimator on this data set (:mod:`slamkit.app.presets`),
+    laid under ``estimator_config``: ``"auto"`` the matching preset if there is one, a
+    preset's name, or ``None`` for none."""
 
 
 @dataclass(frozen=True)
@@ -42,10 +48,17 @@ class RunReport:
 
     out_dir: Path
     files: tuple[str, ...]
-    metrics: dict[str, Any]
+    scores: RunScores
     result: Result
-    dataset_settings: dict[str, Any] = field(default_factory=dict)
-    """The data set's ``estimator_defaults`` the run used (those the config left unset)."""
+    preset: str | None = None
+    """The preset the run used, if any."""
+    preset_settings: dict[str, Any] = field(default_factory=dict)
+    """The preset's settings the run used (those the config left unset)."""
+
+    @property
+    def metrics(self) -> dict[str, Any]:
+        """The scores as written to ``metrics.json``."""
+        return self.scores.as_dict()
 
 
 def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
@@ -53,7 +66,10 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
     ``trajectory.tum``, ``metrics.json``, ``config.json`` (the resolved configuration) and
     PNG plots. The folder is written completely or not at all."""
     entry = get_estimator_entry(request.estimator)
-    entry.make_config(request.estimator_config)  # fail on bad config before loading
+    config, preset = resolve_preset(
+        entry.name, request.dataset, request.estimator_config, request.preset
+    )
+    entry.make_config(config)  # fail on bad config before loading
     dataset = load_dataset(
         request.dataset,
         seed=request.seed,
@@ -61,11 +77,10 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         data_root=request.data_root,
     )
     frames = ANIMATION_FRAMES if request.animate else 0
-    # The mapping, not the config object: the data set's estimator_defaults go under it.
     result = run(
         entry,
         dataset,
-        config=request.estimator_config,
+        config=config,
         seed=request.seed,
         progress=progress,
         frames=frames,
@@ -80,6 +95,7 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         "estimator": {"name": entry.name, **result.config},
         "dataset": {"name": dataset.name, **dataset.metadata.get("config", {})},
         "seed": request.seed,
+        "preset": None if preset is None else preset.name,
     }
     with atomic_folder(request.out_dir, overwrite=request.overwrite) as tmp:
         write_tum(tmp / "trajectory.tum", result.times, result.poses)
@@ -92,13 +108,19 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
                 save_figure(fig, tmp / name)
         if request.animate:
             from slamkit.viz.animation import save_animation
+            from slamkit.viz.report import gps_alignment
 
-            gps = evaluation.metrics.get("gps", {})
-            alignment = None
-            if "alignment_tx" in gps:
-                alignment = (gps["alignment_tx"], gps["alignment_ty"], gps["alignment_angle"])
-            save_animation(result, dataset, tmp / "animation.gif", gps_alignment=alignment)
+            save_animation(
+                result, dataset, tmp / "animation.gif", gps_alignment=gps_alignment(evaluation)
+            )
         files = tuple(sorted(p.name for p in tmp.iterdir()))
-    defaults = dataset.estimator_defaults.get(entry.name, {})
-    used = {k: v for k, v in defaults.items() if k not in request.estimator_config}
-    return RunReport(Path(request.out_dir), files, evaluation.metrics, result, used)
+    settings = {} if preset is None else dict(preset.settings)
+    used = {k: v for k, v in settings.items() if k not in request.estimator_config}
+    return RunReport(
+        Path(request.out_dir),
+        files,
+        evaluation.scores,
+        result,
+        None if preset is None else preset.name,
+        used,
+    )

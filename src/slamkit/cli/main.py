@@ -7,8 +7,9 @@ Heavy imports happen inside the commands so ``slamkit --help`` stays fast.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.markup import escape
@@ -17,6 +18,9 @@ from rich.table import Table
 from slamkit.cli._common import console, known_errors, progress_bar, split_config
 from slamkit.cli.map_cmd import map_app
 from slamkit.cli.optimize_cmd import optimize_command
+
+if TYPE_CHECKING:
+    from slamkit.eval.records import RunScores
 
 app = typer.Typer(
     name="slamkit",
@@ -30,7 +34,16 @@ app.add_typer(data_app, name="data")
 app.add_typer(map_app, name="map")
 
 
-def _render_metrics(metrics: dict[str, Any]) -> Table:
+def _render_metrics(scores: RunScores) -> Table:
+    """The headline scores of a run; those that do not apply to it are left out."""
+    from slamkit.eval import (
+        AssociationScores,
+        ConvergenceReport,
+        GpsError,
+        LandmarkError,
+        TrajectoryError,
+    )
+
     table = Table(show_header=True, header_style="bold")
     table.add_column("metric")
     table.add_column("value", justify="right")
@@ -39,35 +52,31 @@ def _render_metrics(metrics: dict[str, Any]) -> Table:
         if value is not None:  # escape: "[m]" would otherwise be read as rich markup
             table.add_row(escape(name), format(value, fmt))
 
-    ate = metrics.get("ate", {})
-    add("ATE RMSE, SE(2)-aligned [m]", ate.get("rmse"), ".3f")
-    add("ATE RMSE, unaligned [m]", metrics.get("ate_unaligned", {}).get("rmse"), ".3f")
-    add("heading RMSE, unaligned [deg]", _deg(metrics.get("ate_unaligned", {})), ".2f")
-    add("final position error [m]", metrics.get("final_position_error"), ".3f")
-    add("mean NEES (3 dof)", metrics.get("nees", {}).get("mean"), ".2f")
-    conv = metrics.get("convergence", {})
-    add("converged after [s]", conv.get("time_s"), ".1f")
-    add("median error after [m]", conv.get("position_error_after", {}).get("median"), ".3f")
-    lm = metrics.get("landmarks", {})
-    add("landmark RMSE [m]", lm.get("rmse"), ".3f")
-    add("landmarks mapped / true", _ratio(lm.get("n_matched"), lm.get("n_missing")), "s")
-    add("GPS RMSE, SE(2)-aligned [m]", metrics.get("gps", {}).get("rmse"), ".3f")
-    assoc = metrics.get("association", {})
-    add("association accuracy", assoc.get("accuracy"), ".4f")
-    add("duplicate landmarks", assoc.get("duplicates"), "d")
-    add("run time [s]", metrics.get("runtime", {}).get("total_seconds"), ".3f")
+    ate, raw = scores.ate, scores.ate_unaligned
+    if isinstance(ate, TrajectoryError):
+        add("ATE RMSE, SE(2)-aligned [m]", ate.rmse, ".3f")
+    if isinstance(raw, TrajectoryError):
+        add("ATE RMSE, unaligned [m]", raw.rmse, ".3f")
+        add("heading RMSE, unaligned [deg]", math.degrees(raw.heading_rmse), ".2f")
+    add("final position error [m]", scores.final_position_error, ".3f")
+    add("mean NEES (3 dof)", None if scores.nees is None else scores.nees.mean, ".2f")
+    conv = scores.convergence
+    if isinstance(conv, ConvergenceReport):
+        add("converged after [s]", conv.time, ".1f")
+        after = conv.position_error
+        add("median error after [m]", None if after is None else after.median, ".3f")
+    lm = scores.landmarks
+    if isinstance(lm, LandmarkError):
+        add("landmark RMSE [m]", lm.rmse, ".3f")
+        add("landmarks mapped / true", f"{lm.n_matched} / {lm.n_matched + lm.n_missing}", "s")
+    if isinstance(scores.gps, GpsError):
+        add("GPS RMSE, SE(2)-aligned [m]", scores.gps.rmse, ".3f")
+    assoc = scores.association
+    if isinstance(assoc, AssociationScores):
+        add("association accuracy", assoc.accuracy, ".4f")
+        add("duplicate landmarks", assoc.duplicates, "d")
+    add("run time [s]", scores.runtime.total_seconds, ".3f")
     return table
-
-
-def _ratio(matched: int | None, missing: int | None) -> str | None:
-    return None if matched is None or missing is None else f"{matched} / {matched + missing}"
-
-
-def _deg(ate: dict[str, Any]) -> float | None:
-    import math
-
-    v = ate.get("heading_rmse")
-    return None if v is None else math.degrees(v)
 
 
 def _run(
@@ -81,6 +90,7 @@ def _run(
     plots: bool,
     overwrite: bool,
     animate: bool = False,
+    preset: str = "auto",
 ) -> None:
     from slamkit.app import RunRequest, run_job
 
@@ -96,13 +106,14 @@ def _run(
         plots=plots,
         overwrite=overwrite,
         animate=animate,
+        preset=None if preset == "none" else preset,
     )
     with progress_bar(f"{estimator} on {data}") as progress:
         report = run_job(request, progress)
-    if report.dataset_settings:
-        used = ", ".join(f"{k}={v}" for k, v in report.dataset_settings.items())
-        console.print(f"settings measured for {data} (config.json has them all): {used}")
-    console.print(_render_metrics(report.metrics))
+    if report.preset_settings:
+        used = ", ".join(f"{k}={v}" for k, v in report.preset_settings.items())
+        console.print(f"preset {report.preset} (config.json has every setting): {used}")
+    console.print(_render_metrics(report.scores))
     console.print(f"wrote {', '.join(report.files)} to [bold]{report.out_dir}[/]")
 
 
@@ -128,6 +139,13 @@ def run_command(
     animate: Annotated[
         bool, typer.Option(help="Also write animation.gif: the estimate and its map over time.")
     ] = False,
+    preset: Annotated[
+        str,
+        typer.Option(
+            help="Settings measured for this estimator on this data set: 'auto' (the matching "
+            "preset, if any), 'none', or a preset's name."
+        ),
+    ] = "auto",
 ) -> None:
     """Run ESTIMATOR on a data set; write trajectory, metrics, config and plots."""
     target = out if out is not None else Path("results") / f"{estimator}-{data}"
@@ -141,6 +159,7 @@ def run_command(
         plots=plots,
         overwrite=overwrite,
         animate=animate,
+        preset=preset,
     )
 
 

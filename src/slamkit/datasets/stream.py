@@ -260,9 +260,8 @@ class Dataset:
     ``initial_pose``/``initial_cov`` is the prior an estimator may start from (absent for
     global localization and for data sets whose start is unknown). ``known_landmarks`` and
     ``known_grid`` are maps a *localization* estimator may use; SLAM estimators ignore them.
-    ``truth`` is for evaluation only: estimators must not read it. ``estimator_defaults``
-    holds settings measured to suit this data set, per registered estimator name (see
-    :func:`slamkit.pipeline.run`: the caller's config wins over them).
+    ``truth`` is for evaluation only: estimators must not read it. (Settings measured to
+    suit one estimator on a data set are not part of it: see :mod:`slamkit.app.presets`.)
     """
 
     name: str
@@ -277,7 +276,6 @@ class Dataset:
     truth: GroundTruth = field(default_factory=GroundTruth)
     description: str = ""
     metadata: dict[str, Any] = field(default_factory=dict)
-    estimator_defaults: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.initial_pose is not None:

@@ -114,20 +114,9 @@ stamps lag the odometry by 0.06–0.09 s (fitted); the loader does not shift the
   landmarks, 95.6 % of the readings associated as the file's feature index does, GPS RMSE
   4.81 m — what EKF-SLAM given the feature index reaches at 0.1 rad (4.81 m).
 
-**FastSLAM settings** (:data:`ESTIMATOR_DEFAULTS`, the data set's ``estimator_defaults``;
-a caller's config wins). Within one particle the pose is exact, so a re-observed tree is
-matched against its landmark's own covariance and the reading noise alone; EKF-SLAM's
-innovation also holds the pose uncertainty, FastSLAM's does not. The trunk's centre seen
-from another side, minutes later, is likely off by more than the 2-s noise: the nominal
-noise leaves FastSLAM 1.0 starting new trees where it should match (whole run, no ids,
-100 particles, seed 0: GPS RMSE 21.3 m, association accuracy 0.41).
-Measured on the whole run, seeds 0-3, ``measurement_noise_scale`` (standard deviations) ×
-``motion_noise_scale`` (covariance), ``hit_weight`` 3: 4 × 1 gives 5.8, 16.6, 5.4, 8.8 m;
-4 × 0.5 gives 10.5, 6.6, 6.8, 7.4 m; **6 × 0.5** gives 5.1, 7.9, 6.9, 5.6 m (accuracy
-0.95 in every seed, ~210 landmarks); 8 × 0.5 gives 5.2, 11.0, 4.9, 8.4 m. FastSLAM 2.0
-with 6 × 0.5 (seed 0): 4.35 m, accuracy 0.951 (EKF-SLAM with the nominal noise: 4.81 m,
-0.956). EKF-SLAM keeps the nominal noise: with 4× the reading sigmas its NIS per degree
-of freedom falls to 0.08 and it maps 139 trees.
+**FastSLAM** needs other settings than the nominal noise on this data set; they are the
+preset ``victoria-park-fastslam`` (:mod:`slamkit.app.presets`; how they were measured:
+``docs/presets.md``).
 """
 
 from __future__ import annotations
@@ -161,7 +150,6 @@ from slamkit.models import Ackermann
 __all__ = [
     "DETECTIONS_FILE",
     "ENCODER_OFFSET",
-    "ESTIMATOR_DEFAULTS",
     "FOLDER",
     "GPS_FILE",
     "LASER_MAX_RANGE",
@@ -175,14 +163,6 @@ __all__ = [
 ]
 
 FOLDER = "landmarks/victoria_park"
-_FASTSLAM_DEFAULTS = {"measurement_noise_scale": 6.0, "motion_noise_scale": 0.5, "hit_weight": 3}
-ESTIMATOR_DEFAULTS: Mapping[str, Mapping[str, Any]] = {
-    "fastslam1": _FASTSLAM_DEFAULTS,
-    "fastslam2": _FASTSLAM_DEFAULTS,
-}
-"""Settings measured to suit this data set, per estimator (module docstring: FastSLAM
-settings); the loader hands them to :class:`~slamkit.datasets.Dataset` as
-``estimator_defaults``."""
 ODOMETRY_FILE = f"{FOLDER}/original_acfr/aa3_dr.csv.gz"
 GPS_FILE = f"{FOLDER}/original_acfr/aa3_gpsx.csv"
 DETECTIONS_FILE = f"{FOLDER}/slsjf/data_sensor_clean_clean.csv.gz"
@@ -439,5 +419,4 @@ def load_victoria_park(
             "positions as reference"
         ),
         metadata=metadata,
-        estimator_defaults={k: dict(v) for k, v in ESTIMATOR_DEFAULTS.items()},
     )

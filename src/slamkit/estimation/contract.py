@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from enum import Enum
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -28,6 +29,7 @@ __all__ = [
     "Frame",
     "InnovationLog",
     "LandmarkEstimate",
+    "LandmarkIds",
     "LandmarkView",
     "ParticleSnapshot",
     "ParticleView",
@@ -99,6 +101,17 @@ class SnapshotSchedule:
         return bool(self._times)
 
 
+class LandmarkIds(Enum):
+    """How an estimator's landmark ids relate to the data set's (its output says which, so
+    that evaluation pairs maps and scores associations correctly)."""
+
+    DATASET = "dataset"
+    """The data set's landmark ids: from readings that carry ids, or from a known map."""
+    OWN = "own"
+    """Numbered by the estimator itself: maps are paired by position, associations up to a
+    relabelling."""
+
+
 @dataclass(frozen=True)
 class EstimatorOutput:
     """What an estimator returns at the end besides its trajectory."""
@@ -114,6 +127,9 @@ class EstimatorOutput:
     or started, concatenated over the :class:`~slamkit.datasets.LandmarkReadings` events in
     stream order (``-1``: the reading was not used). Scored against
     ``truth.reading_ids`` by :func:`slamkit.eval.association_scores`."""
+    landmark_numbering: LandmarkIds | None = None
+    """How the ids of ``landmarks`` and ``reading_landmarks`` relate to the data set's: the
+    estimator says (``None``: it has no landmarks)."""
 
 
 @dataclass(frozen=True)

@@ -11,11 +11,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from slamkit.datasets.stream import Control, Dataset, Event, Odometry
+from slamkit._validation import FloatArray
+from slamkit.datasets.stream import Dataset
 from slamkit.errors import ConfigError, InputError
 from slamkit.estimation.contract import EstimatorOutput, PoseEstimate
+from slamkit.estimation.shell import EstimatorShell
 from slamkit.localization.belief import GaussianBelief, predict_unchecked
-from slamkit.models import odometry_control
 
 __all__ = ["DeadReckoning", "DeadReckoningConfig"]
 
@@ -32,8 +33,10 @@ class DeadReckoningConfig:
             raise ConfigError(f"noise_scale: expected a number >= 0, got {self.noise_scale}")
 
 
-class DeadReckoning:
+class DeadReckoning(EstimatorShell):
     """Integrates :class:`Control` or :class:`Odometry` events; ignores everything else."""
+
+    name = "dead reckoning"
 
     def __init__(
         self, dataset: Dataset, config: DeadReckoningConfig, rng: np.random.Generator
@@ -44,22 +47,13 @@ class DeadReckoning:
         self._Q = config.noise_scale * dataset.motion.noise_cov
         start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
         self._belief = GaussianBelief.from_pose(start, dataset.initial_cov)
-        self._last_odometry: np.ndarray | None = None
         self._steps = 0
+        super().__init__()
 
-    def handle(self, event: Event) -> None:
-        if isinstance(event, Control):
-            # The Dataset validated u and dt, MotionSpec the noise: no re-checks per step.
-            self._belief = predict_unchecked(
-                self._belief, event.u, event.dt, self._motion.model, self._Q
-            )
-            self._steps += 1
-        elif isinstance(event, Odometry):
-            if self._last_odometry is not None:
-                u = odometry_control(self._last_odometry, event.pose)
-                self._belief = predict_unchecked(self._belief, u, 0.0, self._motion.model, self._Q)
-                self._steps += 1
-            self._last_odometry = event.pose
+    def on_control(self, u: FloatArray, dt: float) -> None:
+        # The Dataset validated u and dt, MotionSpec the noise: no re-checks per step.
+        self._belief = predict_unchecked(self._belief, u, dt, self._motion.model, self._Q)
+        self._steps += 1
 
     def estimate(self) -> PoseEstimate:
         return PoseEstimate(self._belief.pose, self._belief.pose_cov)

@@ -28,9 +28,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray, as_array, as_covariance
-from slamkit.datasets.stream import Control, Dataset, Event, LandmarkReadings, Odometry
+from slamkit.datasets.stream import Dataset, LandmarkReadings
 from slamkit.errors import ConfigError, GeometryError, InputError, SlamkitError
-from slamkit.estimation.contract import EstimatorOutput, InnovationLog, PoseEstimate
+from slamkit.estimation.contract import EstimatorOutput, LandmarkIds, PoseEstimate
 from slamkit.estimation.gaussian import (
     angular_indices,
     check_finite_covariance,
@@ -39,10 +39,11 @@ from slamkit.estimation.gaussian import (
     measure_unchecked,
     wrap_components,
 )
+from slamkit.estimation.shell import AssociationRecorder, EstimatorShell, InnovationRecorder
 from slamkit.localization.association import associate_arrays_unchecked
 from slamkit.localization.belief import GaussianBelief, predict
 from slamkit.localization.kalman import UpdateInfo
-from slamkit.models import LandmarkModel, MotionModel, odometry_control
+from slamkit.models import LandmarkModel, MotionModel
 from slamkit.models.motion import motion_kernels
 from slamkit.prob import chi2_gate
 
@@ -257,7 +258,7 @@ def _fix_residual_chi2(residuals: FloatArray, R: FloatArray, kind: str) -> tuple
     return chi2, e.size - _FIX_UNKNOWNS.get(kind, 3)
 
 
-class GaussianLocalization:
+class GaussianLocalization(EstimatorShell):
     """Event handling shared by the EKF and UKF localization estimators.
 
     Controls (or consecutive odometry poses) drive the prediction; every landmark reading
@@ -333,7 +334,7 @@ class GaussianLocalization:
         if dataset.initial_pose is not None:
             start = GaussianBelief.from_pose(dataset.initial_pose, dataset.initial_cov)
             self._mean, self._cov = start.mean.copy(), start.cov.copy()
-        self._last_odometry: FloatArray | None = None
+        super().__init__()
 
         self._counts = {
             "predictions": 0,
@@ -358,10 +359,8 @@ class GaussianLocalization:
         self._relocalizing = False
         self._lockout_times: list[float] = []
         self._relocalization_times: list[float] = []
-        self._log_t: list[float] = []
-        self._log_nis: list[float] = []
-        self._log_id: list[int] = []
-        self._chosen: list[NDArray[np.int64]] = []  # per readings event: landmark or -1
+        self._innovations = InnovationRecorder(config.record_innovations)
+        self._chosen = AssociationRecorder()  # per reading: its landmark or -1
 
     # -- the two steps a filter provides ------------------------------------------------
 
@@ -374,20 +373,16 @@ class GaussianLocalization:
 
     # -- Estimator protocol -------------------------------------------------------------
 
-    def handle(self, event: Event) -> None:
-        if isinstance(event, Control):
-            self._motion_step(event.u, event.dt)
-        elif isinstance(event, Odometry):
-            if self._last_odometry is not None:
-                self._motion_step(odometry_control(self._last_odometry, event.pose), 0.0)
-            self._last_odometry = event.pose
-        elif isinstance(event, LandmarkReadings):
-            chosen = np.full(event.ids.size, -1, dtype=np.int64)
-            if self._mean is None:
-                self._start_from_fix(event)
-            else:
-                self._readings(event, chosen)
-            self._chosen.append(chosen)
+    def on_control(self, u: FloatArray, dt: float) -> None:
+        self._motion_step(u, dt)
+
+    def on_landmarks(self, event: LandmarkReadings) -> None:
+        chosen = np.full(event.ids.size, -1, dtype=np.int64)
+        if self._mean is None:
+            self._start_from_fix(event)
+        else:
+            self._readings(event, chosen)
+        self._chosen.add(chosen)
 
     def estimate(self) -> PoseEstimate:
         if self._mean is None or self._cov is None:
@@ -395,7 +390,7 @@ class GaussianLocalization:
         return PoseEstimate(self._mean[:3].copy(), self._cov[:3, :3].copy())
 
     def finish(self) -> EstimatorOutput:
-        nis = np.asarray(self._log_nis, dtype=float)
+        nis = self._innovations.nis
         diagnostics: dict[str, Any] = dict(self._counts)
         diagnostics["mean_nis"] = float(nis.mean()) if nis.size else None
         diagnostics["mean_nis_per_dof"] = float(nis.mean()) / self._meas.dim if nis.size else None
@@ -406,16 +401,12 @@ class GaussianLocalization:
         diagnostics["lockouts"] = len(self._lockout_times)
         diagnostics["lockout_times"] = list(self._lockout_times)
         diagnostics["relocalization_times"] = list(self._relocalization_times)
-        log = None
-        if self._config.record_innovations:
-            log = InnovationLog(
-                times=np.asarray(self._log_t, dtype=float),
-                nis=nis,
-                dof=np.full(nis.size, self._meas.dim, dtype=np.int64),
-                landmark_ids=np.asarray(self._log_id, dtype=np.int64),
-            )
-        chosen = np.concatenate([np.zeros(0, np.int64), *self._chosen])
-        return EstimatorOutput(diagnostics=diagnostics, innovations=log, reading_landmarks=chosen)
+        return EstimatorOutput(
+            diagnostics=diagnostics,
+            innovations=self._innovations.log(),
+            reading_landmarks=self._chosen.result(),
+            landmark_numbering=LandmarkIds.DATASET,  # the known map's ids
+        )
 
     # -- internals ------------------------------------------------------------------------
 
@@ -513,10 +504,7 @@ class GaussianLocalization:
             self._counts["updates"] += 1
             chosen[j] = lid
             self._rejections_in_a_row = 0
-            if self._config.record_innovations:
-                self._log_t.append(float(event.t))
-                self._log_nis.append(nis)
-                self._log_id.append(lid)
+            self._innovations.add(event.t, nis, self._meas.dim, lid)
 
 
 class EkfLocalization(GaussianLocalization):

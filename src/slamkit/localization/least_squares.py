@@ -22,9 +22,10 @@ from typing import Any
 import numpy as np
 
 from slamkit._validation import FloatArray
-from slamkit.datasets.stream import Control, Dataset, Event, LandmarkReadings, Odometry
+from slamkit.datasets.stream import Dataset, LandmarkReadings
 from slamkit.errors import ConfigError, GeometryError, InputError
 from slamkit.estimation.contract import EstimatorOutput, PoseEstimate
+from slamkit.estimation.shell import EstimatorShell
 from slamkit.eval import associate, nees, pose_errors
 from slamkit.localization.belief import GaussianBelief, predict
 from slamkit.localization.static import (
@@ -35,7 +36,6 @@ from slamkit.localization.static import (
     localize_from_readings,
 )
 from slamkit.maps import LandmarkMap
-from slamkit.models import odometry_control
 
 __all__ = [
     "LeastSquaresConfig",
@@ -82,7 +82,7 @@ def _check_dataset(dataset: Dataset) -> tuple[Any, LandmarkMap]:
     return dataset.landmark_sensor, dataset.known_landmarks
 
 
-class LeastSquaresLocalization:
+class LeastSquaresLocalization(EstimatorShell):
     """A static least-squares fix at every landmark event (see the module docstring).
 
     ``finish()`` reports ``fixes`` (events solved), ``refused`` (degenerate geometry),
@@ -90,6 +90,8 @@ class LeastSquaresLocalization:
     ``too_few_readings`` (fewer usable readings than the sensor kind needs),
     ``motion_steps`` and ``mean_iterations`` of the solved events.
     """
+
+    name = "least squares"
 
     def __init__(
         self, dataset: Dataset, config: LeastSquaresConfig, rng: np.random.Generator
@@ -104,7 +106,7 @@ class LeastSquaresLocalization:
             s2 = config.unknown_position_sigma**2
             self._belief = GaussianBelief(np.zeros(3), np.diag([s2, s2, UNIFORM_HEADING_VARIANCE]))
         self._need = MIN_READINGS[self._sensor.kind]
-        self._last_odometry: FloatArray | None = None
+        super().__init__()
         self._counts = {
             "fixes": 0,
             "refused": 0,
@@ -114,21 +116,12 @@ class LeastSquaresLocalization:
         }
         self._iterations = 0
 
-    def handle(self, event: Event) -> None:
-        if isinstance(event, LandmarkReadings):
-            self._fix(event)
-        elif isinstance(event, Control):
-            if self._motion is not None and self._Q is not None:
-                self._belief = predict(self._belief, event.u, event.dt, self._motion.model, self._Q)
-                self._counts["motion_steps"] += 1
-        elif isinstance(event, Odometry):
-            if self._motion is not None and self._Q is not None and self._last_odometry is not None:
-                u = odometry_control(self._last_odometry, event.pose)
-                self._belief = predict(self._belief, u, 0.0, self._motion.model, self._Q)
-                self._counts["motion_steps"] += 1
-            self._last_odometry = event.pose
+    def on_control(self, u: FloatArray, dt: float) -> None:
+        if self._motion is not None and self._Q is not None:
+            self._belief = predict(self._belief, u, dt, self._motion.model, self._Q)
+            self._counts["motion_steps"] += 1
 
-    def _fix(self, event: LandmarkReadings) -> None:
+    def on_landmarks(self, event: LandmarkReadings) -> None:
         if int(np.count_nonzero(np.asarray(event.ids) >= 0)) < self._need:
             self._counts["too_few_readings"] += 1
             return

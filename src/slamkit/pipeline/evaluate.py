@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any, Literal, Protocol
+from dataclasses import dataclass, replace
+from typing import Any, Literal, TypeVar
 
 import numpy as np
 
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset
 from slamkit.errors import CovarianceError, InputError, SlamkitError
+from slamkit.estimation.contract import LandmarkIds
 from slamkit.eval import (
+    AssociationScores,
     absolute_trajectory_error,
     associate,
     association_scores,
@@ -24,6 +26,7 @@ from slamkit.eval import (
     pose_errors,
     relative_pose_error,
 )
+from slamkit.eval.records import NeesSummary, RunScores, RunTime, Skipped
 from slamkit.pipeline.registry import ESTIMATORS
 from slamkit.pipeline.runner import Result
 
@@ -38,9 +41,9 @@ CONVERGENCE_LOST = 1.0
 
 @dataclass(frozen=True)
 class Evaluation:
-    """Metrics (JSON-able) plus the matched arrays that plots need."""
+    """The typed scores of a run plus the matched arrays that plots need."""
 
-    metrics: dict[str, Any]
+    scores: RunScores
     matched_times: FloatArray | None = None
     errors: FloatArray | None = None
     """Per matched step ``(dx, dy, dtheta)`` estimate minus truth, no alignment."""
@@ -48,18 +51,22 @@ class Evaluation:
     """Per matched step standard deviations ``(3,)`` from the estimator's covariance."""
     nees: FloatArray | None = None
 
+    @property
+    def metrics(self) -> dict[str, Any]:
+        """The scores in their ``metrics.json`` form (:meth:`RunScores.as_dict`)."""
+        return self.scores.as_dict()
 
-class _HasDict(Protocol):
-    def as_dict(self) -> dict[str, Any]: ...
+
+R = TypeVar("R")
 
 
-def _metric(metrics: dict[str, Any], name: str, compute: Callable[[], _HasDict]) -> None:
-    """Store one metric, or why it could not be computed on this run (a path shorter than
-    the RPE distance, a robot that never moved, maps without common landmarks)."""
+def _scored(compute: Callable[[], R]) -> R | Skipped:
+    """A metric, or why it could not be computed on this run (a path shorter than the RPE
+    distance, a robot that never moved, maps without common landmarks)."""
     try:
-        metrics[name] = compute().as_dict()
+        return compute()
     except SlamkitError as exc:
-        metrics[name] = {"skipped": str(exc)}
+        return Skipped(str(exc))
 
 
 def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -> Evaluation:
@@ -67,108 +74,138 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
     true trajectory, the time to converge of a run without a prior (:data:`CONVERGENCE`),
     the error against a position-only reference track (GPS, outliers
     rejected, SE(2)-aligned at its times), NIS statistics of the innovation log (windows of
-    50 updates), landmark-map error (landmarks matched by id, or by position when the
-    estimator numbered its own), data-association scores against the true association of
-    the readings, and run times. Steps are matched by time stamp within ``max_dt``
-    (default: half the median step of the result)."""
-    metrics: dict[str, Any] = {
-        "estimator": result.estimator,
-        "dataset": result.dataset,
-        "seed": result.seed,
-        "steps": len(result),
-        "runtime": {
-            "total_seconds": result.total_seconds,
-            "mean_step_seconds": float(result.step_seconds.mean()) if len(result) else 0.0,
-            "max_step_seconds": float(result.step_seconds.max()) if len(result) else 0.0,
-        },
-        "diagnostics": result.output.diagnostics,
-    }
+    50 updates), landmark-map error (landmarks matched by id when the estimator's output
+    says its ids are the data set's, by position otherwise), data-association scores
+    against the true association of the readings, and run times. Steps are matched by time
+    stamp within ``max_dt`` (default: half the median step of the result)."""
+    n = len(result)
+    scores = RunScores(
+        estimator=result.estimator,
+        dataset=result.dataset,
+        seed=result.seed,
+        steps=n,
+        runtime=RunTime(
+            total_seconds=result.total_seconds,
+            mean_step_seconds=float(result.step_seconds.mean()) if n else 0.0,
+            max_step_seconds=float(result.step_seconds.max()) if n else 0.0,
+        ),
+        diagnostics=result.output.diagnostics,
+    )
     truth = dataset.truth
-    ev = Evaluation(metrics)
-    if truth.times is not None and truth.poses is not None and len(result) > 1:
-        if max_dt is None:
-            max_dt = 0.5 * float(np.median(np.diff(result.times))) if len(result) > 1 else 0.0
-        ia, ib = associate(result.times, truth.times, max_dt)
-        est, ref = result.poses[ia], truth.poses[ib]
-        metrics["matched_steps"] = int(ia.size)
-        if ia.size >= 2:
-            _metric(metrics, "ate", lambda: absolute_trajectory_error(est, ref, align="se2"))
-            _metric(
-                metrics, "ate_unaligned", lambda: absolute_trajectory_error(est, ref, align="none")
-            )
-            _metric(metrics, "rpe_1_step", lambda: relative_pose_error(est, ref, delta=1))
-            _metric(
-                metrics,
-                "rpe_10_m",
-                lambda: relative_pose_error(est, ref, delta=10.0, unit="meters"),
-            )
-            err = pose_errors(est, ref)
-            metrics["final_position_error"] = float(np.hypot(*err[-1, :2]))
-            if dataset.initial_pose is None:  # a global start: when did it find the robot?
-                position, heading = np.hypot(err[:, 0], err[:, 1]), np.abs(err[:, 2])
-                threshold, hold = CONVERGENCE
-                _metric(
-                    metrics,
-                    "convergence",
-                    lambda: convergence(
-                        result.times[ia],
-                        position,
-                        threshold,
-                        hold,
-                        lost_threshold=CONVERGENCE_LOST,
-                        heading_errors=heading,
-                    ),
-                )
-            sig = nees_vals = None
-            if result.covariances is not None:
-                covs = result.covariances[ia]
-                sig = np.sqrt(np.clip(np.diagonal(covs, axis1=1, axis2=2), 0.0, None))
-                with np.errstate(divide="ignore", invalid="ignore"):  # singular: not scored
-                    ok = np.linalg.det(covs) > 1e-300
-                nees_vals = np.full(ia.size, np.nan)
-                try:
-                    nees_vals[ok] = nees(err[ok], covs[ok])
-                except CovarianceError:
-                    ok[:] = False
-                if np.any(ok):
-                    lo, hi = chi2_bounds(3, 1, 0.95)
-                    vals = nees_vals[ok]
-                    metrics["nees"] = {
-                        "mean": float(vals.mean()),
-                        "dof": 3,
-                        "band_95": [lo, hi],
-                        "fraction_in_band": float(np.mean((vals >= lo) & (vals <= hi))),
-                        "steps": int(ok.sum()),
-                    }
-            ev = Evaluation(metrics, result.times[ia], err, sig, nees_vals)
-    if truth.positions is not None and truth.position_times is not None and len(result) > 1:
+    arrays: dict[str, Any] = {}
+    if truth.times is not None and truth.poses is not None and n > 1:
+        scores, arrays = _trajectory_scores(scores, result, dataset, max_dt)
+    if truth.positions is not None and truth.position_times is not None and n > 1:
         gps_t, gps_xy = truth.position_times, truth.positions
-        _metric(metrics, "gps", lambda: gps_error(result.times, result.poses, gps_t, gps_xy))
+        scores = replace(
+            scores, gps=_scored(lambda: gps_error(result.times, result.poses, gps_t, gps_xy))
+        )
     log = result.output.innovations
     if log is not None and len(log) > 0:
-        _metric(metrics, "nis", lambda: nis_summary(log.times, log.nis, log.dof, window=50))
+        scores = replace(
+            scores, nis=_scored(lambda: nis_summary(log.times, log.nis, log.dof, window=50))
+        )
+    same_ids = _same_ids(result)
     if result.output.landmarks is not None and truth.landmarks is not None:
         est_map, true_map = result.output.landmarks.landmarks, truth.landmarks
-        by: Literal["id", "position"] = (
-            "id" if np.intersect1d(est_map.ids, true_map.ids).size else "position"
+        if result.output.landmark_numbering is None:  # undeclared: by id where ids meet
+            same_ids = bool(np.intersect1d(est_map.ids, true_map.ids).size)
+        by: Literal["id", "position"] = "id" if same_ids else "position"
+        scores = replace(
+            scores,
+            landmarks_matched_by=by,
+            landmarks=_scored(lambda: landmark_map_error(est_map, true_map, match=by)),
         )
-        metrics["landmarks_matched_by"] = by
-        _metric(metrics, "landmarks", lambda: landmark_map_error(est_map, true_map, match=by))
     chosen = result.output.reading_landmarks
     if chosen is not None and truth.reading_ids is not None:
-        _metric(metrics, "association", lambda: _association(chosen, dataset, result.estimator))
-    return ev
+        same = _same_ids(result)
+        scores = replace(scores, association=_scored(lambda: _association(chosen, dataset, same)))
+    return Evaluation(scores, **arrays)
 
 
-def _association(chosen: np.ndarray, dataset: Dataset, estimator: str) -> _HasDict:
+def _same_ids(result: Result) -> bool:
+    """Whether the estimator's landmark ids are the data set's (its output says so)."""
+    numbering = result.output.landmark_numbering
+    if numbering is not None:
+        return numbering is LandmarkIds.DATASET
+    # Not declared (an estimator written before the output said it): a localization
+    # estimator, which needs the known map, numbers landmarks as the map does.
+    entry = ESTIMATORS.get(result.estimator)
+    return entry is not None and "known_landmarks" in entry.requires
+
+
+def _trajectory_scores(
+    scores: RunScores, result: Result, dataset: Dataset, max_dt: float | None
+) -> tuple[RunScores, dict[str, Any]]:
+    """The scores against the true trajectory and the matched arrays for the plots."""
+    truth = dataset.truth
+    assert truth.times is not None and truth.poses is not None
+    if max_dt is None:
+        max_dt = 0.5 * float(np.median(np.diff(result.times)))
+    ia, ib = associate(result.times, truth.times, max_dt)
+    scores = replace(scores, matched_steps=int(ia.size))
+    if ia.size < 2:
+        return scores, {}
+    est, ref = result.poses[ia], truth.poses[ib]
+    err = pose_errors(est, ref)
+    scores = replace(
+        scores,
+        ate=_scored(lambda: absolute_trajectory_error(est, ref, align="se2")),
+        ate_unaligned=_scored(lambda: absolute_trajectory_error(est, ref, align="none")),
+        rpe_1_step=_scored(lambda: relative_pose_error(est, ref, delta=1)),
+        rpe_10_m=_scored(lambda: relative_pose_error(est, ref, delta=10.0, unit="meters")),
+        final_position_error=float(np.hypot(*err[-1, :2])),
+    )
+    if dataset.initial_pose is None:  # a global start: when did it find the robot?
+        position, heading = np.hypot(err[:, 0], err[:, 1]), np.abs(err[:, 2])
+        threshold, hold = CONVERGENCE
+        times = result.times[ia]
+        scores = replace(
+            scores,
+            convergence=_scored(
+                lambda: convergence(
+                    times,
+                    position,
+                    threshold,
+                    hold,
+                    lost_threshold=CONVERGENCE_LOST,
+                    heading_errors=heading,
+                )
+            ),
+        )
+    sig = nees_vals = None
+    if result.covariances is not None:
+        covs = result.covariances[ia]
+        sig = np.sqrt(np.clip(np.diagonal(covs, axis1=1, axis2=2), 0.0, None))
+        with np.errstate(divide="ignore", invalid="ignore"):  # singular: not scored
+            ok = np.linalg.det(covs) > 1e-300
+        nees_vals = np.full(ia.size, np.nan)
+        try:
+            nees_vals[ok] = nees(err[ok], covs[ok])
+        except CovarianceError:
+            ok[:] = False
+        if np.any(ok):
+            lo, hi = chi2_bounds(3, 1, 0.95)
+            vals = nees_vals[ok]
+            scores = replace(
+                scores,
+                nees=NeesSummary(
+                    mean=float(vals.mean()),
+                    dof=3,
+                    band_95=(lo, hi),
+                    fraction_in_band=float(np.mean((vals >= lo) & (vals <= hi))),
+                    steps=int(ok.sum()),
+                ),
+            )
+    arrays = {"matched_times": result.times[ia], "errors": err, "sigmas": sig, "nees": nees_vals}
+    return scores, arrays
+
+
+def _association(chosen: np.ndarray, dataset: Dataset, same_ids: bool) -> AssociationScores:
     true = dataset.check_reading_ids()
     if true.size != chosen.size:
         raise InputError(
             f"association: the estimator reported {chosen.size} readings, the data set has "
             f"{true.size}"
         )
-    # An estimator that needs the known map (localization) numbers landmarks as the map
-    # does; the others (SLAM) number their own.
-    entry = ESTIMATORS.get(estimator)
-    same_ids = entry is not None and "known_landmarks" in entry.requires
     return association_scores(chosen, true, same_ids=same_ids)

@@ -96,16 +96,11 @@ def run(
     ``frames > 0`` also keeps about that many :class:`Frame` snapshots (pose, map,
     particles), evenly spaced in time, the last one at the end of the run.
 
-    A mapping ``config`` (or none) is laid over ``dataset.estimator_defaults[name]``, the
-    settings the data set's loader measured to suit this estimator: the caller's keys win,
-    and :attr:`Result.config` records what was used. A config object is used as it is.
+    ``config`` is a mapping (unknown keys rejected) or a config object.
     """
     if not (isinstance(frames, int) and frames >= 0):
         raise InputError(f"frames: expected an integer >= 0, got {frames!r}")
     entry = get_estimator_entry(estimator) if isinstance(estimator, str) else estimator
-    defaults = dataset.estimator_defaults.get(entry.name)
-    if defaults and (config is None or isinstance(config, Mapping)):
-        config = {**defaults, **(config or {})}
     cfg = entry.make_config(config)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()

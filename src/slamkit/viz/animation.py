@@ -18,6 +18,7 @@ import numpy as np
 from matplotlib.animation import FuncAnimation, PillowWriter
 
 from slamkit.errors import InputError
+from slamkit.geometry.alignment import Similarity
 from slamkit.viz.plots import (
     new_figure,
     plot_covariance_ellipses,
@@ -43,14 +44,15 @@ def save_animation(
     *,
     fps: int = 8,
     n_sigma: float = 3.0,
-    gps_alignment: tuple[float, float, float] | None = None,
+    gps_alignment: Similarity | None = None,
 ) -> Path:
     """Write the frames of ``result`` as an animated GIF to ``path`` (atomically: a reader
     never sees a half-written file) and return the path.
 
-    ``gps_alignment`` is the ``(tx, ty, angle)`` that maps the estimate into the GPS frame
-    (``metrics["gps"]`` of an evaluation); with it the GPS track is drawn in the estimate's
-    frame. Raises :class:`~slamkit.errors.InputError` when the run kept no frames.
+    ``gps_alignment`` is the similarity that maps the estimate into the GPS frame (the
+    ``alignment`` of an evaluation's :class:`~slamkit.eval.GpsError`); with it the GPS track
+    is drawn in the estimate's frame. Raises :class:`~slamkit.errors.InputError` when the
+    run kept no frames.
     """
     frames = result.frames
     if not frames:

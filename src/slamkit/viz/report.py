@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from slamkit.eval import chi2_bounds, nis_summary
+from slamkit.eval import GpsError, chi2_bounds, nis_summary
 from slamkit.geometry.alignment import Similarity
 from slamkit.viz.maps import plot_map
 from slamkit.viz.plots import (
@@ -31,22 +31,26 @@ if TYPE_CHECKING:
     from slamkit.pipeline.evaluate import Evaluation
     from slamkit.pipeline.runner import Result
 
-__all__ = ["plot_reference", "run_figures"]
+__all__ = ["gps_alignment", "plot_reference", "run_figures"]
 
 
-def plot_reference(
-    ax: Axes, truth: GroundTruth, gps_alignment: tuple[float, float, float] | None = None
-) -> None:
+def gps_alignment(evaluation: Evaluation) -> Similarity | None:
+    """The similarity that maps the estimate into the GPS frame, if the run was scored
+    against GPS."""
+    gps = evaluation.scores.gps
+    return gps.alignment if isinstance(gps, GpsError) else None
+
+
+def plot_reference(ax: Axes, truth: GroundTruth, gps_alignment: Similarity | None = None) -> None:
     """What a data set knows of the world, under an estimate: its walls, its true landmarks
-    and — given ``gps_alignment``, the ``(tx, ty, angle)`` that maps the estimate into the
-    GPS frame (``metrics["gps"]``) — the GPS track in the estimate's frame."""
+    and — given ``gps_alignment``, the similarity that maps the estimate into the GPS frame
+    (:attr:`slamkit.eval.GpsError.alignment`) — the GPS track in the estimate's frame."""
     if truth.walls is not None:
         plot_segments(ax, truth.walls)
     if truth.landmarks is not None:
         plot_landmarks(ax, truth.landmarks, label="true landmarks")
     if truth.positions is not None and gps_alignment is not None:
-        to_gps = Similarity.from_pose(gps_alignment)
-        xy = to_gps.inverse().apply_to_points(truth.positions)
+        xy = gps_alignment.inverse().apply_to_points(truth.positions)
         ax.plot(xy[:, 0], xy[:, 1], ".", ms=1.5, color="0.55", label="GPS (aligned)", zorder=1)
 
 
@@ -60,13 +64,7 @@ def run_figures(
     figs: dict[str, Figure] = {}
     fig = new_figure(figsize=(7.0, 6.0))
     ax = fig.add_subplot()
-    gps = evaluation.metrics.get("gps", {})
-    aligned = "alignment_tx" in gps
-    plot_reference(
-        ax,
-        dataset.truth,
-        (gps["alignment_tx"], gps["alignment_ty"], gps["alignment_angle"]) if aligned else None,
-    )
+    plot_reference(ax, dataset.truth, gps_alignment(evaluation))
     plot_trajectories(ax, truth=dataset.truth.poses, estimate=result.poses, legend=False)
     if result.covariances is not None and len(result) > 1:
         every = max(1, len(result) // 25)

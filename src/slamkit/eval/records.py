@@ -1,0 +1,110 @@
+"""Typed scores of one run: what :func:`slamkit.pipeline.evaluate.evaluate` measures, as
+frozen records, each metric either its result type or :class:`Skipped` with the reason it
+does not apply (a path shorter than the RPE distance, a robot that never moved, maps without
+common landmarks). JSON only at the io boundary: :meth:`RunScores.as_dict` gives the
+``metrics.json`` form."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Any, Literal
+
+from slamkit.eval.association import AssociationScores
+from slamkit.eval.convergence import ConvergenceReport
+from slamkit.eval.gps import GpsError
+from slamkit.eval.innovations import NisSummary
+from slamkit.eval.landmarks import LandmarkError
+from slamkit.eval.trajectory import RelativeError, TrajectoryError
+
+__all__ = [
+    "NeesSummary",
+    "RunScores",
+    "RunTime",
+    "Skipped",
+]
+
+
+@dataclass(frozen=True)
+class Skipped:
+    """A metric that does not apply to this run, and why."""
+
+    reason: str
+
+    def as_dict(self) -> dict[str, str]:
+        return {"skipped": self.reason}
+
+
+@dataclass(frozen=True)
+class NeesSummary:
+    """NEES of the pose against the true trajectory over the steps whose covariance is
+    regular, with the two-sided 95 % χ²(3) band of one step."""
+
+    mean: float
+    dof: int
+    band_95: tuple[float, float]
+    fraction_in_band: float
+    steps: int
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "mean": self.mean,
+            "dof": self.dof,
+            "band_95": list(self.band_95),
+            "fraction_in_band": self.fraction_in_band,
+            "steps": self.steps,
+        }
+
+
+@dataclass(frozen=True)
+class RunTime:
+    """Wall-clock seconds of the run: all steps, and the mean and largest step."""
+
+    total_seconds: float
+    mean_step_seconds: float
+    max_step_seconds: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {
+            "total_seconds": self.total_seconds,
+            "mean_step_seconds": self.mean_step_seconds,
+            "max_step_seconds": self.max_step_seconds,
+        }
+
+
+@dataclass(frozen=True)
+class RunScores:
+    """Every score of one run. ``None``: the data set has nothing to score it against (no
+    true trajectory, no GPS, no true landmarks, ...); :class:`Skipped`: it has, but the
+    metric does not apply to this run."""
+
+    estimator: str
+    dataset: str
+    seed: int
+    steps: int
+    runtime: RunTime
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+    """The estimator's own JSON-able counts and statistics (``EstimatorOutput``)."""
+    matched_steps: int | None = None
+    ate: TrajectoryError | Skipped | None = None
+    ate_unaligned: TrajectoryError | Skipped | None = None
+    rpe_1_step: RelativeError | Skipped | None = None
+    rpe_10_m: RelativeError | Skipped | None = None
+    final_position_error: float | None = None
+    convergence: ConvergenceReport | Skipped | None = None
+    nees: NeesSummary | None = None
+    gps: GpsError | Skipped | None = None
+    nis: NisSummary | Skipped | None = None
+    landmarks_matched_by: Literal["id", "position"] | None = None
+    landmarks: LandmarkError | Skipped | None = None
+    association: AssociationScores | Skipped | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        """The ``metrics.json`` form, in field order: plain values, records through their
+        ``as_dict``, metrics that do not apply as ``{"skipped": reason}``, those without a
+        reference (``None``) left out."""
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if value is not None:
+                out[f.name] = value.as_dict() if hasattr(value, "as_dict") else value
+        return out
