@@ -20,7 +20,8 @@ _TWO_PI = 2.0 * np.pi
 
 
 def wrap_angle(angle: ArrayLike) -> FloatArray:
-    """Wrap angles (radians) to ``[-pi, pi)``; works on scalars and arrays of any shape."""
+    """Wrap angles (radians) to ``[-pi, pi)``; works on scalars and arrays of any shape.
+    Non-finite angles give NaN."""
     if isinstance(angle, float | int) or (isinstance(angle, np.ndarray) and angle.ndim == 0):
         # Filters call this once per reading: plain floats are ~10x cheaper than 0-d arrays.
         return np.float64(wrap_angle_float(float(angle)))  # type: ignore[return-value]
@@ -28,7 +29,8 @@ def wrap_angle(angle: ArrayLike) -> FloatArray:
     # a - 2pi * floor((a + pi) / 2pi) is ~4x faster than np.mod on large arrays. Rounding can
     # leave a result a hair outside [-pi, pi) (e.g. a = pi - 1e-16 gives -pi - 4e-16), so
     # fold those few values back once.
-    w = a - _TWO_PI * np.floor((a + np.pi) / _TWO_PI)
+    with np.errstate(invalid="ignore"):  # inf - inf: NaN, as documented
+        w = a - _TWO_PI * np.floor((a + np.pi) / _TWO_PI)
     w = np.where(w < -np.pi, w + _TWO_PI, w)
     w = np.where(w >= np.pi, w - _TWO_PI, w)
     # Angles already in range come back bit-identical (1e-12 stays 1e-12, not a multiple
@@ -37,9 +39,12 @@ def wrap_angle(angle: ArrayLike) -> FloatArray:
 
 
 def wrap_angle_float(a: float) -> float:
-    """:func:`wrap_angle` for one Python float (for per-reading kernels)."""
+    """:func:`wrap_angle` for one Python float (for per-reading kernels). A non-finite
+    angle gives NaN, as in :func:`wrap_angle` (a filter that diverged reports it as such)."""
     if -math.pi <= a < math.pi:
         return a
+    if not math.isfinite(a):
+        return math.nan
     w = a - _TWO_PI * math.floor((a + math.pi) / _TWO_PI)
     if w < -math.pi:
         w += _TWO_PI
