@@ -69,7 +69,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import chain
 
 import numpy as np
@@ -89,7 +89,10 @@ from slamkit.geometry import pose2
 from slamkit.optim import factors
 from slamkit.optim.data import EdgeSet, FloatArray, GraphData, IntArray
 from slamkit.optim.graph import GraphProblem
-from slamkit.optim.solvers import OptimizerConfig, optimize
+from slamkit.optim.loop import Estimate, SolverContext, run_least_squares
+from slamkit.optim.robust import RobustKernel
+from slamkit.optim.settings import LmConfig, StoppingConfig
+from slamkit.optim.steps import BacktrackingGaussNewtonStep, LevenbergMarquardtStep
 from slamkit.optim.sparse import LinearSolverName, SingularSystem, make_factorizer, solve_spd
 
 __all__ = [
@@ -736,81 +739,56 @@ class IncrementalOptimizer:
 
     # ------------------------------------------------------------------ batch step
     def _batch_step(self, rtol: float) -> int:
-        """Gauss-Newton on the whole graph from the current estimate (one symbolic analysis,
-        reused by every iteration); returns the number of linearisations."""
+        """The loop of :func:`~slamkit.optim.loop.run_least_squares` on the whole graph from
+        the current estimate, with Gauss-Newton and backtracking
+        (:class:`~slamkit.optim.steps.BacktrackingGaussNewtonStep`; one symbolic analysis,
+        reused by every iteration), then Levenberg-Marquardt from where it stalls; returns
+        the number of linearisations (LM's: factorisations)."""
         self._clear_window()
         self._batch_steps += 1
         data = self.graph()
         problem = GraphProblem.from_data(data)
         x = problem.to_internal(data.poses)
-        lm = np.zeros((0, 2))
-        cfg = self.config
-        lin = problem.linearize(x, lm)
-        iterations = 1
-        converged = problem.n == 0
-        if not converged:
-            fac = make_factorizer(cfg.linear_solver, problem.pattern)
-            for _ in range(cfg.batch_max_iterations):
-                assert lin.H is not None and lin.g is not None
-                try:
-                    fac.factor(lin.H)
-                except SingularSystem as exc:
-                    which = (
-                        f"{problem.variable_of_column(exc.column)} is not determined"
-                        if exc.column is not None
-                        else "the back-end does not say which variable is not determined"
-                    )
-                    raise GeometryError(
-                        f"the normal equations of the graph so far are singular ({exc}); {which}"
-                    ) from None
-                delta = -fac.solve(lin.g)
-                x_new, _ = problem.retract(x, lm, delta)
-                new = problem.linearize(x_new, lm)
-                iterations += 1
-                if not np.isfinite(new.cost):
-                    raise ConvergenceError("a batch step produced a non-finite cost", self._updates)
-                if new.cost > lin.cost and new.cost - lin.cost <= rtol * lin.cost:
-                    converged = True  # rounding noise at the minimum: keep the lower point
-                    break
-                alpha = 1.0
-                while new.cost > lin.cost and alpha > 0.05:
-                    # Gauss-Newton overshot (a strongly nonlinear correction): backtrack.
-                    alpha *= 0.5
-                    x_new, _ = problem.retract(x, lm, alpha * delta)
-                    new = problem.linearize(x_new, lm)
-                    iterations += 1
-                if not new.cost <= lin.cost:
-                    # No decrease along the Gauss-Newton direction: Levenberg-Marquardt from
-                    # here, with the same problem and tolerance.
-                    res = optimize(
-                        data,
-                        OptimizerConfig(
-                            method="lm",
-                            relative_tolerance=rtol,
-                            step_tolerance=cfg.step_tolerance,
-                            max_iterations=cfg.batch_max_iterations,
-                            linear_solver=cfg.linear_solver,
-                        ),
-                        initial_poses=problem.to_external(x),
-                        problem=problem,
-                    )
-                    x = problem.to_internal(res.poses)
-                    lin = problem.linearize(x, lm, jacobians=False)
-                    iterations += res.factorizations
-                    converged = res.converged
-                    break
-                change = lin.cost - new.cost
-                x, lin = x_new, new
-                if change <= rtol * abs(new.cost + change) or np.abs(delta).max() <= (
-                    cfg.step_tolerance
-                ):
-                    converged = True
-                    break
-        self._X[: self._n] = problem.to_external(x)
+        if problem.n == 0:  # every pose fixed: nothing to solve
+            current = Estimate(x, np.zeros((0, 2)), problem.linearize(x, np.zeros((0, 2))))
+            iterations, converged = 1, True
+        else:
+            current, iterations, converged = self._batch_solve(problem, x, rtol)
+        self._X[: self._n] = problem.to_external(current.poses)
         self._batch_iterations += iterations
         self._last_converged = converged
-        self._last_chi2 = lin.chi2
+        self._last_chi2 = current.lin.chi2
         return iterations
+
+    def _batch_solve(
+        self, problem: GraphProblem, x: FloatArray, rtol: float
+    ) -> tuple[Estimate, int, bool]:
+        """Backtracking Gauss-Newton from ``x`` until ``|f_old - f_new| ≤ rtol · f_old`` or
+        ``max |δ| ≤ step_tolerance`` (no gradient test), then LM from where it stalls.
+        Returns the estimate, the linearisations (LM's: factorisations) and convergence."""
+        cfg = self.config
+        ctx = SolverContext(
+            problem, RobustKernel(), make_factorizer(cfg.linear_solver, problem.pattern)
+        )
+        start = ctx.linearize(x, np.zeros((0, 2)))
+        rule = StoppingConfig(
+            max_iterations=cfg.batch_max_iterations,
+            relative_tolerance=rtol,
+            absolute_tolerance=0.0,
+            step_tolerance=cfg.step_tolerance,
+        )
+        gn = BacktrackingGaussNewtonStep(rtol, self._updates)
+        out = run_least_squares(ctx, start, gn, rule, [], check_gradient=False)
+        iterations = ctx.linearizations
+        if out.stalled and not out.converged:
+            # No decrease along the Gauss-Newton direction: Levenberg-Marquardt from here,
+            # with the same problem and tolerance.
+            lm_rule = replace(rule, absolute_tolerance=StoppingConfig().absolute_tolerance)
+            before = ctx.factorizations
+            lm = LevenbergMarquardtStep(LmConfig())
+            out = run_least_squares(ctx, out.estimate, lm, lm_rule, [])
+            iterations += ctx.factorizations - before
+        return out.estimate, iterations, out.converged
 
 
 def _window_normal_equations(
