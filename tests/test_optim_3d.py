@@ -105,7 +105,9 @@ def test_3d_sesync_objective_and_marginals() -> None:
         edges=(EdgeSet("se3", es.i, es.j, noisy, es.information, es.lines),),
     )
     g2o = optimize(data, OptimizerConfig(stopping=StoppingConfig(relative_tolerance=1e-12)))
-    fs = optimize(data, OptimizerConfig(objective="sesync", stopping=StoppingConfig(relative_tolerance=1e-12)))
+    fs = optimize(
+        data, OptimizerConfig(objective="sesync", stopping=StoppingConfig(relative_tolerance=1e-12))
+    )
     assert fs.cost == pytest.approx(sesync_objective(data, fs.poses), rel=1e-12)
     assert fs.cost < sesync_objective(data, g2o.poses)
     assert g2o.cost < g2o_chi2(data, fs.poses)

@@ -31,7 +31,15 @@ import pytest
 
 from slamkit.eval.trajectory import absolute_trajectory_error
 from slamkit.io.posegraph import read_graph
-from slamkit.optim import EdgeSet, GraphData, GraphProblem, OptimizerConfig, RobustConfig, StoppingConfig, optimize
+from slamkit.optim import (
+    EdgeSet,
+    GraphData,
+    GraphProblem,
+    OptimizerConfig,
+    RobustConfig,
+    StoppingConfig,
+    optimize,
+)
 from slamkit.optim.robust import robust_rho_and_weight
 
 pytestmark = pytest.mark.realdata

@@ -147,7 +147,11 @@ def test_methods_and_backends_agree_on_noisy_graph() -> None:
     results = []
     for method in ("gn", "lm", "dogleg"):
         for backend in BACKENDS:
-            cfg = OptimizerConfig(solver=method, linear_solver=backend, stopping=StoppingConfig(relative_tolerance=1e-12))  # type: ignore[arg-type]
+            cfg = OptimizerConfig(
+                solver=method,
+                linear_solver=backend,
+                stopping=StoppingConfig(relative_tolerance=1e-12),
+            )  # type: ignore[arg-type]
             results.append(optimize(data, cfg))
     ref = results[0]
     assert ref.cost > 0.5  # noisy: a genuine least-squares optimum, not zero
@@ -273,7 +277,9 @@ def test_sesync_objective_solver_minimises_F() -> None:
     truth = _loop_truth()
     data = _pose_graph(truth, rng, sigma=0.05)
     g2o = optimize(data, OptimizerConfig(stopping=StoppingConfig(relative_tolerance=1e-12)))
-    fs = optimize(data, OptimizerConfig(objective="sesync", stopping=StoppingConfig(relative_tolerance=1e-12)))
+    fs = optimize(
+        data, OptimizerConfig(objective="sesync", stopping=StoppingConfig(relative_tolerance=1e-12))
+    )
     assert fs.cost == pytest.approx(sesync_objective(data, fs.poses), rel=1e-12)
     assert fs.cost < sesync_objective(data, g2o.poses)
     assert g2o.cost < g2o_chi2(data, fs.poses)
@@ -457,7 +463,9 @@ def test_grow_initialization_reaches_the_optimum_near_the_truth() -> None:
     assert res.initialization == "grow" and res.converged
     assert res.cost == pytest.approx(ref.cost, rel=1e-7)
     _assert_poses_close(res.poses, ref.poses, 1e-4)
-    odo = optimize(data, OptimizerConfig(initialization="odometry", stopping=StoppingConfig(max_iterations=0)))
+    odo = optimize(
+        data, OptimizerConfig(initialization="odometry", stopping=StoppingConfig(max_iterations=0))
+    )
     assert res.initial_cost < 0.1 * odo.initial_cost
     with pytest.raises(ConfigError, match=r"grow\.max_step"):
         OptimizerConfig(grow=GrowConfig(max_step=0))

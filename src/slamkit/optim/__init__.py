@@ -37,10 +37,10 @@ from slamkit.optim.init import (
     initial_values,
     spanning_tree_initialization,
 )
+from slamkit.optim.loop import IterationInfo
 from slamkit.optim.marginals import Marginals, marginal_covariances
 from slamkit.optim.objectives import g2o_chi2, sesync_objective
 from slamkit.optim.robust import RobustKernel, robust_rho_and_weight
-from slamkit.optim.loop import IterationInfo
 from slamkit.optim.settings import (
     DoglegConfig,
     GrowConfig,
@@ -58,8 +58,8 @@ __all__ = [
     "EdgeSet",
     "GraphData",
     "GraphProblem",
-    "GrowConfig",
     "GraphUpdate",
+    "GrowConfig",
     "IncrementalConfig",
     "IncrementalOptimizer",
     "IncrementalResult",

@@ -92,8 +92,8 @@ from slamkit.optim.graph import GraphProblem
 from slamkit.optim.loop import Estimate, SolverContext, run_least_squares
 from slamkit.optim.robust import RobustKernel
 from slamkit.optim.settings import LmConfig, StoppingConfig
-from slamkit.optim.steps import BacktrackingGaussNewtonStep, LevenbergMarquardtStep
 from slamkit.optim.sparse import LinearSolverName, SingularSystem, make_factorizer, solve_spd
+from slamkit.optim.steps import BacktrackingGaussNewtonStep, LevenbergMarquardtStep
 
 __all__ = [
     "GraphUpdate",

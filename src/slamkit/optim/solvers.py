@@ -47,6 +47,7 @@ __all__ = [
     "resolve_initialization",
 ]
 
+
 @dataclass(frozen=True)
 class OptimizeResult:
     """The optimum and how it was reached. ``poses`` rows follow ``pose_ids``."""

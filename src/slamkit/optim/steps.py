@@ -179,7 +179,10 @@ class BacktrackingGaussNewtonStep:
         new = ctx.move(current, delta)
         if not np.isfinite(new.lin.cost):
             raise ConvergenceError("a batch step produced a non-finite cost", self.update)
-        if new.lin.cost > lin.cost and new.lin.cost - lin.cost <= self.relative_tolerance * lin.cost:
+        if (
+            new.lin.cost > lin.cost
+            and new.lin.cost - lin.cost <= self.relative_tolerance * lin.cost
+        ):
             return NoStep("the cost rose by rounding noise at the minimum", True, 0.0)
         alpha = 1.0
         while new.lin.cost > lin.cost and alpha > 0.05:
