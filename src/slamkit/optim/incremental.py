@@ -73,16 +73,12 @@ from dataclasses import dataclass, replace
 from itertools import chain
 
 import numpy as np
-import scipy.linalg
-import scipy.sparse
 
 from slamkit.errors import (
     ConfigError,
     ConvergenceError,
-    CovarianceError,
     GeometryError,
     InputError,
-    NonFiniteError,
     ShapeError,
 )
 from slamkit.geometry import pose2
@@ -92,8 +88,16 @@ from slamkit.optim.graph import GraphProblem
 from slamkit.optim.loop import Estimate, SolverContext, run_least_squares
 from slamkit.optim.robust import RobustKernel
 from slamkit.optim.settings import LmConfig, StoppingConfig
-from slamkit.optim.sparse import LinearSolverName, SingularSystem, make_factorizer, solve_spd
+from slamkit.optim.sparse import LinearSolverName, SingularSystem, make_factorizer
 from slamkit.optim.steps import BacktrackingGaussNewtonStep, LevenbergMarquardtStep
+from slamkit.optim.updates import (
+    GraphUpdate,
+    check_guesses,
+    check_update_edges,
+    edge_name,
+    time_ordered_updates,
+)
+from slamkit.optim.window import solve_window, window_normal_equations, window_terms
 
 __all__ = [
     "GraphUpdate",
@@ -103,8 +107,6 @@ __all__ = [
     "UpdateInfo",
     "time_ordered_updates",
 ]
-
-_KINDS = ("se2", "se2_prior")
 
 
 @dataclass(frozen=True)
@@ -155,15 +157,6 @@ class IncrementalConfig:
 
 
 @dataclass(frozen=True)
-class GraphUpdate:
-    """One update: new pose ids (increasing), their edges, and optional initial guesses."""
-
-    pose_ids: IntArray  # (K,)
-    edges: tuple[EdgeSet, ...]
-    initial_poses: FloatArray | None = None  # (K, 3); None: chained from the edges
-
-
-@dataclass(frozen=True)
 class UpdateInfo:
     """What one :meth:`IncrementalOptimizer.update` did."""
 
@@ -192,66 +185,6 @@ class IncrementalResult:
     batch_iterations: int  # linearisations over all batch steps
     update_seconds: FloatArray  # (updates,) wall time of each update
     finish_seconds: float  # the final batch step
-
-
-def time_ordered_updates(data: GraphData, *, use_vertices: bool = False) -> list[GraphUpdate]:
-    """Split a 2D pose graph into one update per pose in increasing id order, each carrying
-    the edges (``se2``, ``se2_prior``) whose later end is that pose.
-
-    ``use_vertices``: give the file's vertices as initial guesses (default: only the first
-    pose's, where the gauge anchors it as in batch; the optimiser chains the others from the
-    edges and its current estimate, as a robot would).
-    """
-    if data.dim != 2:
-        raise InputError(f"incremental optimisation handles 2D pose graphs, got dim {data.dim}")
-    sets = []
-    for es in data.edges:
-        if es.kind not in _KINDS:
-            raise InputError(
-                f"incremental optimisation handles se2 and se2_prior edges, got {es.kind!r}"
-            )
-        sets.append(es)
-    if data.poses.shape[0]:
-        ids = np.asarray(data.pose_ids, dtype=np.int64)
-    else:
-        refs = [es.i for es in sets] + [es.j for es in sets if es.kind == "se2"]
-        ids = np.unique(np.concatenate(refs)) if refs else np.zeros(0, np.int64)
-    order = np.argsort(ids, kind="stable")
-    sorted_ids = ids[order]
-    per_set = []
-    for es in sets:
-        later = es.i if es.kind == "se2_prior" else np.maximum(es.i, es.j)
-        k = np.argsort(later, kind="stable")
-        starts = np.searchsorted(later[k], sorted_ids, side="left")
-        ends = np.searchsorted(later[k], sorted_ids, side="right")
-        per_set.append((es, k, starts, ends))
-    updates = []
-    for r, pid in enumerate(sorted_ids.tolist()):
-        edges = []
-        for es, k, starts, ends in per_set:
-            sel = k[starts[r] : ends[r]]
-            if sel.shape[0]:
-                edges.append(
-                    EdgeSet(
-                        es.kind,
-                        es.i[sel],
-                        es.j[sel],
-                        es.measurement[sel],
-                        es.information[sel],
-                        es.lines[sel] if es.lines.shape[0] else np.zeros(sel.shape[0], np.int64),
-                    )
-                )
-        guess = None
-        if data.poses.shape[0] and (use_vertices or r == 0):
-            guess = data.poses[order[r]][None, :].copy()
-        updates.append(GraphUpdate(np.array([pid], dtype=np.int64), tuple(edges), guess))
-    return updates
-
-
-def _edge_name(es: EdgeSet, k: int) -> str:
-    line = int(es.lines[k]) if es.lines.shape[0] > k else 0
-    what = f"{es.kind} edge {int(es.i[k])}" + (f" → {int(es.j[k])}" if es.kind == "se2" else "")
-    return what + (f" (line {line})" if line > 0 else f" (#{k} of its set in this update)")
 
 
 class IncrementalOptimizer:
@@ -362,8 +295,8 @@ class IncrementalOptimizer:
         """
         t0 = time.perf_counter()
         new_ids = self._check_new_ids(pose_ids)
-        guesses = self._check_guesses(initial_poses, new_ids)
-        checked = [self._check_edge_set(es) for es in edges]
+        guesses = check_guesses(initial_poses, new_ids)
+        checked = [check_update_edges(es) for es in edges]
         new_row = {pid: self._n + k for k, pid in enumerate(new_ids.tolist())}
         resolved = [self._resolve(es, new_row) for es in checked]
         X_new = self._initial_guesses(new_ids, new_row, guesses, resolved)
@@ -459,56 +392,6 @@ class IncrementalOptimizer:
             prev = pid
         return ids
 
-    @staticmethod
-    def _check_guesses(initial_poses: FloatArray | None, ids: IntArray) -> FloatArray | None:
-        if initial_poses is None:
-            return None
-        g = np.asarray(initial_poses, dtype=np.float64)
-        if g.shape != (ids.shape[0], 3):
-            raise ShapeError(f"initial_poses: expected shape ({ids.shape[0]}, 3), got {g.shape}")
-        if not np.isfinite(g).all():
-            k = int(np.flatnonzero(~np.isfinite(g).all(axis=1))[0])
-            raise NonFiniteError(f"initial_poses: NaN or infinity in the guess of pose {ids[k]}")
-        return g
-
-    @staticmethod
-    def _check_edge_set(es: EdgeSet) -> tuple[EdgeSet, FloatArray]:
-        """Shapes, finiteness, symmetric positive definite information; returns ``U``."""
-        if es.kind not in _KINDS:
-            raise InputError(
-                f"edge kind {es.kind!r}: incremental optimisation handles se2 and se2_prior"
-            )
-        n = len(es)
-        for name, arr, shape in (
-            ("j", es.j, (n,)),
-            ("measurement", es.measurement, (n, 3)),
-            ("information", es.information, (n, 3, 3)),
-        ):
-            if np.shape(arr) != shape:
-                raise ShapeError(
-                    f"{es.kind} edges: {name} has shape {np.shape(arr)}, expected {shape}"
-                )
-        info = es.information
-        if not (np.isfinite(es.measurement).all() and np.isfinite(info).all()):
-            bad = ~np.isfinite(es.measurement).all(axis=1) | ~np.isfinite(info).all(axis=(1, 2))
-            raise NonFiniteError(f"{_edge_name(es, int(np.flatnonzero(bad)[0]))}: NaN or infinity")
-        if n == 0:
-            return es, np.zeros((0, 3, 3))
-        asym = np.abs(info - np.swapaxes(info, 1, 2)).max(axis=(1, 2)) > 1e-9 * np.abs(info).max(
-            axis=(1, 2)
-        )
-        if asym.any():
-            k = int(np.flatnonzero(asym)[0])
-            raise CovarianceError(f"{_edge_name(es, k)}: information matrix not symmetric")
-        try:
-            L = np.linalg.cholesky(info)
-        except np.linalg.LinAlgError:
-            k = int(np.argmin(np.linalg.eigvalsh(info).min(axis=1)))
-            raise CovarianceError(
-                f"{_edge_name(es, k)}: information matrix not positive definite"
-            ) from None
-        return es, np.swapaxes(L, 1, 2)
-
     def _resolve(
         self, checked: tuple[EdgeSet, FloatArray], new_row: dict[int, int]
     ) -> tuple[EdgeSet, FloatArray, IntArray, IntArray | None]:
@@ -521,7 +404,7 @@ class IncrementalOptimizer:
                 r = self._row_of.get(pid, new_row.get(pid))
                 if r is None:
                     raise InputError(
-                        f"{_edge_name(es, k)}: pose {pid} is not in the graph (add it in this "
+                        f"{edge_name(es, k)}: pose {pid} is not in the graph (add it in this "
                         "update or an earlier one)"
                     )
                 out[k] = r
@@ -533,7 +416,7 @@ class IncrementalOptimizer:
         b = rows(np.asarray(es.j, dtype=np.int64))
         if (a == b).any():
             k = int(np.flatnonzero(a == b)[0])
-            raise InputError(f"{_edge_name(es, k)}: edge from a pose to itself")
+            raise InputError(f"{edge_name(es, k)}: edge from a pose to itself")
         return es, U, a, b
 
     def _initial_guesses(
@@ -702,27 +585,13 @@ class IncrementalOptimizer:
         self._local[rows] = -1
         l6 = np.repeat(np.concatenate([la[:, None], lb[:, None]], axis=1), 3, axis=1)
         cols = np.where(l6 >= 0, 3 * l6 + np.tile(np.arange(3), 2), -1)  # (E, 6)
-        any_prior = bool(prior.any())
-        bw = ~prior
         first_step = 0.0
         for it in range(self.config.window_iterations):
             X = self._X
-            if not any_prior:  # the common case: relative-pose edges only
-                e, Ja, Jb = factors.se2_between_error(X[a], X[b], z)
-                J = np.concatenate([Ja, Jb], axis=2)  # ∂e/∂(δ_a, δ_b)
-            else:
-                e = np.empty((eidx.shape[0], 3))
-                J = np.zeros((eidx.shape[0], 3, 6))
-                if bw.any():
-                    e[bw], J[bw, :, :3], J[bw, :, 3:] = factors.se2_between_error(
-                        X[a[bw]], X[b[bw]], z[bw]
-                    )
-                e[prior], J[prior, :, :3] = factors.se2_prior_error(X[a[prior]], z[prior])
-            r = np.einsum("eij,ej->ei", U, e)  # whitened residual U e and Jacobian U J
-            J = U @ J
-            flat, vals, g = _window_normal_equations(3 * w, cols, r, J)
+            r, J = window_terms(X, a, b, z, U, prior)
+            flat, vals, g = window_normal_equations(3 * w, cols, r, J)
             try:
-                delta = _solve_window(3 * w, flat, vals, g, self.config.linear_solver)
+                delta = solve_window(3 * w, flat, vals, g, self.config.linear_solver)
             except SingularSystem:
                 names = ", ".join(str(int(self._ids[q])) for q in rows[:8].tolist())
                 raise GeometryError(
@@ -789,43 +658,3 @@ class IncrementalOptimizer:
             out = run_least_squares(ctx, out.estimate, lm, lm_rule, [])
             iterations += ctx.factorizations - before
         return out.estimate, iterations, out.converged
-
-
-def _window_normal_equations(
-    n: int, cols: IntArray, r: FloatArray, J: FloatArray
-) -> tuple[IntArray, FloatArray, FloatArray]:
-    """``H = Σ Jᵀ J`` as flat indices ``row · n + col`` and values (duplicates to be summed;
-    ``n²`` marks a dropped entry) and ``g = Σ Jᵀ r`` (length ``n``), from each edge's whitened
-    residual ``r (E, 3)``, Jacobian ``J (E, 3, 6)`` with respect to both of its poses and the
-    window columns ``cols (E, 6)`` of those six unknowns (-1: the pose is held fixed)."""
-    keep = cols >= 0
-    flat = np.where(
-        keep[:, :, None] & keep[:, None, :], cols[:, :, None] * n + cols[:, None, :], n * n
-    )
-    vals = np.einsum("eki,ekj->eij", J, J)
-    gcols = np.where(keep, cols, n)
-    g = np.bincount(gcols.ravel(), np.einsum("eki,ek->ei", J, r).ravel(), minlength=n + 1)
-    return flat.ravel().astype(np.int64), vals.ravel(), g[:n].astype(np.float64)
-
-
-# Up to this size the window system is solved densely. OpenBLAS runs LAPACK's Cholesky
-# multithreaded on larger matrices, which on a loaded 2-core machine cost 9 ms at n = 150
-# against 0.11 ms at n = 75 (sparse CHOLMOD: 0.6 ms at n = 180).
-_DENSE_MAX = 96
-
-
-def _solve_window(
-    n: int, flat: IntArray, vals: FloatArray, g: FloatArray, solver: LinearSolverName
-) -> FloatArray:
-    """``δ = -H⁻¹ g``; raises :class:`SingularSystem` when ``H`` is not positive definite."""
-    if n <= _DENSE_MAX:
-        H = np.bincount(flat, vals, minlength=n * n + 1)[: n * n].reshape(n, n)
-        try:
-            c = scipy.linalg.cho_factor(H, lower=True, check_finite=False)
-        except np.linalg.LinAlgError as exc:
-            raise SingularSystem(str(exc)) from None
-        return -scipy.linalg.cho_solve(c, g, check_finite=False)
-    keep = flat < n * n
-    flat, vals = flat[keep], vals[keep]
-    H_sparse = scipy.sparse.coo_matrix((vals, (flat // n, flat % n)), shape=(n, n)).tocsc()
-    return -solve_spd(H_sparse, g, solver)
