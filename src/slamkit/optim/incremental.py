@@ -42,9 +42,9 @@ information factor and updates it by Givens rotations; CHOLMOD can do rank updat
 ``solve``, ``spsolve``, ``diag``, ``getfactor``, ``linsolve`` and ``splinsolve``. Keeping the
 batch factor and folding new edges in exactly (the Schur complement of the new rows, with the
 marginal covariance of each touched old pose taken from the factor) needs one full solve per
-touched old pose: 23 ms for the three right-hand sides of one pose on city10000 (10,000
-poses, 1.3 M nonzeros in ``L``, a loaded machine), some 30 window steps' worth, and city10000
-closes a loop at nearly every pose. So the window step is the cheap local update, and the
+touched old pose, which on a large graph costs tens of window steps per touched pose (the
+measurement is in ``docs/estimators/optim.md``), and a graph like city10000 closes a loop
+at nearly every pose. So the window step is the cheap local update, and the
 batch step restores exactness periodically; between batch steps the numeric factor is not
 kept at all.
 

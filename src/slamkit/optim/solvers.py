@@ -187,8 +187,8 @@ def optimize(
 def resolve_initialization(problem: GraphProblem, name: str) -> str:
     """The initialisation ``"auto"`` stands for: the file's vertices when it has them, else
     ``"grow"`` for graphs with landmark readings (the odometry start of a long trajectory
-    whose landmarks close loops lies in a bad basin: on Victoria Park LM from it stops at
-    χ² ≈ 5e5, from the grown start at 6184), else the odometry spanning tree."""
+    whose landmarks close loops lies in a bad basin, as on Victoria Park: see
+    ``docs/estimators/optim.md``), else the odometry spanning tree."""
     if name != "auto":
         return name
     if problem.data.poses.shape[0]:
@@ -274,7 +274,7 @@ def grow_initialization(
     rigid correction of the last optimised pose; then the prefix doubles (adding at most
     ``grow.max_step`` poses) until it covers the graph. Each solve starts close to its
     optimum, as in an incremental smoother; the cost is a few batch solves of growing size
-    (on Victoria Park seven prefixes before the full solve, 1.3 s in all). A prefix that does
+    (the Victoria Park count and time are in ``docs/estimators/optim.md``). A prefix that does
     not form a valid graph (ids out of time order, so it falls apart) is skipped.
     """
     cfg = config if config is not None else OptimizerConfig()

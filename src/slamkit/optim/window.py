@@ -57,8 +57,8 @@ def window_normal_equations(
 
 
 # Up to this size the window system is solved densely. OpenBLAS runs LAPACK's Cholesky
-# multithreaded on larger matrices, which on a loaded 2-core machine cost 9 ms at n = 150
-# against 0.11 ms at n = 75 (sparse CHOLMOD: 0.6 ms at n = 180).
+# multithreaded on larger matrices, which on a loaded machine costs far more than the
+# sparse back-end (timings in docs/estimators/optim.md).
 DENSE_MAX = 96
 
 
