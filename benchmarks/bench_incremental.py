@@ -36,7 +36,7 @@ from slamkit.datasets import find_data_root
 from slamkit.geometry import pose2
 from slamkit.geometry.angles import wrap_angle
 from slamkit.io.posegraph import read_graph
-from slamkit.optim import OptimizerConfig, g2o_chi2, optimize
+from slamkit.optim import OptimizerConfig, StoppingConfig, g2o_chi2, optimize
 from slamkit.optim.incremental import (
     GraphUpdate,
     IncrementalConfig,
@@ -142,7 +142,9 @@ def main() -> str:
             [[p.x(), p.y(), p.theta()] for p in (est.atPose2(int(k)) for k in res.pose_ids)]
         )
         chi2_peer = g2o_chi2(graph, g_poses)
-        batch = optimize(graph, OptimizerConfig(method="gn", relative_tolerance=1e-12))
+        batch = optimize(
+            graph, OptimizerConfig(solver="gn", stopping=StoppingConfig(relative_tolerance=1e-12))
+        )
         assert np.array_equal(batch.pose_ids, res.pose_ids)
         diff = res.poses - batch.poses
         diff[:, 2] = wrap_angle(diff[:, 2])

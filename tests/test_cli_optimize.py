@@ -115,7 +115,8 @@ def test_synthetic_g2o_loop_recovers_the_true_poses(tmp_path):
     config = json.loads((out / "config.json").read_text())
     assert config["solver"] == "lm" and config["init"] == "file"
     assert config["objective"] == "g2o" and config["robust_kernel"] == "none"
-    assert config["optimizer"]["method"] == "lm" and config["optimizer"]["max_iterations"] == 100
+    assert config["optimizer"]["solver"] == "lm"
+    assert config["optimizer"]["stopping"]["max_iterations"] == 100
 
 
 def test_synthetic_isam_landmark_graph_is_written_as_g2o_with_renumbered_landmarks(tmp_path):
@@ -182,7 +183,7 @@ def test_missing_file_and_missing_vertex_are_one_line_errors(tmp_path):
         (["--robust", "tukey"], "robust kernel: expected one of none, huber"),
         (["--robust", "huber", "--robust-width", "-1"], "expected a number > 0"),
         (["--init", "magic"], "init: expected one of file, odometry, chordal"),
-        (["--max-iterations", "-3"], "max_iterations: expected >= 0"),
+        (["--max-iterations", "-3"], "stopping.max_iterations: expected an integer >= 0"),
     ],
 )
 def test_bad_options_are_one_line_errors(tmp_path, args, message):
@@ -260,7 +261,7 @@ def test_intel_robust_kernel_cost_is_below_its_chi2(data_root, tmp_path):
     assert m["cost_final"] < m["chi2_final"]
     assert m["chi2_final"] == pytest.approx(45.004696, rel=1e-3)
     config = json.loads((tmp_path / "c" / "config.json").read_text())
-    assert config["robust_width"] == 3.0 and config["optimizer"]["robust_kernel"] == "cauchy"
+    assert config["robust_width"] == 3.0 and config["optimizer"]["robust"]["kernel"] == "cauchy"
 
 
 @pytest.mark.realdata

@@ -14,6 +14,7 @@ from slamkit.optim import (
     GraphData,
     GraphProblem,
     OptimizerConfig,
+    StoppingConfig,
     chordal_initialization,
     g2o_chi2,
     marginal_covariances,
@@ -72,7 +73,7 @@ def test_noise_free_3d_graph_is_solved_exactly(method: str) -> None:
     start = f3.retract_poses3(truth, np.random.default_rng(0).normal(size=(20, 6)) * 0.1)
     start[0] = truth[0]
     data = _graph(truth, start)
-    res = optimize(data, OptimizerConfig(method=method))  # type: ignore[arg-type]
+    res = optimize(data, OptimizerConfig(solver=method))  # type: ignore[arg-type]
     assert res.converged and res.initial_cost > 10.0 and res.cost < 1e-14
     assert res.poses.shape == (20, 7)
     _assert_same(res.poses, truth, 1e-7)
@@ -103,8 +104,10 @@ def test_3d_sesync_objective_and_marginals() -> None:
         poses=data.poses,
         edges=(EdgeSet("se3", es.i, es.j, noisy, es.information, es.lines),),
     )
-    g2o = optimize(data, OptimizerConfig(relative_tolerance=1e-12))
-    fs = optimize(data, OptimizerConfig(objective="sesync", relative_tolerance=1e-12))
+    g2o = optimize(data, OptimizerConfig(stopping=StoppingConfig(relative_tolerance=1e-12)))
+    fs = optimize(
+        data, OptimizerConfig(objective="sesync", stopping=StoppingConfig(relative_tolerance=1e-12))
+    )
     assert fs.cost == pytest.approx(sesync_objective(data, fs.poses), rel=1e-12)
     assert fs.cost < sesync_objective(data, g2o.poses)
     assert g2o.cost < g2o_chi2(data, fs.poses)

@@ -236,12 +236,12 @@ def test_singular_normal_equations_raise_geometry_error() -> None:
     solvers = ["dense", "superlu"] + (["cholmod"] if cholmod_available() else [])
     for solver in solvers:
         with pytest.raises(GeometryError, match=r"singular.*landmark 7 is not determined"):
-            optimize(g, OptimizerConfig(method="gn", linear_solver=solver))  # type: ignore[arg-type]
+            optimize(g, OptimizerConfig(solver="gn", linear_solver=solver))  # type: ignore[arg-type]
     # The dense back-end eliminates in variable order: the landmark's pivot is the one that fails.
     with pytest.raises(GeometryError, match=r"failed at landmark 7 \(y\)"):
-        optimize(g, OptimizerConfig(method="gn", linear_solver="dense"))
+        optimize(g, OptimizerConfig(solver="gn", linear_solver="dense"))
     with pytest.raises(GeometryError, match=r"marginals: .*landmark 7"):
-        res = optimize(g, OptimizerConfig(method="lm"))  # damping keeps LM going
+        res = optimize(g, OptimizerConfig(solver="lm"))  # damping keeps LM going
         marginal_covariances(g, res, landmark_ids=[7])
 
 
@@ -278,7 +278,7 @@ def test_singular_pivot_is_named_in_the_original_order() -> None:
     solvers = ["dense", "superlu"] + (["cholmod"] if cholmod_available() else [])
     for solver in solvers:
         with pytest.raises(GeometryError, match=r"pose 3 is not determined") as info:
-            optimize(g, OptimizerConfig(method="gn", linear_solver=solver))  # type: ignore[arg-type]
+            optimize(g, OptimizerConfig(solver="gn", linear_solver=solver))  # type: ignore[arg-type]
         if solver != "superlu":  # SuperLU reports an exactly singular factor without a column
             assert "failed at pose 3 (" in str(info.value), (solver, str(info.value))
 

@@ -19,6 +19,7 @@ from slamkit.optim import (
     GraphData,
     GraphProblem,
     OptimizerConfig,
+    StoppingConfig,
     g2o_chi2,
     optimize,
     spanning_tree_initialization,
@@ -30,7 +31,9 @@ from slamkit.optim.incremental import (
 )
 
 INFO = np.diag([100.0, 100.0, 400.0])  # σ = 0.1 m, 0.1 m, 0.05 rad
-TIGHT = OptimizerConfig(method="gn", relative_tolerance=1e-12, max_iterations=50)
+TIGHT = OptimizerConfig(
+    solver="gn", stopping=StoppingConfig(relative_tolerance=1e-12, max_iterations=50)
+)
 
 
 def _edges(kind: str, i, j, z, info=None) -> EdgeSet:

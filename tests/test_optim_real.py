@@ -12,6 +12,7 @@ from slamkit.io.posegraph import read_graph
 from slamkit.optim import (
     GraphProblem,
     OptimizerConfig,
+    StoppingConfig,
     g2o_chi2,
     marginal_covariances,
     optimize,
@@ -74,7 +75,7 @@ def test_intel_methods_agree_on_g2o_chi2(data_root: Path) -> None:
     graph = _read(data_root, "intel.g2o")
     costs = {}
     for method in ("gn", "lm", "dogleg"):
-        cfg = OptimizerConfig(method=method, relative_tolerance=1e-9)  # type: ignore[arg-type]
+        cfg = OptimizerConfig(solver=method, stopping=StoppingConfig(relative_tolerance=1e-9))  # type: ignore[arg-type]
         res = optimize(graph, cfg)
         assert res.converged, res.reason
         costs[method] = res.cost

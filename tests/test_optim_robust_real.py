@@ -31,7 +31,15 @@ import pytest
 
 from slamkit.eval.trajectory import absolute_trajectory_error
 from slamkit.io.posegraph import read_graph
-from slamkit.optim import EdgeSet, GraphData, GraphProblem, OptimizerConfig, optimize
+from slamkit.optim import (
+    EdgeSet,
+    GraphData,
+    GraphProblem,
+    OptimizerConfig,
+    RobustConfig,
+    StoppingConfig,
+    optimize,
+)
 from slamkit.optim.robust import robust_rho_and_weight
 
 pytestmark = pytest.mark.realdata
@@ -104,20 +112,20 @@ def test_robust_kernels_recover_the_trajectory(
         return absolute_trajectory_error(poses, truth, align="se2").rmse
 
     reference = ate(optimize(graph).poses)
-    plain = optimize(corrupted, OptimizerConfig(max_iterations=30))
+    plain = optimize(corrupted, OptimizerConfig(stopping=StoppingConfig(max_iterations=30)))
     assert ate(plain.poses) > ls_floor * reference
     problem = GraphProblem.from_data(corrupted)
     es = corrupted.edges[0]
     true_closure = (np.abs(es.j - es.i) != 1) & ~false
     for kernel in ("geman_mcclure", "dcs"):
-        cfg = OptimizerConfig(robust_kernel=kernel)
+        cfg = OptimizerConfig(robust=RobustConfig(kernel=kernel))
         res = optimize(corrupted, cfg)
         assert res.converged and res.iterations > 5, res.reason
         assert ate(res.poses) < 1.05 * reference, kernel
         (s,) = problem.block_terms(res.poses, np.zeros((0, 2)))
         _, w = robust_rho_and_weight(cfg.kernel, s)
         assert w[false].max() < 1e-3 and w[true_closure].min() > 0.5, kernel
-    cauchy = optimize(corrupted, OptimizerConfig(robust_kernel="cauchy"))
+    cauchy = optimize(corrupted, OptimizerConfig(robust=RobustConfig(kernel="cauchy")))
     assert ate(cauchy.poses) < cauchy_ceiling * reference
 
 
@@ -136,7 +144,7 @@ def test_too_narrow_a_kernel_stays_at_the_odometry_start(data_root: Path) -> Non
     true_closure = (np.abs(es.j - es.i) != 1) & ~false
     problem = GraphProblem.from_data(corrupted)
     for kernel in ("geman_mcclure", "dcs"):
-        cfg = OptimizerConfig(robust_kernel=kernel, robust_width=1.0)
+        cfg = OptimizerConfig(robust=RobustConfig(kernel=kernel, width=1.0))
         res = optimize(corrupted, cfg)
         assert res.converged and res.iterations == 1
         moved = absolute_trajectory_error(res.poses, truth, align="se2").rmse

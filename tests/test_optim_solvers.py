@@ -15,7 +15,11 @@ from slamkit.optim import (
     EdgeSet,
     GraphData,
     GraphProblem,
+    GrowConfig,
+    LmConfig,
     OptimizerConfig,
+    RobustConfig,
+    StoppingConfig,
     cholmod_available,
     chordal_initialization,
     g2o_chi2,
@@ -129,7 +133,7 @@ def test_noise_free_loop_is_solved_exactly(method: str) -> None:
     rng = np.random.default_rng(0)
     truth = _loop_truth()
     data = _pose_graph(truth, vertices=_perturb(truth, rng))
-    res = optimize(data, OptimizerConfig(method=method))  # type: ignore[arg-type]
+    res = optimize(data, OptimizerConfig(solver=method))  # type: ignore[arg-type]
     assert res.converged and res.anchored_first
     assert res.initial_cost > 100.0
     assert res.cost < 1e-12
@@ -143,7 +147,11 @@ def test_methods_and_backends_agree_on_noisy_graph() -> None:
     results = []
     for method in ("gn", "lm", "dogleg"):
         for backend in BACKENDS:
-            cfg = OptimizerConfig(method=method, linear_solver=backend, relative_tolerance=1e-12)  # type: ignore[arg-type]
+            cfg = OptimizerConfig(
+                solver=method,
+                linear_solver=backend,
+                stopping=StoppingConfig(relative_tolerance=1e-12),
+            )  # type: ignore[arg-type]
             results.append(optimize(data, cfg))
     ref = results[0]
     assert ref.cost > 0.5  # noisy: a genuine least-squares optimum, not zero
@@ -201,7 +209,7 @@ def test_normal_equations_match_dense_jacobian() -> None:
 def test_landmark_graph_recovers_truth(method: str) -> None:
     rng = np.random.default_rng(4)
     data, truth, lms = _landmark_graph(rng)
-    cfg = OptimizerConfig(method=method)  # type: ignore[arg-type]
+    cfg = OptimizerConfig(solver=method)  # type: ignore[arg-type]
     res = optimize(
         data,
         cfg,
@@ -268,8 +276,10 @@ def test_sesync_objective_solver_minimises_F() -> None:
     rng = np.random.default_rng(7)
     truth = _loop_truth()
     data = _pose_graph(truth, rng, sigma=0.05)
-    g2o = optimize(data, OptimizerConfig(relative_tolerance=1e-12))
-    fs = optimize(data, OptimizerConfig(objective="sesync", relative_tolerance=1e-12))
+    g2o = optimize(data, OptimizerConfig(stopping=StoppingConfig(relative_tolerance=1e-12)))
+    fs = optimize(
+        data, OptimizerConfig(objective="sesync", stopping=StoppingConfig(relative_tolerance=1e-12))
+    )
     assert fs.cost == pytest.approx(sesync_objective(data, fs.poses), rel=1e-12)
     assert fs.cost < sesync_objective(data, g2o.poses)
     assert g2o.cost < g2o_chi2(data, fs.poses)
@@ -315,7 +325,7 @@ def test_robust_kernels_reject_a_false_loop_closure(kernel: str) -> None:
     )
     data = GraphData(dim=2, pose_ids=np.zeros(0, np.int64), poses=np.zeros((0, 3)), edges=(edges,))
     plain = optimize(data)  # both start from the odometry chain
-    cfg = OptimizerConfig(robust_kernel=kernel, robust_width=1.0)  # type: ignore[arg-type]
+    cfg = OptimizerConfig(robust=RobustConfig(kernel=kernel, width=1.0))  # type: ignore[arg-type]
     robust = optimize(data, cfg)
     truth = pose2.compose(pose2.inverse(truth[0]), truth)  # pose 0 anchored at the origin
     err_plain = np.abs(plain.poses[:, :2] - truth[:, :2]).max()
@@ -379,14 +389,14 @@ def test_max_iterations_and_bad_config() -> None:
     rng = np.random.default_rng(11)
     truth = _loop_truth()
     data = _pose_graph(truth, rng, sigma=0.05, vertices=_perturb(truth, rng))
-    res = optimize(data, OptimizerConfig(method="gn", max_iterations=1))
+    res = optimize(data, OptimizerConfig(solver="gn", stopping=StoppingConfig(max_iterations=1)))
     assert res.iterations == 1 and not res.converged
     with pytest.raises(ConfigError):
-        OptimizerConfig(method="newton")  # type: ignore[arg-type]
+        OptimizerConfig(solver="newton")  # type: ignore[arg-type]
     with pytest.raises(ConfigError):
-        OptimizerConfig(lambda_factor=1.0)
+        OptimizerConfig(lm=LmConfig(lambda_factor=1.0))
     with pytest.raises(ConfigError):
-        OptimizerConfig(robust_kernel="tukey")  # type: ignore[arg-type]
+        OptimizerConfig(robust=RobustConfig(kernel="tukey"))  # type: ignore[arg-type]
 
 
 def test_equivalent_poses_are_merged() -> None:
@@ -444,19 +454,21 @@ def test_grow_initialization_reaches_the_optimum_near_the_truth() -> None:
     tr0 = pose2.inverse_transform_points(truth[0], trees[np.unique(data.edges[1].j) - 1000])
     ref = optimize(
         data,
-        OptimizerConfig(method="gn", relative_tolerance=1e-12),
+        OptimizerConfig(solver="gn", stopping=StoppingConfig(relative_tolerance=1e-12)),
         initial_poses=t0,
         initial_landmarks=tr0,
     )
-    cfg = OptimizerConfig(grow_initial_poses=10, grow_max_step=30)
+    cfg = OptimizerConfig(grow=GrowConfig(initial_poses=10, max_step=30))
     res = optimize(data, cfg)
     assert res.initialization == "grow" and res.converged
     assert res.cost == pytest.approx(ref.cost, rel=1e-7)
     _assert_poses_close(res.poses, ref.poses, 1e-4)
-    odo = optimize(data, OptimizerConfig(initialization="odometry", max_iterations=0))
+    odo = optimize(
+        data, OptimizerConfig(initialization="odometry", stopping=StoppingConfig(max_iterations=0))
+    )
     assert res.initial_cost < 0.1 * odo.initial_cost
-    with pytest.raises(ConfigError, match="grow_max_step"):
-        OptimizerConfig(grow_max_step=0)
+    with pytest.raises(ConfigError, match=r"grow\.max_step"):
+        OptimizerConfig(grow=GrowConfig(max_step=0))
 
 
 @pytest.mark.parametrize("objective", ["g2o", "sesync"])

@@ -77,6 +77,8 @@ def _coerce(value: Any, annotation: Any, where: str) -> Any:
             raise ConfigError(f"{where}: expected a string, got {value!r}")
         return value
     if dataclasses.is_dataclass(annotation) and isinstance(annotation, type):
+        if isinstance(value, annotation):  # an already built section
+            return value
         if not isinstance(value, Mapping):
             raise ConfigError(f"{where}: expected a table of settings, got {value!r}")
         return config_from_mapping(annotation, value, where)
@@ -84,7 +86,14 @@ def _coerce(value: Any, annotation: Any, where: str) -> Any:
 
 
 def config_from_mapping(cls: type[C], values: Mapping[str, Any] | None, where: str = "") -> C:
-    """Build the frozen dataclass ``cls`` from ``values``; missing keys keep their defaults."""
+    """Build the frozen dataclass ``cls`` from ``values``; missing keys keep their defaults.
+
+    A field typed as a dataclass (a config *section*, such as ``OptimizerConfig.lm``) takes a
+    nested mapping (a ``[optimizer.lm]`` table in TOML, a nested object in JSON), read by the
+    same rules with its own defaults for missing keys (unknown keys and wrong types are
+    reported as ``where.section.key``); an instance of the section's class is taken as it is.
+    :func:`config_to_dict` writes sections back as nested dicts, so the two round-trip.
+    """
     if not (dataclasses.is_dataclass(cls) and isinstance(cls, type)):
         raise TypeError(f"{cls!r} is not a dataclass type")
     values = dict(values or {})

@@ -21,7 +21,9 @@ Files written (``OUT`` the output folder):
   the optimiser alone (sparsity pattern, symbolic analysis and iterations; not reading,
   validating or initialising, which are ``read_seconds``, ``validate_seconds`` and
   ``init_seconds``).
-* ``config.json`` — the resolved options and the full optimiser configuration.
+* ``config.json`` — the resolved options and the full optimiser configuration
+  (``optimizer``: :class:`~slamkit.optim.OptimizerConfig` with its sections as nested
+  objects, readable by :func:`~slamkit.config.config_from_mapping`).
 """
 
 from __future__ import annotations
@@ -55,7 +57,7 @@ from slamkit.optim import (
 
 if TYPE_CHECKING:
     from slamkit.optim.data import GraphFamily
-    from slamkit.optim.solvers import InitName
+    from slamkit.optim.settings import InitName
     from slamkit.viz.plots import Figure  # app never imports matplotlib itself
 
 __all__ = ["OptimizeReport", "OptimizeRequest", "optimize_graph_job"]
@@ -125,17 +127,20 @@ def _choice(value: str, name: str, allowed: tuple[str, ...]) -> str:
 def _optimizer_config(request: OptimizeRequest) -> OptimizerConfig:
     """Check the request's options and build the optimiser's configuration (errors name the
     option)."""
+    robust: dict[str, Any] = {
+        "kernel": _choice(request.robust_kernel.replace("-", "_"), "robust kernel", KERNELS)
+    }
     settings: dict[str, Any] = {
-        "method": _choice(request.solver, "solver", SOLVERS),
+        "solver": _choice(request.solver, "solver", SOLVERS),
         "objective": _choice(request.objective, "objective", OBJECTIVES),
-        "robust_kernel": _choice(request.robust_kernel.replace("-", "_"), "robust kernel", KERNELS),
+        "robust": robust,
     }
     if request.init is not None:
         _choice(request.init, "init", INITS)
     if request.robust_width is not None:
-        settings["robust_width"] = request.robust_width
+        robust["width"] = request.robust_width
     if request.max_iterations is not None:
-        settings["max_iterations"] = request.max_iterations
+        settings["stopping"] = {"max_iterations": request.max_iterations}
     return config_from_mapping(OptimizerConfig, settings, "optimize")
 
 
@@ -283,7 +288,7 @@ def _metrics(
         "solver": result.method,
         "objective": result.objective,
         "initialization": init,
-        "robust_kernel": cfg.robust_kernel,
+        "robust_kernel": cfg.robust.kernel,
         "linear_solver": result.linear_solver,
         "anchored_first_pose": result.anchored_first,
         "dim": data.dim,
@@ -358,7 +363,7 @@ def optimize_graph_job(
 
     def on_iteration(info: IterationInfo) -> None:
         if progress is not None:
-            progress(info.iteration, cfg.max_iterations)
+            progress(info.iteration, cfg.stopping.max_iterations)
 
     # The folder check comes before the work; on any error the partial folder is removed.
     with atomic_folder(request.out_dir, overwrite=request.overwrite) as tmp:
@@ -378,10 +383,10 @@ def optimize_graph_job(
             "file": str(path),
             "solver": result.method,
             "init": init,
-            "robust_kernel": cfg.robust_kernel,
-            "robust_width": cfg.kernel.width if cfg.robust_kernel != "none" else None,
+            "robust_kernel": cfg.robust.kernel,
+            "robust_width": cfg.kernel.width if cfg.robust.kernel != "none" else None,
             "objective": cfg.objective,
-            "max_iterations": cfg.max_iterations,
+            "max_iterations": cfg.stopping.max_iterations,
             "output": metrics["output"],
             "optimizer": config_to_dict(cfg),
         }

@@ -6,8 +6,14 @@ and 2D landmarks, and over SE(3) poses.
   :mod:`~slamkit.optim.factors3d`: the SE(3) relative-pose and prior edges.
 * :mod:`~slamkit.optim.graph`: validation, variable indexing, gauge, vectorised linearisation.
 * :mod:`~slamkit.optim.sparse`: the fixed normal-matrix pattern and the Cholesky back-ends.
-* :mod:`~slamkit.optim.solvers`: Gauss-Newton, Levenberg-Marquardt, Powell's dogleg, and the
-  grown-prefix start of long landmark graphs.
+* :mod:`~slamkit.optim.settings`: :class:`OptimizerConfig` and its sections (stopping rule,
+  LM, dogleg, robust kernel, grown start).
+* :mod:`~slamkit.optim.loop`: the one nonlinear least-squares loop (linearise, step,
+  accept/reject, stop) and its per-iteration record.
+* :mod:`~slamkit.optim.steps`: its step strategies: Gauss-Newton, Levenberg-Marquardt,
+  Powell's dogleg, and backtracking Gauss-Newton (the incremental batch step).
+* :mod:`~slamkit.optim.solvers`: :func:`optimize` and the grown-prefix start of long
+  landmark graphs.
 * :mod:`~slamkit.optim.init`: odometry spanning tree and chordal initialisation.
 * :mod:`~slamkit.optim.objectives`: the g2o χ² and SE-Sync's ``F`` of any solution.
 * :mod:`~slamkit.optim.robust`: Huber, Cauchy, Geman-McClure and DCS kernels (IRLS).
@@ -31,33 +37,41 @@ from slamkit.optim.init import (
     initial_values,
     spanning_tree_initialization,
 )
+from slamkit.optim.loop import IterationInfo
 from slamkit.optim.marginals import Marginals, marginal_covariances
 from slamkit.optim.objectives import g2o_chi2, sesync_objective
 from slamkit.optim.robust import RobustKernel, robust_rho_and_weight
-from slamkit.optim.solvers import (
-    IterationInfo,
+from slamkit.optim.settings import (
+    DoglegConfig,
+    GrowConfig,
+    LmConfig,
     OptimizerConfig,
-    OptimizeResult,
-    grow_initialization,
-    optimize,
+    RobustConfig,
+    StoppingConfig,
 )
+from slamkit.optim.solvers import OptimizeResult, grow_initialization, optimize
 from slamkit.optim.sparse import cholmod_available
 
 __all__ = [
+    "DoglegConfig",
     "EdgeKind",
     "EdgeSet",
     "GraphData",
     "GraphProblem",
     "GraphUpdate",
+    "GrowConfig",
     "IncrementalConfig",
     "IncrementalOptimizer",
     "IncrementalResult",
     "IterationInfo",
     "Linearization",
+    "LmConfig",
     "Marginals",
     "OptimizeResult",
     "OptimizerConfig",
+    "RobustConfig",
     "RobustKernel",
+    "StoppingConfig",
     "UpdateInfo",
     "cholmod_available",
     "chordal_initialization",

@@ -42,9 +42,9 @@ information factor and updates it by Givens rotations; CHOLMOD can do rank updat
 ``solve``, ``spsolve``, ``diag``, ``getfactor``, ``linsolve`` and ``splinsolve``. Keeping the
 batch factor and folding new edges in exactly (the Schur complement of the new rows, with the
 marginal covariance of each touched old pose taken from the factor) needs one full solve per
-touched old pose: 23 ms for the three right-hand sides of one pose on city10000 (10,000
-poses, 1.3 M nonzeros in ``L``, a loaded machine), some 30 window steps' worth, and city10000
-closes a loop at nearly every pose. So the window step is the cheap local update, and the
+touched old pose, which on a large graph costs tens of window steps per touched pose (the
+measurement is in ``docs/estimators/optim.md``), and a graph like city10000 closes a loop
+at nearly every pose. So the window step is the cheap local update, and the
 batch step restores exactness periodically; between batch steps the numeric factor is not
 kept at all.
 
@@ -69,28 +69,35 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import chain
 
 import numpy as np
-import scipy.linalg
-import scipy.sparse
 
 from slamkit.errors import (
     ConfigError,
     ConvergenceError,
-    CovarianceError,
     GeometryError,
     InputError,
-    NonFiniteError,
     ShapeError,
 )
 from slamkit.geometry import pose2
 from slamkit.optim import factors
 from slamkit.optim.data import EdgeSet, FloatArray, GraphData, IntArray
 from slamkit.optim.graph import GraphProblem
-from slamkit.optim.solvers import OptimizerConfig, optimize
-from slamkit.optim.sparse import LinearSolverName, SingularSystem, make_factorizer, solve_spd
+from slamkit.optim.loop import Estimate, SolverContext, run_least_squares
+from slamkit.optim.robust import RobustKernel
+from slamkit.optim.settings import LmConfig, StoppingConfig
+from slamkit.optim.sparse import LinearSolverName, SingularSystem, make_factorizer
+from slamkit.optim.steps import BacktrackingGaussNewtonStep, LevenbergMarquardtStep
+from slamkit.optim.updates import (
+    GraphUpdate,
+    check_guesses,
+    check_update_edges,
+    edge_name,
+    time_ordered_updates,
+)
+from slamkit.optim.window import solve_window, window_normal_equations, window_terms
 
 __all__ = [
     "GraphUpdate",
@@ -100,8 +107,6 @@ __all__ = [
     "UpdateInfo",
     "time_ordered_updates",
 ]
-
-_KINDS = ("se2", "se2_prior")
 
 
 @dataclass(frozen=True)
@@ -152,15 +157,6 @@ class IncrementalConfig:
 
 
 @dataclass(frozen=True)
-class GraphUpdate:
-    """One update: new pose ids (increasing), their edges, and optional initial guesses."""
-
-    pose_ids: IntArray  # (K,)
-    edges: tuple[EdgeSet, ...]
-    initial_poses: FloatArray | None = None  # (K, 3); None: chained from the edges
-
-
-@dataclass(frozen=True)
 class UpdateInfo:
     """What one :meth:`IncrementalOptimizer.update` did."""
 
@@ -189,66 +185,6 @@ class IncrementalResult:
     batch_iterations: int  # linearisations over all batch steps
     update_seconds: FloatArray  # (updates,) wall time of each update
     finish_seconds: float  # the final batch step
-
-
-def time_ordered_updates(data: GraphData, *, use_vertices: bool = False) -> list[GraphUpdate]:
-    """Split a 2D pose graph into one update per pose in increasing id order, each carrying
-    the edges (``se2``, ``se2_prior``) whose later end is that pose.
-
-    ``use_vertices``: give the file's vertices as initial guesses (default: only the first
-    pose's, where the gauge anchors it as in batch; the optimiser chains the others from the
-    edges and its current estimate, as a robot would).
-    """
-    if data.dim != 2:
-        raise InputError(f"incremental optimisation handles 2D pose graphs, got dim {data.dim}")
-    sets = []
-    for es in data.edges:
-        if es.kind not in _KINDS:
-            raise InputError(
-                f"incremental optimisation handles se2 and se2_prior edges, got {es.kind!r}"
-            )
-        sets.append(es)
-    if data.poses.shape[0]:
-        ids = np.asarray(data.pose_ids, dtype=np.int64)
-    else:
-        refs = [es.i for es in sets] + [es.j for es in sets if es.kind == "se2"]
-        ids = np.unique(np.concatenate(refs)) if refs else np.zeros(0, np.int64)
-    order = np.argsort(ids, kind="stable")
-    sorted_ids = ids[order]
-    per_set = []
-    for es in sets:
-        later = es.i if es.kind == "se2_prior" else np.maximum(es.i, es.j)
-        k = np.argsort(later, kind="stable")
-        starts = np.searchsorted(later[k], sorted_ids, side="left")
-        ends = np.searchsorted(later[k], sorted_ids, side="right")
-        per_set.append((es, k, starts, ends))
-    updates = []
-    for r, pid in enumerate(sorted_ids.tolist()):
-        edges = []
-        for es, k, starts, ends in per_set:
-            sel = k[starts[r] : ends[r]]
-            if sel.shape[0]:
-                edges.append(
-                    EdgeSet(
-                        es.kind,
-                        es.i[sel],
-                        es.j[sel],
-                        es.measurement[sel],
-                        es.information[sel],
-                        es.lines[sel] if es.lines.shape[0] else np.zeros(sel.shape[0], np.int64),
-                    )
-                )
-        guess = None
-        if data.poses.shape[0] and (use_vertices or r == 0):
-            guess = data.poses[order[r]][None, :].copy()
-        updates.append(GraphUpdate(np.array([pid], dtype=np.int64), tuple(edges), guess))
-    return updates
-
-
-def _edge_name(es: EdgeSet, k: int) -> str:
-    line = int(es.lines[k]) if es.lines.shape[0] > k else 0
-    what = f"{es.kind} edge {int(es.i[k])}" + (f" → {int(es.j[k])}" if es.kind == "se2" else "")
-    return what + (f" (line {line})" if line > 0 else f" (#{k} of its set in this update)")
 
 
 class IncrementalOptimizer:
@@ -359,8 +295,8 @@ class IncrementalOptimizer:
         """
         t0 = time.perf_counter()
         new_ids = self._check_new_ids(pose_ids)
-        guesses = self._check_guesses(initial_poses, new_ids)
-        checked = [self._check_edge_set(es) for es in edges]
+        guesses = check_guesses(initial_poses, new_ids)
+        checked = [check_update_edges(es) for es in edges]
         new_row = {pid: self._n + k for k, pid in enumerate(new_ids.tolist())}
         resolved = [self._resolve(es, new_row) for es in checked]
         X_new = self._initial_guesses(new_ids, new_row, guesses, resolved)
@@ -456,56 +392,6 @@ class IncrementalOptimizer:
             prev = pid
         return ids
 
-    @staticmethod
-    def _check_guesses(initial_poses: FloatArray | None, ids: IntArray) -> FloatArray | None:
-        if initial_poses is None:
-            return None
-        g = np.asarray(initial_poses, dtype=np.float64)
-        if g.shape != (ids.shape[0], 3):
-            raise ShapeError(f"initial_poses: expected shape ({ids.shape[0]}, 3), got {g.shape}")
-        if not np.isfinite(g).all():
-            k = int(np.flatnonzero(~np.isfinite(g).all(axis=1))[0])
-            raise NonFiniteError(f"initial_poses: NaN or infinity in the guess of pose {ids[k]}")
-        return g
-
-    @staticmethod
-    def _check_edge_set(es: EdgeSet) -> tuple[EdgeSet, FloatArray]:
-        """Shapes, finiteness, symmetric positive definite information; returns ``U``."""
-        if es.kind not in _KINDS:
-            raise InputError(
-                f"edge kind {es.kind!r}: incremental optimisation handles se2 and se2_prior"
-            )
-        n = len(es)
-        for name, arr, shape in (
-            ("j", es.j, (n,)),
-            ("measurement", es.measurement, (n, 3)),
-            ("information", es.information, (n, 3, 3)),
-        ):
-            if np.shape(arr) != shape:
-                raise ShapeError(
-                    f"{es.kind} edges: {name} has shape {np.shape(arr)}, expected {shape}"
-                )
-        info = es.information
-        if not (np.isfinite(es.measurement).all() and np.isfinite(info).all()):
-            bad = ~np.isfinite(es.measurement).all(axis=1) | ~np.isfinite(info).all(axis=(1, 2))
-            raise NonFiniteError(f"{_edge_name(es, int(np.flatnonzero(bad)[0]))}: NaN or infinity")
-        if n == 0:
-            return es, np.zeros((0, 3, 3))
-        asym = np.abs(info - np.swapaxes(info, 1, 2)).max(axis=(1, 2)) > 1e-9 * np.abs(info).max(
-            axis=(1, 2)
-        )
-        if asym.any():
-            k = int(np.flatnonzero(asym)[0])
-            raise CovarianceError(f"{_edge_name(es, k)}: information matrix not symmetric")
-        try:
-            L = np.linalg.cholesky(info)
-        except np.linalg.LinAlgError:
-            k = int(np.argmin(np.linalg.eigvalsh(info).min(axis=1)))
-            raise CovarianceError(
-                f"{_edge_name(es, k)}: information matrix not positive definite"
-            ) from None
-        return es, np.swapaxes(L, 1, 2)
-
     def _resolve(
         self, checked: tuple[EdgeSet, FloatArray], new_row: dict[int, int]
     ) -> tuple[EdgeSet, FloatArray, IntArray, IntArray | None]:
@@ -518,7 +404,7 @@ class IncrementalOptimizer:
                 r = self._row_of.get(pid, new_row.get(pid))
                 if r is None:
                     raise InputError(
-                        f"{_edge_name(es, k)}: pose {pid} is not in the graph (add it in this "
+                        f"{edge_name(es, k)}: pose {pid} is not in the graph (add it in this "
                         "update or an earlier one)"
                     )
                 out[k] = r
@@ -530,7 +416,7 @@ class IncrementalOptimizer:
         b = rows(np.asarray(es.j, dtype=np.int64))
         if (a == b).any():
             k = int(np.flatnonzero(a == b)[0])
-            raise InputError(f"{_edge_name(es, k)}: edge from a pose to itself")
+            raise InputError(f"{edge_name(es, k)}: edge from a pose to itself")
         return es, U, a, b
 
     def _initial_guesses(
@@ -699,27 +585,13 @@ class IncrementalOptimizer:
         self._local[rows] = -1
         l6 = np.repeat(np.concatenate([la[:, None], lb[:, None]], axis=1), 3, axis=1)
         cols = np.where(l6 >= 0, 3 * l6 + np.tile(np.arange(3), 2), -1)  # (E, 6)
-        any_prior = bool(prior.any())
-        bw = ~prior
         first_step = 0.0
         for it in range(self.config.window_iterations):
             X = self._X
-            if not any_prior:  # the common case: relative-pose edges only
-                e, Ja, Jb = factors.se2_between_error(X[a], X[b], z)
-                J = np.concatenate([Ja, Jb], axis=2)  # ∂e/∂(δ_a, δ_b)
-            else:
-                e = np.empty((eidx.shape[0], 3))
-                J = np.zeros((eidx.shape[0], 3, 6))
-                if bw.any():
-                    e[bw], J[bw, :, :3], J[bw, :, 3:] = factors.se2_between_error(
-                        X[a[bw]], X[b[bw]], z[bw]
-                    )
-                e[prior], J[prior, :, :3] = factors.se2_prior_error(X[a[prior]], z[prior])
-            r = np.einsum("eij,ej->ei", U, e)  # whitened residual U e and Jacobian U J
-            J = U @ J
-            flat, vals, g = _window_normal_equations(3 * w, cols, r, J)
+            r, J = window_terms(X, a, b, z, U, prior)
+            flat, vals, g = window_normal_equations(3 * w, cols, r, J)
             try:
-                delta = _solve_window(3 * w, flat, vals, g, self.config.linear_solver)
+                delta = solve_window(3 * w, flat, vals, g, self.config.linear_solver)
             except SingularSystem:
                 names = ", ".join(str(int(self._ids[q])) for q in rows[:8].tolist())
                 raise GeometryError(
@@ -736,118 +608,53 @@ class IncrementalOptimizer:
 
     # ------------------------------------------------------------------ batch step
     def _batch_step(self, rtol: float) -> int:
-        """Gauss-Newton on the whole graph from the current estimate (one symbolic analysis,
-        reused by every iteration); returns the number of linearisations."""
+        """The loop of :func:`~slamkit.optim.loop.run_least_squares` on the whole graph from
+        the current estimate, with Gauss-Newton and backtracking
+        (:class:`~slamkit.optim.steps.BacktrackingGaussNewtonStep`; one symbolic analysis,
+        reused by every iteration), then Levenberg-Marquardt from where it stalls; returns
+        the number of linearisations (LM's: factorisations)."""
         self._clear_window()
         self._batch_steps += 1
         data = self.graph()
         problem = GraphProblem.from_data(data)
         x = problem.to_internal(data.poses)
-        lm = np.zeros((0, 2))
-        cfg = self.config
-        lin = problem.linearize(x, lm)
-        iterations = 1
-        converged = problem.n == 0
-        if not converged:
-            fac = make_factorizer(cfg.linear_solver, problem.pattern)
-            for _ in range(cfg.batch_max_iterations):
-                assert lin.H is not None and lin.g is not None
-                try:
-                    fac.factor(lin.H)
-                except SingularSystem as exc:
-                    which = (
-                        f"{problem.variable_of_column(exc.column)} is not determined"
-                        if exc.column is not None
-                        else "the back-end does not say which variable is not determined"
-                    )
-                    raise GeometryError(
-                        f"the normal equations of the graph so far are singular ({exc}); {which}"
-                    ) from None
-                delta = -fac.solve(lin.g)
-                x_new, _ = problem.retract(x, lm, delta)
-                new = problem.linearize(x_new, lm)
-                iterations += 1
-                if not np.isfinite(new.cost):
-                    raise ConvergenceError("a batch step produced a non-finite cost", self._updates)
-                if new.cost > lin.cost and new.cost - lin.cost <= rtol * lin.cost:
-                    converged = True  # rounding noise at the minimum: keep the lower point
-                    break
-                alpha = 1.0
-                while new.cost > lin.cost and alpha > 0.05:
-                    # Gauss-Newton overshot (a strongly nonlinear correction): backtrack.
-                    alpha *= 0.5
-                    x_new, _ = problem.retract(x, lm, alpha * delta)
-                    new = problem.linearize(x_new, lm)
-                    iterations += 1
-                if not new.cost <= lin.cost:
-                    # No decrease along the Gauss-Newton direction: Levenberg-Marquardt from
-                    # here, with the same problem and tolerance.
-                    res = optimize(
-                        data,
-                        OptimizerConfig(
-                            method="lm",
-                            relative_tolerance=rtol,
-                            step_tolerance=cfg.step_tolerance,
-                            max_iterations=cfg.batch_max_iterations,
-                            linear_solver=cfg.linear_solver,
-                        ),
-                        initial_poses=problem.to_external(x),
-                        problem=problem,
-                    )
-                    x = problem.to_internal(res.poses)
-                    lin = problem.linearize(x, lm, jacobians=False)
-                    iterations += res.factorizations
-                    converged = res.converged
-                    break
-                change = lin.cost - new.cost
-                x, lin = x_new, new
-                if change <= rtol * abs(new.cost + change) or np.abs(delta).max() <= (
-                    cfg.step_tolerance
-                ):
-                    converged = True
-                    break
-        self._X[: self._n] = problem.to_external(x)
+        if problem.n == 0:  # every pose fixed: nothing to solve
+            current = Estimate(x, np.zeros((0, 2)), problem.linearize(x, np.zeros((0, 2))))
+            iterations, converged = 1, True
+        else:
+            current, iterations, converged = self._batch_solve(problem, x, rtol)
+        self._X[: self._n] = problem.to_external(current.poses)
         self._batch_iterations += iterations
         self._last_converged = converged
-        self._last_chi2 = lin.chi2
+        self._last_chi2 = current.lin.chi2
         return iterations
 
-
-def _window_normal_equations(
-    n: int, cols: IntArray, r: FloatArray, J: FloatArray
-) -> tuple[IntArray, FloatArray, FloatArray]:
-    """``H = Σ Jᵀ J`` as flat indices ``row · n + col`` and values (duplicates to be summed;
-    ``n²`` marks a dropped entry) and ``g = Σ Jᵀ r`` (length ``n``), from each edge's whitened
-    residual ``r (E, 3)``, Jacobian ``J (E, 3, 6)`` with respect to both of its poses and the
-    window columns ``cols (E, 6)`` of those six unknowns (-1: the pose is held fixed)."""
-    keep = cols >= 0
-    flat = np.where(
-        keep[:, :, None] & keep[:, None, :], cols[:, :, None] * n + cols[:, None, :], n * n
-    )
-    vals = np.einsum("eki,ekj->eij", J, J)
-    gcols = np.where(keep, cols, n)
-    g = np.bincount(gcols.ravel(), np.einsum("eki,ek->ei", J, r).ravel(), minlength=n + 1)
-    return flat.ravel().astype(np.int64), vals.ravel(), g[:n].astype(np.float64)
-
-
-# Up to this size the window system is solved densely. OpenBLAS runs LAPACK's Cholesky
-# multithreaded on larger matrices, which on a loaded 2-core machine cost 9 ms at n = 150
-# against 0.11 ms at n = 75 (sparse CHOLMOD: 0.6 ms at n = 180).
-_DENSE_MAX = 96
-
-
-def _solve_window(
-    n: int, flat: IntArray, vals: FloatArray, g: FloatArray, solver: LinearSolverName
-) -> FloatArray:
-    """``δ = -H⁻¹ g``; raises :class:`SingularSystem` when ``H`` is not positive definite."""
-    if n <= _DENSE_MAX:
-        H = np.bincount(flat, vals, minlength=n * n + 1)[: n * n].reshape(n, n)
-        try:
-            c = scipy.linalg.cho_factor(H, lower=True, check_finite=False)
-        except np.linalg.LinAlgError as exc:
-            raise SingularSystem(str(exc)) from None
-        return -scipy.linalg.cho_solve(c, g, check_finite=False)
-    keep = flat < n * n
-    flat, vals = flat[keep], vals[keep]
-    H_sparse = scipy.sparse.coo_matrix((vals, (flat // n, flat % n)), shape=(n, n)).tocsc()
-    return -solve_spd(H_sparse, g, solver)
+    def _batch_solve(
+        self, problem: GraphProblem, x: FloatArray, rtol: float
+    ) -> tuple[Estimate, int, bool]:
+        """Backtracking Gauss-Newton from ``x`` until ``|f_old - f_new| ≤ rtol · f_old`` or
+        ``max |δ| ≤ step_tolerance`` (no gradient test), then LM from where it stalls.
+        Returns the estimate, the linearisations (LM's: factorisations) and convergence."""
+        cfg = self.config
+        ctx = SolverContext(
+            problem, RobustKernel(), make_factorizer(cfg.linear_solver, problem.pattern)
+        )
+        start = ctx.linearize(x, np.zeros((0, 2)))
+        rule = StoppingConfig(
+            max_iterations=cfg.batch_max_iterations,
+            relative_tolerance=rtol,
+            absolute_tolerance=0.0,
+            step_tolerance=cfg.step_tolerance,
+        )
+        gn = BacktrackingGaussNewtonStep(rtol, self._updates)
+        out = run_least_squares(ctx, start, gn, rule, [], check_gradient=False)
+        iterations = ctx.linearizations
+        if out.stalled and not out.converged:
+            # No decrease along the Gauss-Newton direction: Levenberg-Marquardt from here,
+            # with the same problem and tolerance.
+            lm_rule = replace(rule, absolute_tolerance=StoppingConfig().absolute_tolerance)
+            before = ctx.factorizations
+            lm = LevenbergMarquardtStep(LmConfig())
+            out = run_least_squares(ctx, out.estimate, lm, lm_rule, [])
+            iterations += ctx.factorizations - before
+        return out.estimate, iterations, out.converged

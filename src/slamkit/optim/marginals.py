@@ -19,7 +19,9 @@ from numpy.typing import ArrayLike
 from slamkit.errors import GeometryError, InputError
 from slamkit.optim.data import FloatArray, GraphData, IntArray
 from slamkit.optim.graph import GraphProblem, lookup_rows
-from slamkit.optim.solvers import OptimizerConfig, OptimizeResult, indeterminate_error
+from slamkit.optim.loop import indeterminate_error
+from slamkit.optim.settings import OptimizerConfig
+from slamkit.optim.solvers import OptimizeResult
 from slamkit.optim.sparse import SingularSystem, make_factorizer
 
 __all__ = ["Marginals", "marginal_covariances"]

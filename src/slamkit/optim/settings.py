@@ -1,0 +1,275 @@
+"""Settings of the batch optimiser (:func:`~slamkit.optim.optimize`) as frozen sections.
+
+``OptimizerConfig`` holds the choices (solver, objective, start, gauge, linear back-end) and
+one section per concern::
+
+    OptimizerConfig(
+        solver="lm",
+        stopping=StoppingConfig(max_iterations=100, relative_tolerance=1e-6),
+        lm=LmConfig(lambda_initial=1e-5),    # read only by solver="lm"
+        dogleg=DoglegConfig(),               # read only by solver="dogleg"
+        robust=RobustConfig(kernel="cauchy"),
+        grow=GrowConfig(),                   # read only by initialization="grow"
+    )
+
+In a TOML file the sections are nested tables (``[optimizer.lm]``), in JSON nested objects;
+:func:`~slamkit.config.config_from_mapping` and :func:`~slamkit.config.config_to_dict` read
+and write them.
+
+**Validation is declarative.** Each field that needs a range says so where it is declared,
+``setting(default, check)``, and a ``Literal`` annotation is its own list of choices; every
+section's ``__post_init__`` (from :class:`Section`) runs those checks and raises a
+:class:`~slamkit.errors.ConfigError` that names the field as ``section.field``.
+
+Units: ``f`` is the cost ``Σ ρ(‖U e‖²)`` (χ² without a robust kernel, no factor ½),
+dimensionless; steps ``δ`` are tangent vectors of the free variables (metres and radians for
+poses, metres for landmarks). An *iteration* is one linearisation; LM may factor several
+damped systems and dogleg try several radii inside one iteration.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Literal
+
+from slamkit.errors import ConfigError
+from slamkit.optim.graph import GaugeMode, ObjectiveName
+from slamkit.optim.robust import DEFAULT_WIDTHS, KernelName, RobustKernel
+from slamkit.optim.sparse import LinearSolverName
+
+__all__ = [
+    "DoglegConfig",
+    "GrowConfig",
+    "InitName",
+    "LmConfig",
+    "MethodName",
+    "OptimizerConfig",
+    "RobustConfig",
+    "Section",
+    "StoppingConfig",
+    "setting",
+]
+
+MethodName = Literal["lm", "gn", "dogleg"]
+InitName = Literal["auto", "vertices", "odometry", "chordal", "grow"]
+
+Check = Callable[[Any], bool]
+"""A field's range test: true when the value is allowed."""
+
+
+def setting(default: Any, check: Check, expected: str) -> Any:
+    """A dataclass field with ``default`` whose value must pass ``check`` (``expected`` says
+    what is allowed, for the error message)."""
+    return field(default=default, metadata={"check": check, "expected": expected})
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def int_at_least(low: int) -> Check:
+    """An integer ``>= low``."""
+    return lambda v: _is_int(v) and v >= low
+
+
+def finite_at_least(low: float) -> Check:
+    """A finite number ``>= low``."""
+    return lambda v: _is_number(v) and v >= low
+
+
+def finite_above(low: float) -> Check:
+    """A finite number ``> low``."""
+    return lambda v: _is_number(v) and v > low
+
+
+class Section:
+    """Base of the config sections: ``__post_init__`` checks every field declared with
+    :func:`setting` and every ``Literal``-typed field, naming ``SECTION.field`` on failure."""
+
+    SECTION: ClassVar[str] = ""
+    _literal_cache: ClassVar[dict[type, dict[str, tuple[Any, ...]]]] = {}
+
+    @classmethod
+    def _literals(cls) -> dict[str, tuple[Any, ...]]:
+        """The choices of each ``Literal``-typed field (resolved once per class)."""
+        cached = Section._literal_cache.get(cls)
+        if cached is None:
+            cached = {}
+            for name, hint in typing.get_type_hints(cls).items():
+                if typing.get_origin(hint) is Literal:
+                    cached[name] = typing.get_args(hint)
+            Section._literal_cache[cls] = cached
+        return cached
+
+    def __post_init__(self) -> None:
+        prefix = f"{self.SECTION}." if self.SECTION else ""
+        choices = self._literals()
+        for f in dataclasses.fields(self):  # type: ignore[arg-type]
+            value = getattr(self, f.name)
+            if f.name in choices and value not in choices[f.name]:
+                allowed = ", ".join(repr(c) for c in choices[f.name])
+                raise ConfigError(f"{prefix}{f.name}: expected one of {allowed}, got {value!r}")
+            check = f.metadata.get("check")
+            if check is not None and not check(value):
+                raise ConfigError(
+                    f"{prefix}{f.name}: expected {f.metadata['expected']}, got {value!r}"
+                )
+
+
+@dataclass(frozen=True)
+class StoppingConfig(Section):
+    """When the nonlinear least-squares loop stops. Before solving iteration ``k`` it stops
+    (converged) when ``max |g| ≤ gradient_tolerance``; after an accepted step from ``f_old``
+    to ``f_new`` of size ``max |δ|`` it stops (converged) when the first of
+    ``|f_old - f_new| ≤ absolute_tolerance``, ``|f_old - f_new| ≤ relative_tolerance · |f_old|``
+    or ``max |δ| ≤ step_tolerance`` holds; after ``max_iterations`` linearisations it stops
+    with ``converged = False``."""
+
+    SECTION: ClassVar[str] = "stopping"
+
+    max_iterations: int = setting(100, int_at_least(0), "an integer >= 0")
+    """Stop after this many linearisations (``converged = False``)."""
+    relative_tolerance: float = setting(1e-6, finite_at_least(0.0), "a finite number >= 0")
+    """Stop (converged) after a step when ``|f_old - f_new| ≤ relative_tolerance · |f_old|``
+    (dimensionless)."""
+    absolute_tolerance: float = setting(1e-9, finite_at_least(0.0), "a finite number >= 0")
+    """Stop (converged) after a step when ``|f_old - f_new| ≤ absolute_tolerance`` (cost
+    units: χ²)."""
+    gradient_tolerance: float = setting(0.0, finite_at_least(0.0), "a finite number >= 0")
+    """Stop (converged) before solving when ``max |g| ≤ gradient_tolerance`` (``g = JᵀWr``,
+    cost per tangent unit)."""
+    step_tolerance: float = setting(1e-12, finite_at_least(0.0), "a finite number >= 0")
+    """Stop (converged) after a step when ``max |δ| ≤ step_tolerance`` (tangent units: metres,
+    radians)."""
+
+
+@dataclass(frozen=True)
+class LmConfig(Section):
+    """Levenberg-Marquardt: solve ``(H + λD) δ = -g``; accept when ``f`` decreases, then
+    ``λ ← max(λ / lambda_factor, 1e-20)``, else ``λ ← λ · lambda_factor`` and refactor."""
+
+    SECTION: ClassVar[str] = "lm"
+
+    lambda_initial: float = setting(1e-5, finite_above(0.0), "a finite number > 0")
+    """The first damping ``λ`` (cost per squared tangent unit)."""
+    lambda_factor: float = setting(10.0, finite_above(1.0), "a finite number > 1")
+    """``λ`` is divided by this after an accepted step and multiplied after a rejected one."""
+    lambda_max: float = setting(1e10, finite_above(0.0), "a finite number > 0")
+    """Stop (``converged = False``) when ``λ`` exceeds this without finding a decrease."""
+    damping: Literal["levenberg", "marquardt"] = "levenberg"
+    """``D = I`` (``"levenberg"``, GTSAM's default) or ``D = diag(H)`` (``"marquardt"``)."""
+
+
+@dataclass(frozen=True)
+class DoglegConfig(Section):
+    """Powell's dogleg: a trust region of Euclidean radius ``Δ`` (tangent units) around the
+    current estimate, grown to ``max(Δ, 3‖δ‖)`` when the gain ratio exceeds 0.75 and halved
+    when it is below 0.25."""
+
+    SECTION: ClassVar[str] = "dogleg"
+
+    trust_radius_initial: float = setting(1.0, finite_above(0.0), "a finite number > 0")
+    """The first trust-region radius ``Δ`` (Euclidean norm of ``δ``, tangent units)."""
+    trust_radius_min: float = setting(1e-12, finite_at_least(0.0), "a finite number >= 0")
+    """Stop (``converged = False``) when ``Δ`` shrinks below this without finding a
+    decrease."""
+
+
+@dataclass(frozen=True)
+class RobustConfig(Section):
+    """The robust kernel ``ρ`` applied to every edge's ``‖U e‖²`` (IRLS weights)."""
+
+    SECTION: ClassVar[str] = "robust"
+
+    kernel: KernelName = "none"
+    """``"none"``, ``"huber"``, ``"cauchy"``, ``"geman_mcclure"`` or ``"dcs"`` (all edges)."""
+    width: float | None = None
+    """Kernel width (δ, c or φ; see :mod:`slamkit.optim.robust`); ``None``: the kernel's
+    default, :data:`~slamkit.optim.robust.DEFAULT_WIDTHS`."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _ = self.resolve()  # validates the width
+
+    def resolve(self) -> RobustKernel:
+        """The kernel with its width resolved (``width`` or the kernel's default)."""
+        width = self.width
+        if width is None:
+            width = DEFAULT_WIDTHS.get(self.kernel, 1.0)
+        return RobustKernel(self.kernel, width)
+
+
+@dataclass(frozen=True)
+class GrowConfig(Section):
+    """``initialization="grow"``: batch solves over growing time-ordered prefixes (see
+    :func:`~slamkit.optim.grow_initialization`)."""
+
+    SECTION: ClassVar[str] = "grow"
+
+    initial_poses: int = setting(250, int_at_least(1), "an integer >= 1")
+    """Poses (rows in ``pose_ids`` order, i.e. time order) in the first prefix."""
+    max_step: int = setting(1500, int_at_least(1), "an integer >= 1")
+    """Each prefix doubles, adding at most this many poses."""
+    relative_tolerance: float = setting(1e-3, finite_above(0.0), "a finite number > 0")
+    """The ``stopping.relative_tolerance`` of the prefix solves (the larger of the two is
+    used; the last, full solve uses ``stopping``'s); they only need to land in the right
+    basin."""
+
+
+@dataclass(frozen=True)
+class OptimizerConfig(Section):
+    """Settings of :func:`~slamkit.optim.optimize` (see the module docstring for the units)."""
+
+    solver: MethodName = "lm"
+    """``"lm"`` (Levenberg-Marquardt), ``"gn"`` (Gauss-Newton) or ``"dogleg"`` (Powell)."""
+    objective: ObjectiveName = "g2o"
+    """``"g2o"``: ``Σ eᵀ Ω e`` with g2o's SE(2) error; ``"sesync"``: SE-Sync's ``F`` for the
+    relative-pose edges (other edge kinds keep their g2o error)."""
+    initialization: InitName = "auto"
+    """``"vertices"``, ``"odometry"`` (spanning tree), ``"chordal"``, ``"grow"`` (batch solves
+    over growing time-ordered prefixes, settings in ``grow``), or ``"auto"``: vertices when the
+    file has them, else ``"grow"`` when the graph has landmark readings, else odometry.
+    Ignored when initial values are passed."""
+    gauge: GaugeMode = "anchor_first"
+    """``"anchor_first"``: with no fixed pose and no prior, hold the first pose fixed;
+    ``"none"``: raise :class:`~slamkit.errors.GeometryError` in that case."""
+    linear_solver: LinearSolverName = "auto"
+    """Sparse Cholesky back-end: ``"cholmod"`` (needs cvxopt), ``"superlu"``, ``"dense"``;
+    ``"auto"`` is CHOLMOD when available, else SuperLU."""
+    stopping: StoppingConfig = field(default_factory=StoppingConfig)
+    """The stopping rule of every solver."""
+    lm: LmConfig = field(default_factory=LmConfig)
+    """Levenberg-Marquardt's damping (``solver="lm"``)."""
+    dogleg: DoglegConfig = field(default_factory=DoglegConfig)
+    """Dogleg's trust region (``solver="dogleg"``)."""
+    robust: RobustConfig = field(default_factory=RobustConfig)
+    """The robust kernel (all solvers)."""
+    grow: GrowConfig = field(default_factory=GrowConfig)
+    """The grown-prefix start (``initialization="grow"``)."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name, kind in (
+            ("stopping", StoppingConfig),
+            ("lm", LmConfig),
+            ("dogleg", DoglegConfig),
+            ("robust", RobustConfig),
+            ("grow", GrowConfig),
+        ):
+            if not isinstance(getattr(self, name), kind):
+                raise ConfigError(
+                    f"{name}: expected a {kind.__name__}, got {getattr(self, name)!r}"
+                )
+
+    @property
+    def kernel(self) -> RobustKernel:
+        """The robust kernel with its width resolved (``robust.width`` or the default)."""
+        return self.robust.resolve()
