@@ -343,13 +343,13 @@ def westward_dataset(seed: int) -> Dataset:
     """Heading west (θ = π, where the heading itself wraps) past landmarks 0.2 m off the
     road: each is first ahead (bearing ≈ 0), then straight behind (bearing ≈ ±π, the sign
     flipping with the noise)."""
-    from slamkit.sim.scenarios import LandmarkScenarioConfig, _landmark_dataset
+    from slamkit.sim.scenarios import LandmarkScenarioConfig, landmark_dataset
 
     xs = -np.arange(4.0, 40.0, 4.0)
     ys = np.where(np.arange(xs.size) % 2, 0.2, -0.2)
     world = LandmarkMap.from_positions(np.column_stack([xs, ys]))
     cfg = LandmarkScenarioConfig(max_range=6.0, min_range=1.0)
-    return _landmark_dataset(
+    return landmark_dataset(
         "westward", "", cfg, world, np.array([0.0, 0.0, np.pi]), np.array([[-40.0, 0.0]]),
         np.random.default_rng(seed),
     )  # fmt: skip
