@@ -91,8 +91,6 @@ class SlamBelief:
         return diagonal_blocks(self.cov, len(self))
 
 
-
-
 def _landmark_model(model: object) -> InvertibleLandmarkModel:
     if not isinstance(model, InvertibleLandmarkModel):
         raise InputError(
@@ -221,4 +219,3 @@ def dense_slam_update(
     mean[2] = wrap_angle_float(float(mean[2]))
     nis = float(nu @ np.linalg.solve(S, nu))
     return SlamBelief(mean, 0.5 * (cov + cov.T), belief.ids.copy()), UpdateInfo(nu, S, nis)
-

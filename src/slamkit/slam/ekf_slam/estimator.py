@@ -158,7 +158,7 @@ class EkfSlam:
         self._model: LandmarkModel = sensor.model()
         self._R = as_covariance(config.measurement_noise_scale * sensor.noise_cov, "R", None)
         self._m = int(self._R.shape[0])
-        self._R_inv = np.linalg.inv(self._R)
+        self._R_inv = np.asarray(np.linalg.inv(self._R), dtype=np.float64)
         self._angular = angular_indices(self._model)
         self._sensor = sensor
         self._use_ids = config.use_ids and sensor.identities

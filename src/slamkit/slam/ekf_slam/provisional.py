@@ -24,8 +24,15 @@ from slamkit.slam.common import reading_jacobians
 from slamkit.slam.ekf_slam.config import EkfSlamConfig
 from slamkit.slam.ekf_slam.state import SlamState, diagonal_blocks
 
-__all__ = ["TRACKED", "count_misses", "in_view", "is_confirmed", "reading_information",
-           "remove_missed", "watched"]
+__all__ = [
+    "TRACKED",
+    "count_misses",
+    "in_view",
+    "is_confirmed",
+    "reading_information",
+    "remove_missed",
+    "watched",
+]
 
 TRACKED = ReadingStatus.TRACKED
 """Reading status: the reading updated a provisional feature (the feature only; see
