@@ -30,7 +30,8 @@ class EkfSlamConfig:
     """Data association of unlabelled readings. ``"nn"``: greedy global nearest neighbour
     in Mahalanobis distance (pairs taken by increasing ``d²`` inside the gate, one reading
     per landmark and scan). ``"jcbb"``: joint compatibility branch and bound over the scan
-    (:func:`jcbb`), which respects that every prediction shares the robot's error."""
+    (:func:`~slamkit.slam.ekf_slam.jcbb`), which respects that every prediction shares the
+    robot's error."""
     gate_probability: float = 0.999
     """The individual (and, for JCBB, joint) χ² gate: ``d² ≤ χ²_m(p)`` (13.8 for ``m = 2``;
     JCBB's ``p`` pairs: ``χ²_{mp}(p)``)."""
@@ -51,8 +52,8 @@ class EkfSlamConfig:
     runs after an update. Not the marginal ``Σ_ff``, which can never fall below the robot's
     own position variance: after some drift no feature would be confirmed and the map would
     stop growing. Not ``Σ_ff`` conditioned on the current pose either: that includes the
-    motion noise since the last sighting, and with 0.5 s control steps (``landmark-loop``,
-    ``dt=0.5``, seed 2) 15 of 40 features stayed provisional to the end. ``None``: features join
+    motion noise since the last sighting, so with long control steps many features would
+    stay provisional to the end (``docs/estimators/ekf_slam.md``). ``None``: features join
     the map at their first reading."""
     max_misses: int | None = 3
     """A provisional feature predicted inside the sensor's field of view and range (with a

@@ -20,8 +20,8 @@ class SeifConfig:
     this many the least recently observed are deactivated by sparsification. Without ids it
     should hold a scan's landmarks: in ``landmark-clutter`` (~13 readings a scan) the
     default cuts the links to half of what was just seen, SEIF turns overconfident and
-    true landmarks fall out of the gate (association accuracy 93.9–99.7 % over seeds 0–5;
-    20: 97.9–99.8 %, as EKF-SLAM's nearest neighbour)."""
+    true landmarks fall out of the gate; 20 associates as well as EKF-SLAM's nearest
+    neighbour (measured in ``docs/estimators/ekf_slam.md``)."""
     relax_per_step: int = 10
     """Landmarks besides the robot and the active ones whose mean is relaxed per step (in
     turn, round robin): the amortised mean recovery."""
