@@ -6,7 +6,7 @@ every other). The arithmetic is a rank-4 correction, a few flops per entry, so t
 bound by memory traffic: at best the matrix is read once and written once, ``16 n²`` bytes.
 This script measures, for ``L`` = 100, 250, 500, 1000, 2000:
 
-* slamkit's update (``slamkit.slam.ekf_slam._update_inplace``, the kernel the estimator runs
+* slamkit's update (``slamkit.slam.ekf_slam.update.update_inplace``, the kernel the estimator runs
   per reading): ``H Σ`` from five rows, the gain, and the Joseph form as one rank-4 product
   applied in cache-sized blocks of rows;
 * the peer, a plain NumPy EKF update with the dense ``2 × n`` Jacobian:
@@ -43,9 +43,9 @@ from slamkit.datasets import Dataset, LandmarkReadings
 from slamkit.eval import landmark_map_error, pose_errors
 from slamkit.maps import LandmarkMap
 from slamkit.models import RangeBearing
-from slamkit.sim.scenarios import LandmarkScenarioConfig, _landmark_dataset
+from slamkit.sim.scenarios import LandmarkScenarioConfig, landmark_dataset
 from slamkit.slam import EkfSlam, EkfSlamConfig, Seif, SeifConfig
-from slamkit.slam.ekf_slam import _SCRATCH_BYTES, _update_inplace
+from slamkit.slam.ekf_slam.update import SCRATCH_BYTES, update_inplace
 
 SIZES = (100, 250, 500, 1000, 2000)
 R = np.diag([0.1**2, np.deg2rad(2.0) ** 2])
@@ -91,7 +91,7 @@ def road_dataset(n_landmarks: int = 1000, seed: int = 0) -> Dataset:
     world = LandmarkMap.from_positions(np.column_stack([x, y]))
     cfg = LandmarkScenarioConfig(dt=0.5, speed=2.0, max_range=6.0)
     end = np.array([[float(n_landmarks) + 6.0, 0.0]])
-    return _landmark_dataset("road", "", cfg, world, np.zeros(3), end, rng)
+    return landmark_dataset("road", "", cfg, world, np.zeros(3), end, rng)
 
 
 def growing_map(sizes: tuple[int, ...] = (100, 250, 500, 1000)) -> tuple[list[Record], str]:
@@ -153,11 +153,11 @@ def main() -> str:
         j = L // 2
         mean, cov = make_state(L)
         z = model.predict(mean[:3], mean[3 + 2 * j : 5 + 2 * j]) + np.array([0.05, 0.01])
-        scratch = np.empty(max(_SCRATCH_BYTES // 8, n))
+        scratch = np.empty(max(SCRATCH_BYTES // 8, n))
 
         # same answer from the same state
         m1, c1 = mean.copy(), cov.copy()
-        _update_inplace(m1, c1, 3 + 2 * j, z, model, R, (1,), scratch)
+        update_inplace(m1, c1, 3 + 2 * j, z, model, R, (1,), scratch)
         m2, c2 = mean.copy(), cov.copy()
         peer_update(m2, c2, j, z)
         scale = float(np.abs(cov).max())
@@ -166,7 +166,7 @@ def main() -> str:
         del m2, c2
 
         repeats = 9 if n < 2000 else 5
-        ours = partial(_update_inplace, m1, c1, 3 + 2 * j, z, model, R, (1,), scratch)
+        ours = partial(update_inplace, m1, c1, 3 + 2 * j, z, model, R, (1,), scratch)
         t_ours, _ = best_of(ours, repeats=repeats)
         del m1, c1, ours
         m2, c2 = mean.copy(), cov.copy()
@@ -211,7 +211,7 @@ def main() -> str:
             "largest entry. Bandwidth = 16 n² bytes (the matrix read and written once, the "
             "least an update can move) / time; 'stream' is np.multiply(Σ, c, out=Σ), one "
             "in-place pass and nothing else. slamkit forms the rank-4 Joseph correction in "
-            f"blocks of rows of {_SCRATCH_BYTES // 1024} KiB, so the matrix is streamed once; "
+            f"blocks of rows of {SCRATCH_BYTES // 1024} KiB, so the matrix is streamed once; "
             "the peer writes an n × n temporary (K S Kᵀ, fresh pages every call) and reads "
             "it back ('Σ -= K S Kᵀ only' times that line alone, the gain given; the rest of "
             "the peer is Σ Hᵀ, one more read of Σ). Below ~500 landmarks the matrix fits in "

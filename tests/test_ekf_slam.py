@@ -28,6 +28,7 @@ from slamkit.errors import (
     NonFiniteError,
     ShapeError,
 )
+from slamkit.estimation.gaussian import check_covariance
 from slamkit.maps import LandmarkMap
 from slamkit.models import RangeBearing, RelativePosition, UnicycleEuler
 from slamkit.slam import (
@@ -41,7 +42,9 @@ from slamkit.slam import (
     slam_predict,
     slam_update,
 )
-from slamkit.slam.ekf_slam import OWN_ID_BASE, reading_jacobians
+from slamkit.slam.common import OWN_ID_BASE, reading_jacobians
+from slamkit.slam.ekf_slam import estimator as ekf_estimator
+from slamkit.slam.ekf_slam.update import check_diagonal
 
 R_RB = np.diag([0.1**2, np.deg2rad(2.0) ** 2])
 Q_U = np.diag([0.1**2, np.deg2rad(5.0) ** 2])
@@ -343,13 +346,13 @@ def westward_dataset(seed: int) -> Dataset:
     """Heading west (θ = π, where the heading itself wraps) past landmarks 0.2 m off the
     road: each is first ahead (bearing ≈ 0), then straight behind (bearing ≈ ±π, the sign
     flipping with the noise)."""
-    from slamkit.sim.scenarios import LandmarkScenarioConfig, _landmark_dataset
+    from slamkit.sim.scenarios import LandmarkScenarioConfig, landmark_dataset
 
     xs = -np.arange(4.0, 40.0, 4.0)
     ys = np.where(np.arange(xs.size) % 2, 0.2, -0.2)
     world = LandmarkMap.from_positions(np.column_stack([xs, ys]))
     cfg = LandmarkScenarioConfig(max_range=6.0, min_range=1.0)
-    return _landmark_dataset(
+    return landmark_dataset(
         "westward", "", cfg, world, np.array([0.0, 0.0, np.pi]), np.array([[-40.0, 0.0]]),
         np.random.default_rng(seed),
     )  # fmt: skip
@@ -680,24 +683,42 @@ def test_bad_input_raises_typed_errors() -> None:
         est.handle(LandmarkReadings(1.0, np.array([[2.0, 0.2, 0.0]]), np.array([0])))
 
 
-def test_a_covariance_that_loses_definiteness_raises_with_the_step() -> None:
+def test_a_covariance_that_loses_definiteness_raises_with_the_step(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     dataset = small_dataset()
     est = EkfSlam(dataset, EkfSlamConfig(provisional_trace=None), np.random.default_rng(0))
     events = list(dataset.events)
     for ev in events[:4]:  # steps 1 and 2: control + readings each
         est.handle(ev)
     assert est.landmark_ids.size == 3
-    est._cov_buf[:3, :3] = -np.eye(3)  # corrupt the state: a negative pose variance
+    # The cheap check after every map update: a negative variance, named by state index.
+    cov = est.cov
+    check_diagonal(cov)
+    cov[:3, :3] = -np.eye(3)  # a corrupted state: a negative pose variance
+    with pytest.raises(ConvergenceError, match="state index 0"):
+        check_diagonal(cov)
+    # A divergence inside the filter is reported with the runner's step and time.
+    bad = events[4]
+    assert isinstance(bad, Control)
     with pytest.raises(ConvergenceError) as info:
-        for ev in events[4:]:
-            est.handle(ev)
+        est.handle(dataclasses.replace(bad, u=np.array([np.nan, 0.1])))
     assert info.value.step == 3 and "t = 0.3" in str(info.value)
-    # An indefinite matrix with a healthy diagonal is caught by the full check.
+    # check_every=1: the full test runs on the whole covariance at every step, and an
+    # indefinite matrix with a healthy diagonal fails it.
+    checked: list[np.ndarray] = []
+
+    def spy(c: np.ndarray, where: str) -> None:
+        checked.append(c.copy())
+        check_covariance(c, where)
+
+    monkeypatch.setattr(ekf_estimator, "check_covariance", spy)
     est = EkfSlam(dataset, EkfSlamConfig(check_every=1), np.random.default_rng(0))
     for ev in events[:4]:
         est.handle(ev)
-    c = est._cov_buf
+    assert len(checked) == 4 and np.array_equal(checked[-1], est.cov)  # after every event
+    c = est.cov
+    check_diagonal(c)
     c[3, 5] = c[5, 3] = 10.0 * math.sqrt(c[3, 3] * c[5, 5])  # |ρ| = 10
-    with pytest.raises(ConvergenceError, match="positive definite") as info:
-        est.handle(events[4])
-    assert info.value.step == 3
+    with pytest.raises(ConvergenceError, match="positive definite"):
+        check_covariance(c, "ekf-slam")

@@ -25,6 +25,9 @@ from slamkit.slam.seif import (
     seif_motion_update,
     seif_sparsify,
 )
+from slamkit.slam.seif import estimator as seif_estimator
+from slamkit.slam.seif.association import blanket, blanket_factor
+from slamkit.slam.seif.recovery import check_pose_block
 
 Q_U = np.diag([0.1**2, np.deg2rad(5.0) ** 2])
 R_RB = np.diag([0.1**2, np.deg2rad(2.0) ** 2])
@@ -240,7 +243,8 @@ def test_blanket_covariance_is_a_lower_bound_that_grows_to_the_marginal() -> Non
         for h in (1, 2)
     }
     assert 0.85 < ratio[1] < ratio[2] <= 1.0 + 1e-9 and ratio[2] > 0.95  # 0.894, 0.975
-    assert len(est._blanket(rows, 1, L)) < 0.4 * L  # 28 of 102 landmarks
+    links = [est.links(r) for r in range(L)]
+    assert len(blanket(rows, est.active, links, 1, L)) < 0.4 * L  # 28 of 102 landmarks
 
 
 def run_unlabelled(
@@ -367,25 +371,50 @@ def test_seif_rejects_what_it_cannot_do() -> None:
 
 
 @pytest.mark.parametrize("use_ids", [True, False])
-def test_divergence_is_reported_with_the_runners_step(use_ids: bool) -> None:
-    """A pose information block that is not positive definite (the state corrupted after
-    step 20) is caught at the next scan — by the association's Cholesky factorisation
-    without ids, by the pose-block check with them — and reported with the step number the
-    runner gives that time stamp (one step per distinct time, from 1)."""
+def test_divergence_is_reported_with_the_runners_step(
+    use_ids: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A pose information block that is not positive definite (the state after step 20,
+    corrupted) is caught by the pose-block check and by the association's Cholesky
+    factorisation of the blanket, and a divergence found at the next scan is reported with
+    the step number the runner gives that time stamp (one step per distinct time, from 1)."""
     ds = load_dataset("five-features", seed=0, options={"identities": use_ids})
     est = Seif(ds, SeifConfig(use_ids=use_ids), np.random.default_rng(0))
     groups = list(enumerate(group_by_time(ds.events), start=1))
     for _, (_, group) in groups[:20]:
         for ev in group:
             est.handle(ev)
-    est._Om[:3, :3] = -1e6 * np.eye(3)
+    omega, _ = est.information
+    check_pose_block(omega)
+    rows = np.arange(min(3, est.landmark_ids.size))
+    links = [est.links(r) for r in range(est.landmark_ids.size)]
+    B = blanket(rows, est.active, links, 1, 120)
+    blanket_factor(omega, B, rows.size)
+    omega[:3, :3] = -1e6 * np.eye(3)  # a corrupted state
+    with pytest.raises(ConvergenceError, match="positive definite"):
+        check_pose_block(omega)
+    with pytest.raises(ConvergenceError, match="positive definite"):
+        blanket_factor(omega, B, rows.size)
+    # Wiring: the pose-block check runs after every scan, inside the step numbering; one
+    # that fails at the first scan after step 20 names that scan's step and time.
+    n_scans = sum(isinstance(ev, LandmarkReadings) for _, (_, g) in groups[:20] for ev in g)
+    scans: list[int] = []
+
+    def check_or_fail(om: np.ndarray) -> None:
+        scans.append(om.shape[0])
+        check_pose_block(om)
+        if len(scans) > n_scans:
+            raise ConvergenceError("the information matrix lost positive definiteness")
+
+    est = Seif(ds, SeifConfig(use_ids=use_ids), np.random.default_rng(0))
+    monkeypatch.setattr(seif_estimator, "check_pose_block", check_or_fail)
     expected = next(
         (step, t)
         for step, (t, group) in groups[20:]
         if any(isinstance(ev, LandmarkReadings) for ev in group)
     )
     with pytest.raises(ConvergenceError, match="positive definite") as info:
-        for _, (_, group) in groups[20:]:
+        for _, (_, group) in groups:
             for ev in group:
                 est.handle(ev)
     assert info.value.step == expected[0] and f"t = {expected[1]:g} s" in str(info.value)

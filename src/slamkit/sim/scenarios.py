@@ -47,6 +47,7 @@ __all__ = [
     "build_landmark_loop",
     "build_landmark_loop_closure",
     "build_rooms_laser",
+    "landmark_dataset",
 ]
 
 
@@ -222,7 +223,7 @@ def _start(
     return pose, rng.multivariate_normal(pose, cov)
 
 
-def _landmark_dataset(
+def landmark_dataset(
     name: str,
     description: str,
     cfg: LandmarkScenarioConfig,
@@ -231,6 +232,9 @@ def _landmark_dataset(
     waypoints: np.ndarray,
     rng: np.random.Generator,
 ) -> Dataset:
+    """A landmark scenario over a given ``world``: the robot drives from ``start_pose`` through
+    ``waypoints (W, 2)`` under ``cfg`` (speed, noise, sensor, laps), reading the landmarks on
+    the way; the data set carries the truth and the true association of every reading."""
     prior, x0 = _start(start_pose, cfg.initial_cov(), rng)
     model = UnicycleEuler()
     truth, controls = _follow(
@@ -273,7 +277,7 @@ def build_five_features(
     cfg = config_from_mapping(LandmarkScenarioConfig, options, "scenario")
     rng = np.random.default_rng(seed)
     waypoints = np.array([[8.0, 0.0], [10.0, 5.0], [7.0, 9.0], [2.0, 9.0], [0.0, 4.0], [0.0, 0.0]])
-    return _landmark_dataset(
+    return landmark_dataset(
         "five-features",
         "five point landmarks, a ~35 m loop, range-bearing readings",
         cfg,
@@ -294,7 +298,7 @@ def build_landmark_loop(
     rng = np.random.default_rng(seed)
     world = random_landmarks(rng, 60, (-5.0, -5.0, 65.0, 35.0), min_separation=2.5)
     waypoints = np.array([[60.0, 0.0], [60.0, 30.0], [0.0, 30.0], [0.0, 0.0]])
-    return _landmark_dataset(
+    return landmark_dataset(
         "landmark-loop",
         "60 random landmarks along a 180 m rectangular loop that closes",
         cfg,
@@ -317,7 +321,7 @@ def build_landmark_clutter(
     rng = np.random.default_rng(seed)
     world = random_landmarks(rng, 150, (-5.0, -5.0, 25.0, 25.0), min_separation=1.2)
     waypoints = np.array([[20.0, 0.0], [20.0, 20.0], [0.0, 20.0], [0.0, 0.0]])
-    return _landmark_dataset(
+    return landmark_dataset(
         "landmark-clutter",
         "150 landmarks 1.2 m apart around an 80 m square route, readings without ids",
         cfg,
@@ -342,7 +346,7 @@ def build_landmark_loop_closure(
     parts = [random_landmarks(rng, n, b, min_separation=2.5).positions
              for n, b in zip((33, 17, 33, 17), bands, strict=True)]  # fmt: skip
     waypoints = np.array([[60.0, 0.0], [60.0, 30.0], [0.0, 30.0], [0.0, 0.0], [20.0, 0.0]])
-    return _landmark_dataset(
+    return landmark_dataset(
         "landmark-loop-closure",
         "100 landmarks along a 180 m rectangular loop, driven round and 20 m on",
         cfg,

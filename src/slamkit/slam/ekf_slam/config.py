@@ -1,0 +1,105 @@
+"""Settings of EKF-SLAM (:class:`EkfSlamConfig`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+from slamkit.errors import ConfigError
+from slamkit.mapping.ekf_mapping import association_probabilities
+
+__all__ = ["EkfSlamConfig"]
+
+
+@dataclass(frozen=True)
+class EkfSlamConfig:
+    """Settings of :class:`EkfSlam`. Units: metres, radians, m² for covariance traces."""
+
+    motion_noise_scale: float = 1.0
+    """Multiplies the data set's nominal control-noise covariance ``Q`` (>= 0)."""
+    measurement_noise_scale: float = 1.0
+    """Multiplies the landmark sensor's noise covariance ``R`` (> 0)."""
+    use_ids: bool = True
+    """Use the landmark ids the readings carry when the sensor provides them
+    (``LandmarkSensorSpec.identities``); ``-1`` readings are then associated with the
+    existing landmarks but never start one, so that an id chosen here cannot collide with a
+    later labelled one. ``False`` (or a sensor without identities) ignores every id and
+    associates all readings."""
+    association: Literal["nn", "jcbb"] = "nn"
+    """Data association of unlabelled readings. ``"nn"``: greedy global nearest neighbour
+    in Mahalanobis distance (pairs taken by increasing ``d²`` inside the gate, one reading
+    per landmark and scan). ``"jcbb"``: joint compatibility branch and bound over the scan
+    (:func:`~slamkit.slam.ekf_slam.jcbb`), which respects that every prediction shares the
+    robot's error."""
+    gate_probability: float = 0.999
+    """The individual (and, for JCBB, joint) χ² gate: ``d² ≤ χ²_m(p)`` (13.8 for ``m = 2``;
+    JCBB's ``p`` pairs: ``χ²_{mp}(p)``)."""
+    new_landmark_probability: float = 0.99999
+    """An unmatched reading starts a feature only if its ``d²`` to EVERY landmark exceeds
+    ``χ²_m(new_landmark_probability)`` (23.0 for ``m = 2``); between the two thresholds it
+    is rejected rather than allowed to duplicate a landmark it just missed."""
+    provisional_trace: float | None = 0.05
+    """Provisional feature list [m²]: a new feature is in the state (predicted, tracked and
+    associated like any landmark) but its readings update only the feature itself — the
+    Schmidt (consider) update, so the robot and the map are untouched — until it is known
+    well enough: the trace of its *measurement-only* covariance ``(Σₖ H_kᵀ R⁻¹ H_k)⁻¹``
+    (``H_k = ∂h/∂m`` of each of its readings; the covariance it would have if the robot's
+    poses at its sightings were known) falls below this; then it joins the map. One reading
+    at range ``r`` gives ``L_z R L_zᵀ``, trace ``σ_r² + r² σ_b²`` (0.041 m² at 5 m,
+    0.054 m² at 6 m with σ_r = 0.1 m, σ_b = 2°), so the default confirms a feature at its
+    second sighting, or first within 5 m — a single reading is never enough, as the test
+    runs after an update. Not the marginal ``Σ_ff``, which can never fall below the robot's
+    own position variance: after some drift no feature would be confirmed and the map would
+    stop growing. Not ``Σ_ff`` conditioned on the current pose either: that includes the
+    motion noise since the last sighting, so with long control steps many features would
+    stay provisional to the end (``docs/estimators/ekf_slam.md``). ``None``: features join
+    the map at their first reading."""
+    max_misses: int | None = 3
+    """A provisional feature predicted inside the sensor's field of view and range (with a
+    3σ margin) but not matched in this many consecutive scans is removed from the state
+    (clutter, a spurious reading). ``None``: never."""
+    max_misses_confirmed: int | None = None
+    """The same for confirmed landmarks (``None``, the default: a confirmed landmark is
+    kept — real landmarks are occluded, and removing one throws away its correlations)."""
+    min_range: float = 0.0
+    """Readings that place their landmark closer than this to the sensor [m] are skipped
+    (a range-bearing EKF linearisation is wrong within a few σ_range of the sensor)."""
+    jcbb_max_nodes: int = 20_000
+    """Node budget of one JCBB search; when exhausted the best hypothesis so far is used and
+    ``jcbb_incomplete`` counts it."""
+    initial_capacity: int = 32
+    """Landmarks the state buffers hold before their first doubling."""
+    check_every: int | None = None
+    """Every this many time steps a full Cholesky test of the whole covariance (``O(n³)``).
+    The cheap checks (positive innovation covariance, finite gain, non-negative diagonal)
+    run on every update regardless. ``None``: only the cheap checks."""
+    record_innovations: bool = True
+    """Keep the NIS of every map update in the output's :class:`InnovationLog`."""
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.motion_noise_scale) and self.motion_noise_scale >= 0):
+            raise ConfigError(
+                f"motion_noise_scale: expected a number >= 0, got {self.motion_noise_scale}"
+            )
+        if not (math.isfinite(self.measurement_noise_scale) and self.measurement_noise_scale > 0):
+            raise ConfigError(
+                f"measurement_noise_scale: expected a number > 0, got "
+                f"{self.measurement_noise_scale}"
+            )
+        if self.association not in ("nn", "jcbb"):
+            raise ConfigError(f"association: expected 'nn' or 'jcbb', got {self.association!r}")
+        association_probabilities(self.gate_probability, self.new_landmark_probability)
+        t = self.provisional_trace
+        if t is not None and not (math.isfinite(t) and t > 0):
+            raise ConfigError(f"provisional_trace: expected a number > 0 or None, got {t}")
+        for name in ("max_misses", "max_misses_confirmed", "check_every"):
+            v = getattr(self, name)
+            if v is not None and not (isinstance(v, int) and v >= 1):
+                raise ConfigError(f"{name}: expected an integer >= 1 or None, got {v!r}")
+        if not (math.isfinite(self.min_range) and self.min_range >= 0):
+            raise ConfigError(f"min_range: expected a number >= 0, got {self.min_range}")
+        for name in ("jcbb_max_nodes", "initial_capacity"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and v >= 1):
+                raise ConfigError(f"{name}: expected an integer >= 1, got {v!r}")
