@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset, Event
-from slamkit.errors import ConvergenceError, NonFiniteError
+from slamkit.errors import ConvergenceError
 from slamkit.maps import LandmarkMap, OccupancyGrid
 
 __all__ = [
@@ -164,21 +164,13 @@ class StepClock:
     @contextmanager
     def numbering(self, name: str, t: float) -> Iterator[None]:
         """Re-raise a :class:`~slamkit.errors.ConvergenceError` without a step as
-        ``"{name} at t = {t} s: ..."`` with the current step.
-
-        A :class:`~slamkit.errors.NonFiniteError` raised inside is divergence too: the
-        :class:`~slamkit.datasets.Dataset` validated every event, so a non-finite value an
-        estimator meets while handling one comes from its own state."""
+        ``"{name} at t = {t} s: ..."`` with the current step."""
         try:
             yield
         except ConvergenceError as exc:
             if exc.step is not None:
                 raise
             raise ConvergenceError(f"{name} at t = {t:g} s: {exc}", step=self.step) from exc
-        except NonFiniteError as exc:
-            raise ConvergenceError(
-                f"{name} at t = {t:g} s: the estimate became non-finite ({exc})", step=self.step
-            ) from exc
 
 
 class Estimator(Protocol):

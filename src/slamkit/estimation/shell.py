@@ -11,6 +11,7 @@ An estimator built on :class:`EstimatorShell` implements the hooks it needs
 * turns :class:`~slamkit.datasets.Control` events into ``(u, dt)`` and consecutive
   :class:`~slamkit.datasets.Odometry` poses into the odometry model's
   ``(rot1, trans, rot2)`` with ``dt = 0`` (:class:`MotionInput`);
+* calls :meth:`~EstimatorShell.after_event` (periodic checks of the state);
 * re-raises a :class:`~slamkit.errors.ConvergenceError` from a hook with that step.
 """
 
@@ -112,7 +113,7 @@ class EstimatorShell:
         self.motion_input = MotionInput()
 
     def handle(self, event: Event) -> None:
-        self.clock.tick(event.t)
+        step = self.clock.tick(event.t)
         with self.clock.numbering(self.name, event.t):
             control = self.motion_input.control(event)
             if control is not None:
@@ -121,6 +122,7 @@ class EstimatorShell:
                 self.on_landmarks(event)
             elif isinstance(event, LaserScan):
                 self.on_scan(event)
+            self.after_event(step)
 
     def on_control(self, u: FloatArray, dt: float) -> None:
         """A motion step with control ``u`` over ``dt`` seconds. Default: ignored."""
@@ -130,3 +132,7 @@ class EstimatorShell:
 
     def on_scan(self, event: LaserScan) -> None:
         """A laser scan. Default: ignored."""
+
+    def after_event(self, step: int) -> None:
+        """After every event (``step``: the runner's step it belongs to), inside the step
+        numbering: periodic checks of the state. Default: nothing."""

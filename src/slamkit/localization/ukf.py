@@ -163,6 +163,8 @@ def _ukf_predict_arrays(
     E[N + n + 1 :] = -s * Lq.T
     Y = X  # moved in place: the pose part through g, the rest (if any) unchanged
     Y[:, :3] = move_unchecked(model, X[:, :3], u + E, dt)
+    if not math.isfinite(float(Y[:, :3].sum())):
+        raise ConvergenceError("ukf_predict: the motion moved a sigma point to a non-finite pose")
     new_mean = Wm @ Y
     new_mean[2] = _circular_mean_about(Y[:, 2], Wm, float(Y[0, 2]))
     D = Y - new_mean

@@ -13,22 +13,20 @@ from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray, as_covariance
 from slamkit.datasets.stream import (
-    Control,
     Dataset,
-    Event,
     LandmarkReadings,
     LandmarkSensorSpec,
     MotionSpec,
-    Odometry,
 )
 from slamkit.errors import GeometryError, InputError
 from slamkit.estimation.contract import (
     EstimatorOutput,
     LandmarkEstimate,
+    LandmarkIds,
     PoseEstimate,
-    StepClock,
 )
 from slamkit.estimation.gaussian import angular_indices, check_covariance
+from slamkit.estimation.shell import EstimatorShell
 from slamkit.mapping.ekf_mapping import (
     DISCARDED,
     INITIALISED,
@@ -38,7 +36,7 @@ from slamkit.mapping.ekf_mapping import (
     UPDATED,
 )
 from slamkit.maps import LandmarkMap
-from slamkit.models import LandmarkModel, odometry_control
+from slamkit.models import LandmarkModel
 from slamkit.models.measurement import InvertibleLandmarkModel
 from slamkit.prob import chi2_gate
 from slamkit.slam.common import OWN_ID_BASE, NisRecord, ReadingLog, scan_readings
@@ -110,7 +108,7 @@ def _count_search(counts: dict[str, int], res: JcbbResult | None) -> None:
         counts["jcbb_incomplete"] += int(not res.complete)
 
 
-class EkfSlam:
+class EkfSlam(EstimatorShell):
     """EKF-SLAM with point landmarks, as an estimator of the pipeline.
 
     Controls (or consecutive odometry poses) drive :func:`slam_predict`; each
@@ -164,8 +162,7 @@ class EkfSlam:
         self._use_ids = config.use_ids and sensor.identities
         self._state = SlamState(config.initial_capacity, dataset.initial_pose, dataset.initial_cov)
         self._next_id = OWN_ID_BASE
-        self._last_odometry: FloatArray | None = None
-        self._clock = StepClock()
+        super().__init__()
         self._counts = dict.fromkeys(COUNTS, 0)
         self._log = ReadingLog()
         self._nis = NisRecord()
@@ -200,19 +197,15 @@ class EkfSlam:
         """The current belief (all landmarks, provisional ones included) as a value."""
         return SlamBelief(self.mean, self.cov, self.landmark_ids)
 
-    def handle(self, event: Event) -> None:
-        step = self._clock.tick(event.t)
-        with self._clock.numbering("ekf-slam", event.t):
-            if isinstance(event, Control):
-                self._predict(event.u, event.dt)
-            elif isinstance(event, Odometry):
-                if self._last_odometry is not None:
-                    self._predict(odometry_control(self._last_odometry, event.pose), 0.0)
-                self._last_odometry = event.pose
-            elif isinstance(event, LandmarkReadings):
-                self._scan(event)
-            if self._config.check_every is not None and step % self._config.check_every == 0:
-                check_covariance(self._state.views()[1], "ekf-slam")
+    def on_control(self, u: FloatArray, dt: float) -> None:
+        self._predict(u, dt)
+
+    def on_landmarks(self, event: LandmarkReadings) -> None:
+        self._scan(event)
+
+    def after_event(self, step: int) -> None:
+        if self._config.check_every is not None and step % self._config.check_every == 0:
+            check_covariance(self._state.views()[1], "ekf-slam")
 
     def estimate(self) -> PoseEstimate:
         return PoseEstimate(self._state.mean_buf[:3].copy(), self._state.cov_buf[:3, :3].copy())
@@ -259,6 +252,7 @@ class EkfSlam:
             diagnostics=diagnostics,
             innovations=self._nis.log(self._m) if self._config.record_innovations else None,
             reading_landmarks=self._log.arrays()[1],
+            landmark_numbering=LandmarkIds.DATASET if self._use_ids else LandmarkIds.OWN,
         )
 
     def _predict(self, u: FloatArray, dt: float) -> None:

@@ -13,20 +13,23 @@ from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray, as_covariance
 from slamkit.datasets.stream import (
-    Control,
     Dataset,
-    Event,
     LandmarkReadings,
     LandmarkSensorSpec,
     MotionSpec,
-    Odometry,
 )
 from slamkit.errors import ConvergenceError, GeometryError, InputError
-from slamkit.estimation.contract import EstimatorOutput, LandmarkEstimate, PoseEstimate, StepClock
+from slamkit.estimation.contract import (
+    EstimatorOutput,
+    LandmarkEstimate,
+    LandmarkIds,
+    PoseEstimate,
+)
 from slamkit.estimation.gaussian import angular_indices
+from slamkit.estimation.shell import EstimatorShell
 from slamkit.mapping.ekf_mapping import DISCARDED, INITIALISED, NEW, REJECTED, UPDATED
 from slamkit.maps import LandmarkMap
-from slamkit.models import MIN_RANGE, LandmarkModel, odometry_control
+from slamkit.models import MIN_RANGE, LandmarkModel
 from slamkit.models.measurement import InvertibleLandmarkModel
 from slamkit.prob import chi2_gate
 from slamkit.slam.common import OWN_ID_BASE, NisRecord, ReadingLog, scan_readings
@@ -70,7 +73,7 @@ def _check_dataset(
     return dataset.motion, sensor, model
 
 
-class Seif:
+class Seif(EstimatorShell):
     """SEIF SLAM as an estimator of the pipeline.
 
     Per time step: the motion update (pose and active landmarks); per scan, data
@@ -100,8 +103,6 @@ class Seif:
 
     name = "SEIF"
 
-    name = "SEIF"
-
     def __init__(self, dataset: Dataset, config: SeifConfig, rng: np.random.Generator) -> None:
         motion, sensor, model = _check_dataset(dataset)
         self._config = config
@@ -125,33 +126,27 @@ class Seif:
         self._cursor = 0
         self._max_block = 0  # the largest index block a motion update or sparsification used
         self._max_blanket = 0  # the largest association solve (state entries)
-        self._last_odometry: FloatArray | None = None
-        self._clock = StepClock()
+        super().__init__()
         self._counts = dict.fromkeys(COUNTS, 0)
         self._nis = NisRecord()
         self._log = ReadingLog()
 
-    def handle(self, event: Event) -> None:
-        self._clock.tick(event.t)
-        with self._clock.numbering("seif", event.t):
-            if isinstance(event, Control):
-                self._predict(event.u, event.dt)
-            elif isinstance(event, Odometry):
-                if self._last_odometry is not None:
-                    self._predict(odometry_control(self._last_odometry, event.pose), 0.0)
-                self._last_odometry = event.pose
-            elif isinstance(event, LandmarkReadings):
-                self._readings(event)
-                touched = sparsify_state(self._st, self._config.max_active)
-                if touched:
-                    self._max_block = max(self._max_block, touched)
-                    self._counts["sparsifications"] += 1
-                cfg = self._config
-                self._cursor = relax_step(self._st, cfg.relax_sweeps, cfg.relax_per_step,
-                                          self._cursor)  # fmt: skip
-                check_pose_block(self._st.Om)
-            if not math.isfinite(float(self._st.mu[0] + self._st.mu[1] + self._st.mu[2])):
-                raise ConvergenceError("the mean became non-finite")
+    def on_control(self, u: FloatArray, dt: float) -> None:
+        self._predict(u, dt)
+
+    def on_landmarks(self, event: LandmarkReadings) -> None:
+        self._readings(event)
+        touched = sparsify_state(self._st, self._config.max_active)
+        if touched:
+            self._max_block = max(self._max_block, touched)
+            self._counts["sparsifications"] += 1
+        cfg = self._config
+        self._cursor = relax_step(self._st, cfg.relax_sweeps, cfg.relax_per_step, self._cursor)
+        check_pose_block(self._st.Om)
+
+    def after_event(self, step: int) -> None:
+        if not math.isfinite(float(self._st.mu[0] + self._st.mu[1] + self._st.mu[2])):
+            raise ConvergenceError("the mean became non-finite")
 
     def estimate(self) -> PoseEstimate:
         return PoseEstimate(wrapped_pose(self._st.mu), None)
@@ -234,6 +229,7 @@ class Seif:
             diagnostics=diagnostics,
             innovations=self._nis.log(self._m),
             reading_landmarks=self._log.arrays()[1],
+            landmark_numbering=LandmarkIds.DATASET if self._use_ids else LandmarkIds.OWN,
         )
 
     def _predict(self, u: FloatArray, dt: float) -> None:
