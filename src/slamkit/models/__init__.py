@@ -1,5 +1,6 @@
 """Motion, landmark-measurement and laser models with analytic Jacobians."""
 
+from slamkit.models.ackermann import Ackermann
 from slamkit.models.laser import LaserScanner, cast_rays_grid, cast_rays_segments
 from slamkit.models.measurement import (
     MIN_RANGE,
@@ -13,7 +14,6 @@ from slamkit.models.measurement import (
     landmark_initial_covariance,
 )
 from slamkit.models.motion import (
-    Ackermann,
     DifferentialDrive,
     MotionModel,
     MotionModelBase,
