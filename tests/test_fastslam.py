@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -503,7 +504,8 @@ def test_landmark_terms_equal_the_models_methods(model) -> None:
     """The fused planar kernel (range-bearing written out, other models through their batch
     kernels) against ``predict``/``jacobians`` and dense 2×2 algebra, to 1e-12; a landmark
     at the sensor is flagged."""
-    from slamkit.slam.fastslam import _H00, _I00, _LOGDET, _T00, _ZH0, _landmark_terms
+    from slamkit.slam.fastslam.kernels import landmark_terms
+    from slamkit.slam.fastslam.store import H00, I00, LOGDET, T00, ZH0
 
     rng = np.random.default_rng(4)
     poses = rng.normal(0.0, [2.0, 2.0, 2.0], (7, 3))
@@ -513,7 +515,7 @@ def test_landmark_terms_equal_the_models_methods(model) -> None:
     cov = a @ np.swapaxes(a, -1, -2) + 0.01 * np.eye(2)
     g = np.stack([mu[..., 0], mu[..., 1], cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1]])
     Rm = np.array([[0.02, 0.003], [0.003, 0.01]])
-    F, ok = _landmark_terms(model, tuple(poses.T), g, Rm)
+    F, ok = landmark_terms(model, tuple(poses.T), g, Rm)
     assert ok.tolist() == [[True] * 7, [True, True, False] + [True] * 4, [True] * 7]
     keep = ok
     safe = mu.copy()
@@ -522,19 +524,19 @@ def test_landmark_terms_equal_the_models_methods(model) -> None:
     Hm = model.jacobians(poses[None], safe)[1]
     T = Hm @ cov
     Q = T @ np.swapaxes(Hm, -1, -2) + Rm
-    got_z = np.stack([F[_ZH0], F[_ZH0 + 1]], -1)
+    got_z = np.stack([F[ZH0], F[ZH0 + 1]], -1)
     d = got_z - z_hat
     d[..., 1] = (d[..., 1] + np.pi) % (2 * np.pi) - np.pi if model.angular[1] else d[..., 1]
     np.testing.assert_allclose(d[keep], 0.0, atol=1e-12)
-    got_H = np.stack([F[_H00 : _H00 + 2], F[_H00 + 2 : _H00 + 4]]).transpose(2, 3, 0, 1)
+    got_H = np.stack([F[H00 : H00 + 2], F[H00 + 2 : H00 + 4]]).transpose(2, 3, 0, 1)
     np.testing.assert_allclose(got_H[keep], Hm[keep], rtol=0, atol=1e-12)
-    got_T = np.stack([F[_T00 : _T00 + 2], F[_T00 + 2 : _T00 + 4]]).transpose(2, 3, 0, 1)
+    got_T = np.stack([F[T00 : T00 + 2], F[T00 + 2 : T00 + 4]]).transpose(2, 3, 0, 1)
     np.testing.assert_allclose(got_T[keep], T[keep], rtol=0, atol=1e-12)
     Qi = np.linalg.inv(Q)
-    np.testing.assert_allclose(F[_I00][keep], Qi[..., 0, 0][keep], rtol=1e-12)
-    np.testing.assert_allclose(F[_I00 + 1][keep], Qi[..., 0, 1][keep], rtol=1e-12)
-    np.testing.assert_allclose(F[_I00 + 2][keep], Qi[..., 1, 1][keep], rtol=1e-12)
-    np.testing.assert_allclose(F[_LOGDET][keep], np.log(np.linalg.det(Q))[keep], atol=1e-12)
+    np.testing.assert_allclose(F[I00][keep], Qi[..., 0, 0][keep], rtol=1e-12)
+    np.testing.assert_allclose(F[I00 + 1][keep], Qi[..., 0, 1][keep], rtol=1e-12)
+    np.testing.assert_allclose(F[I00 + 2][keep], Qi[..., 1, 1][keep], rtol=1e-12)
+    np.testing.assert_allclose(F[LOGDET][keep], np.log(np.linalg.det(Q))[keep], atol=1e-12)
 
 
 # --------------------------------------------------------------------------------------------
@@ -1127,21 +1129,25 @@ def test_error_within_a_stated_factor_of_ekf_slam() -> None:
     assert ratio2[0] < 2.5 and ratio2[1] < 1.75, ratio2  # measured 2.11, 1.46
 
 
-def test_misses_count_only_within_the_sensors_effective_range() -> None:
-    """The effective range is the 90th percentile of the readings' ranges over ``√0.9``,
-    capped at the sensor's: for landmarks spread evenly around a sensor that reads all
-    within ``R`` it is ``R``; a sensor that seldom reads far landmarks gets a shorter one,
-    and a landmark predicted beyond it is not counted as missed."""
-    from slamkit.slam.fastslam import _effective_range
+def test_misses_count_only_within_the_sensors_detection_range() -> None:
+    """The measured detection range is the 90th percentile of the readings' ranges over
+    ``√0.9``, capped at the sensor's: for landmarks spread evenly around a sensor that reads
+    all within ``R`` it is ``R``; a sensor that seldom reads far landmarks gets a shorter
+    one, and a landmark predicted beyond it is not counted as missed."""
+    from slamkit.datasets.stream import measured_detection_range
 
     rng = np.random.default_rng(0)
     r = 20.0 * np.sqrt(rng.uniform(0.0, 1.0, 20_000))  # uniform in a 20 m disc
     z = np.column_stack([r, rng.uniform(-np.pi, np.pi, r.size)])
     events = tuple(LandmarkReadings(float(i), z[i * 100 : (i + 1) * 100], np.full(100, -1))
                    for i in range(200))  # fmt: skip
-    ds = Dataset("disc", events, landmark_sensor=LandmarkSensorSpec("range-bearing", R, 80.0))
-    assert _effective_range(ds, RangeBearing(), 80.0) == pytest.approx(20.0, rel=0.02)
-    assert _effective_range(ds, RangeBearing(), 15.0) == 15.0
+    far, near = (
+        LandmarkSensorSpec("range-bearing", R, 80.0),
+        LandmarkSensorSpec("range-bearing", R, 15.0),
+    )
+    assert measured_detection_range(events, far) == pytest.approx(20.0, rel=0.02)
+    assert measured_detection_range(events, near) == 15.0
+    assert far.reach == 80.0 and replace(far, detection_range=20.0).reach == 20.0
     # A landmark at 30 m with a miss range of 20 m: not missed; at 10 m: missed.
     s = UpdateSettings(p0=1e-3, visible_max_range=20.0, first_unlabelled_id=0)
     ps = FastSlamParticles(np.zeros((1, 3)), np.zeros(1), np.array([[[30.0, 0.0], [10.0, 0.0]]]),
@@ -1160,7 +1166,7 @@ def test_visibility_is_judged_from_the_sensor_not_the_robot_origin() -> None:
     42 m ahead of the axle is (38 m from the laser); judged from the axle it is the other
     way round. The same with the robot turned
     and moved (the test runs in the sensor frame of each particle)."""
-    from slamkit.slam.fastslam import _predicted_visible
+    from slamkit.slam.fastslam.association import predicted_visible
 
     robot_frame = np.array([[2.0, 6.0], [10.0, 0.0], [42.0, 0.0], [3.0, -30.0], [-1.0, 0.0]])
     laser = UpdateSettings(p0=1e-3, visible_max_range=40.0, fov=np.pi, sensor_offset=(3.78, 0.5))
@@ -1169,9 +1175,9 @@ def test_visibility_is_judged_from_the_sensor_not_the_robot_origin() -> None:
         world = RelativePosition().inverse(pose, robot_frame)  # (5, 2)
         poses = pose[None]
         x, y = world[:, :1], world[:, 1:]  # (C, P) with one particle
-        assert _predicted_visible(x, y, poses, laser)[:, 0].tolist() == [
+        assert predicted_visible(x, y, poses, laser)[:, 0].tolist() == [
             False, True, True, False, False]  # fmt: skip
-        assert _predicted_visible(x, y, poses, axle)[:, 0].tolist() == [
+        assert predicted_visible(x, y, poses, axle)[:, 0].tolist() == [
             True, True, False, True, False]  # fmt: skip
     with pytest.raises(ConfigError):
         UpdateSettings(p0=1e-3, sensor_offset=(np.nan, 0.0))
@@ -1180,15 +1186,15 @@ def test_visibility_is_judged_from_the_sensor_not_the_robot_origin() -> None:
 def test_the_sensor_offset_comes_from_the_data_set_or_the_config() -> None:
     """The landmark sensor's specification says where it sits (Victoria Park: the laser,
     ahead of the axle); by default at the robot's origin; the config overrides it."""
-    from slamkit.slam.fastslam import _sensor_offset
+    from slamkit.slam.fastslam.config import sensor_offset_of
 
     ds = load_dataset("five-features", seed=0)
-    assert ds.landmark_sensor is not None and _sensor_offset(ds) == (0.0, 0.0)
+    assert ds.landmark_sensor is not None and sensor_offset_of(ds) == (0.0, 0.0)
     rng = np.random.default_rng(0)
     assert FastSlam1(ds, FastSlamConfig(n_particles=5), rng).settings.sensor_offset == (0.0, 0.0)
     sensor = dataclasses.replace(ds.landmark_sensor, offset=(1.5, -0.2))
     moved = dataclasses.replace(ds, landmark_sensor=sensor)
-    assert _sensor_offset(moved) == (1.5, -0.2)
+    assert sensor_offset_of(moved) == (1.5, -0.2)
     est = FastSlam1(moved, FastSlamConfig(n_particles=5), rng)
     assert est.settings.sensor_offset == (1.5, -0.2)
     cfg = FastSlamConfig(n_particles=5, sensor_offset=(0.0, 0.0))

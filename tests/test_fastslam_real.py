@@ -17,6 +17,7 @@ from typing import Any
 
 import pytest
 
+from slamkit.app.presets import get_preset
 from slamkit.datasets import Dataset, load_dataset
 from slamkit.pipeline import run
 from slamkit.pipeline.evaluate import evaluate
@@ -72,7 +73,7 @@ def test_fastslam1_on_victoria_park_judges_misses_from_the_laser(data_root: Path
     beyond ~40 m) and in the half-plane ahead of the laser, which sits 3.78 m ahead of and
     0.5 m left of the rear axle (the pose's origin).
 
-    With the data set's FastSLAM settings (``victoria_park.ESTIMATOR_DEFAULTS``), seeds 0-3:
+    With the preset measured for FastSLAM there (``victoria-park-fastslam``), seeds 0-3:
     125-126 landmarks in the best particle, association accuracy 0.957-0.963, GPS RMSE
     4.27-4.32 m. EKF-SLAM on the same window: 155 landmarks, accuracy 0.96, GPS RMSE 4.35 m
     (``test_slam_real.py``): FastSLAM locates the truck as well with fewer trees, the near
@@ -80,14 +81,15 @@ def test_fastslam1_on_victoria_park_judges_misses_from_the_laser(data_root: Path
     accuracy 0.71, GPS 4.14 m; judging misses from the axle as well (trees beside the cab
     counted as missed at every scan): 96 landmarks, accuracy 0.77, GPS 4.26 m; with the full
     80 m range on top: 54 landmarks, accuracy 0.58."""
-    from slamkit.slam.fastslam import _effective_range, _sensor_offset
+    from slamkit.slam.fastslam.config import sensor_offset_of
 
     ds = load_dataset("victoria-park", options={"max_duration_s": 300.0}, data_root=data_root)
+    preset = dict(get_preset("victoria-park-fastslam").settings)
     sensor = ds.landmark_sensor
-    assert sensor is not None and _sensor_offset(ds) == (3.78, 0.5)
-    reach = _effective_range(ds, sensor.model(), sensor.max_range, _sensor_offset(ds))
+    assert sensor is not None and sensor_offset_of(ds) == (3.78, 0.5)
+    reach = sensor.reach  # measured by the loader from the laser's readings
     assert 36.0 < reach < 40.0  # 38.1
-    m = _metrics("fastslam1", ds, {})
+    m = _metrics("fastslam1", ds, preset)
     assert m["gps"]["used"] > 800 and m["gps"]["rmse"] < 5.2
     assert m["diagnostics"]["landmarks"] >= 100
     a = m["association"]
@@ -121,7 +123,7 @@ def test_fastslam1_against_ekf_slam_on_the_first_120_s_of_victoria_park(data_roo
     81 landmarks, 0.964. With the nominal reading noise FastSLAM reaches 3.23 m but only
     0.795 of its readings agree with the feature index."""
     ds = load_dataset("victoria-park", options={"max_duration_s": 120.0}, data_root=data_root)
-    fast = _metrics("fastslam1", ds, {})
+    fast = _metrics("fastslam1", ds, dict(get_preset("victoria-park-fastslam").settings))
     ekf = _metrics("ekf-slam", ds, {})
     assert fast["gps"]["used"] == ekf["gps"]["used"] > 250
     assert fast["gps"]["rmse"] < 4.1 and fast["gps"]["rmse"] < 1.12 * ekf["gps"]["rmse"]

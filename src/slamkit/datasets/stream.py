@@ -26,7 +26,8 @@ shapes, finiteness) so estimators can trust it.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import math
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal, NoReturn, TypeAlias
 
@@ -46,6 +47,7 @@ from slamkit.models import (
     RelativePosition,
     motion_kernels,
 )
+from slamkit.models.measurement import InvertibleLandmarkModel
 
 __all__ = [
     "Control",
@@ -59,6 +61,7 @@ __all__ = [
     "MotionSpec",
     "Odometry",
     "group_by_time",
+    "measured_detection_range",
 ]
 
 UNKNOWN_ID = -1
@@ -143,6 +146,11 @@ class LandmarkSensorSpec:
     landmark from the robot's pose all the same; the field of view (``fov``, centred ahead)
     is the sensor's, from here: estimators that predict which landmarks should have been
     seen (FastSLAM's existence counters) judge from this point."""
+    detection_range: float | None = None
+    """The range [m, from the sensor] within which it reads the landmarks it could see —
+    shorter than ``max_range`` for a laser that seldom detects a tree trunk far away.
+    Estimators that count missed landmarks count only within it. ``None``: ``max_range``.
+    A loader may measure it from its log (:func:`measured_detection_range`)."""
 
     def __post_init__(self) -> None:
         try:
@@ -169,6 +177,19 @@ class LandmarkSensorSpec:
                 f"min_range: expected 0 <= min_range < max_range, got {self.min_range!r}"
             )
         object.__setattr__(self, "fov", as_positive(self.fov, "fov"))
+        if self.detection_range is not None:
+            d = float(self.detection_range)
+            if not 0.0 < d <= self.max_range:
+                raise InputError(
+                    f"detection_range: expected 0 < detection_range <= max_range "
+                    f"({self.max_range:g}), got {self.detection_range!r}"
+                )
+            object.__setattr__(self, "detection_range", d)
+
+    @property
+    def reach(self) -> float:
+        """:attr:`detection_range`, or ``max_range`` when it is not given."""
+        return self.max_range if self.detection_range is None else self.detection_range
 
     @property
     def dim(self) -> int:
@@ -181,6 +202,25 @@ class LandmarkSensorSpec:
         if self.kind == "position":
             return RelativePosition()
         return RangeOnly() if self.kind == "range" else BearingOnly()
+
+
+def measured_detection_range(events: Sequence[Event], sensor: LandmarkSensorSpec) -> float:
+    """A sensor's detection range measured from the readings of a log: ``min(max_range,
+    q₉₀ / √0.9)``, ``q₉₀`` the 90th percentile of the readings' ranges from the sensor (at
+    ``sensor.offset``) — the range of an ideal sensor (it reads every landmark within it,
+    none beyond) whose readings of landmarks spread evenly in the plane (range CDF
+    ``(r/R)²``) have that percentile. ``max_range`` when there are no readings; range-only
+    and bearing-only readings, which do not place a landmark, give ``max_range`` too."""
+    model = sensor.model()
+    if not isinstance(model, InvertibleLandmarkModel):
+        return sensor.max_range
+    z = [ev.z for ev in events if isinstance(ev, LandmarkReadings) and ev.z.size]
+    if not z:
+        return sensor.max_range
+    lm = model.inverse(np.zeros(3), np.concatenate(z))  # in the robot frame
+    a, b = sensor.offset
+    q90 = float(np.quantile(np.hypot(lm[:, 0] - a, lm[:, 1] - b), 0.9))
+    return min(sensor.max_range, q90 / math.sqrt(0.9))
 
 
 @dataclass(frozen=True)

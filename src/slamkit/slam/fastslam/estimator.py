@@ -1,0 +1,439 @@
+"""The FastSLAM 1.0 and 2.0 estimators: the event shell over the kernels."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slamkit._validation import FloatArray, as_covariance
+from slamkit.datasets.stream import Dataset, Event, LandmarkReadings
+from slamkit.errors import ConfigError, ConvergenceError, InputError
+from slamkit.estimation.contract import (
+    EstimatorOutput,
+    LandmarkEstimate,
+    LandmarkIds,
+    ParticleSnapshot,
+    PoseEstimate,
+    SnapshotSchedule,
+)
+from slamkit.estimation.shell import EstimatorShell
+from slamkit.localization.particles import (
+    low_variance_resample_unchecked,
+    particle_estimate_unchecked,
+)
+from slamkit.mapping.ekf_mapping import (
+    INITIALISED,
+    TOO_CLOSE,
+)
+from slamkit.models.measurement import InvertibleLandmarkModel
+from slamkit.models.motion import motion_kernels
+from slamkit.slam.common import OWN_ID_BASE
+from slamkit.slam.fastslam.association import (
+    normalised_with_weights,
+    prune_landmarks,
+    scan_at_poses,
+    usable_readings,
+)
+from slamkit.slam.fastslam.config import (
+    FastSlamConfig,
+    sensor_offset_of,
+    steering_limit,
+)
+from slamkit.slam.fastslam.particles import FastSlamParticles, IntArray
+from slamkit.slam.fastslam.proposal import fold_motion, sym_sqrt, update2
+from slamkit.slam.fastslam.settings import UpdateSettings, default_p0
+from slamkit.slam.fastslam.store import Work
+
+
+class _FastSlam(EstimatorShell):
+    """The stateful shell shared by both versions (see :class:`FastSlam1`)."""
+
+    version = 1
+    name = "fastslam1"
+
+    def __init__(self, dataset: Dataset, config: FastSlamConfig, rng: np.random.Generator) -> None:
+        if not isinstance(config, FastSlamConfig):
+            raise ConfigError(f"config: expected a FastSlamConfig, got {type(config).__name__}")
+        if dataset.motion is None:
+            raise InputError(
+                f"{self.name} needs a motion model; data set {dataset.name!r} has none"
+            )
+        sensor = dataset.landmark_sensor
+        if sensor is None:
+            raise InputError(
+                f"{self.name} needs a landmark sensor; data set {dataset.name!r} has none"
+            )
+        model = sensor.model()
+        if not isinstance(model, InvertibleLandmarkModel) or model.dim != 2:
+            raise InputError(
+                f"{self.name} cannot use the {sensor.kind!r} sensor of {dataset.name!r}: one "
+                "reading must locate a landmark (use range-bearing or position readings)"
+            )
+        self._cfg = config
+        self._rng = rng
+        self._motion = dataset.motion.model
+        self._Q = as_covariance(
+            config.motion_noise_scale * dataset.motion.noise_cov,
+            "scaled motion noise_cov",
+            self._motion.control_dim,
+            semidefinite=True,
+        )
+        self._Q_root = sym_sqrt(self._Q)  # symmetric: ε = n @ root = root @ n
+        self._model: InvertibleLandmarkModel = model
+        self._R = as_covariance(
+            config.measurement_noise_scale**2 * sensor.noise_cov, "scaled landmark noise_cov", 2
+        )
+        p0 = (
+            config.p0
+            if config.p0 is not None
+            else default_p0(self._R, config.new_landmark_probability)
+        )
+        # Landmarks the filter numbers itself (readings without ids) start at OWN_ID_BASE
+        # when the readings' ids are used, so that they never alias a data set's id (an
+        # online filter cannot look ahead for the largest id); all are its own otherwise.
+        first_unlabelled = OWN_ID_BASE if config.use_ids else 0
+        offset = sensor_offset_of(dataset) if config.sensor_offset is None else config.sensor_offset
+        miss_range = config.miss_max_range
+        if miss_range is None:
+            miss_range = sensor.reach  # the sensor's detection range (its spec says)
+        fov = min(float(sensor.fov), 2.0 * math.pi)
+        if fov < 2.0 * math.pi:
+            fov = max(fov - 2.0 * config.miss_fov_margin, 1e-9)
+        self._settings = UpdateSettings(
+            p0=p0,
+            use_ids=config.use_ids,
+            prune=config.prune,
+            visible_min_range=sensor.min_range,
+            visible_max_range=min(sensor.max_range, miss_range),
+            fov=fov,
+            hit_weight=config.hit_weight,
+            sensor_offset=offset,
+            min_range=config.min_range,
+            first_unlabelled_id=first_unlabelled,
+        )
+        n = config.n_particles
+        if dataset.initial_pose is None:
+            start = np.zeros((n, 3))
+        else:
+            cov = dataset.initial_cov if dataset.initial_cov is not None else np.zeros((3, 3))
+            start = rng.multivariate_normal(
+                dataset.initial_pose, config.prior_cov_scale * cov, n, method="eigh"
+            )
+        ps = FastSlamParticles.start(
+            start, config.initial_capacity, self._settings.first_unlabelled_id
+        )
+        # The state, mutated in place by the kernels: poses, log-weights, weights and the
+        # planar maps (the particle set is built from them on demand, see `particles`).
+        self._poses = ps.poses
+        self._log_weights = ps.log_weights
+        self._weights = ps.weights
+        self._w = Work.of(ps)
+        self._w.common = True
+        self._w.maybe_prunable = False  # no landmark yet
+        self._kernels = motion_kernels(self._motion)
+        self._steering_limit = steering_limit(self._motion)
+        self._pending: tuple[FloatArray, float] | None = None  # 2.0: a motion not yet sampled
+        # 2.0: the earlier controls since the last scan, as each particle's Gaussian (mean
+        # poses, covariances) before the pending control (None: the poses are exact).
+        self._moved: tuple[FloatArray, FloatArray] | None = None
+        self._after: tuple[FloatArray, FloatArray] | None = None  # ... and after it (cache)
+        self._resample_pending = False
+        self._updates = 0
+        # The map is numbered as the data set's landmarks when the readings' ids are used.
+        self._ids_used = config.use_ids and sensor.identities
+        super().__init__()
+        self._t = dataset.start_time
+        self._resamplings = 0
+        self._readings_skipped = 0
+        self._removed = 0
+        self._ess: list[float] = []
+        self._snapshots: list[ParticleSnapshot] = []
+        # Per scan (time, ids (K,) or (K, P), status codes) and per resampling the parent
+        # indices (P,): the association of any final particle, traced through its ancestors.
+        self._history: list[tuple[float, IntArray, NDArray[np.int8]] | NDArray[np.intp]] = []
+        times: Any = config.snapshot_times
+        if config.snapshot_every == 0 and not times and config.n_snapshots > 0:
+            times = np.linspace(dataset.start_time, dataset.end_time, config.n_snapshots)
+        self._schedule = SnapshotSchedule(config.snapshot_every, times)
+        if config.snapshot_every > 0:
+            self._snapshot(dataset.start_time)
+
+    # -- the Estimator protocol -------------------------------------------------------------
+
+    def handle(self, event: Event) -> None:
+        self._t = float(event.t)
+        super().handle(event)
+
+    def on_control(self, u: FloatArray, dt: float) -> None:
+        self._motion_step(np.asarray(u, dtype=float), float(dt))
+
+    def on_landmarks(self, event: LandmarkReadings) -> None:
+        if event.ids.size:
+            self._update(event)
+
+    def estimate(self) -> PoseEstimate:
+        poses = self._poses
+        spread = None
+        if self._pending is not None:
+            # 2.0 between a control and its scan: each particle's motion since the scan as a
+            # Gaussian; the estimate is their mixture (mean, spread of the means + mean cov).
+            poses, covs = self._pending_gaussian()
+            spread = np.einsum("p,pij->ij", self._weights, covs)
+        # The weights are normalised by construction, the poses the filter's own.
+        mean, cov = particle_estimate_unchecked(poses, self._weights)
+        if spread is not None:
+            cov = cov + spread
+        if self._cfg.estimate == "best":
+            mean = poses[int(np.argmax(self._log_weights))].copy()
+        return PoseEstimate(mean, cov)
+
+    def finish(self) -> EstimatorOutput:
+        ps = self.particles
+        best = ps.best
+        ess = np.asarray(self._ess) if self._ess else np.zeros(0)
+        counts = ps.counts
+        diagnostics: dict[str, Any] = {
+            "version": self.version,
+            "n_particles": len(ps),
+            "measurement_updates": self._updates,
+            "resamplings": self._resamplings,
+            "readings_skipped": self._readings_skipped,
+            "landmarks": int(counts[best]),
+            "landmarks_mean": float(counts.mean()),
+            "landmarks_min": int(counts.min()),
+            "landmarks_max": int(counts.max()),
+            "landmarks_removed": self._removed,
+            "capacity": ps.capacity,
+            "p0": self._settings.p0,
+            "ess_min": float(ess.min()) if ess.size else None,
+            "ess_mean": float(ess.mean()) if ess.size else None,
+            "ess_median": float(np.median(ess)) if ess.size else None,
+            "ess_final": float(ess[-1]) if ess.size else None,
+            "best_particle_weight": float(ps.weights[best]),
+        }
+        if self._schedule.pending and (not self._snapshots or self._snapshots[-1].t < self._t):
+            self._snapshot(self._t)  # times left after the last update: the final set
+        _, chosen, status = self.reading_log()
+        diagnostics["readings"] = int(chosen.size)
+        diagnostics["readings_new_landmark"] = int(np.count_nonzero(status == INITIALISED))
+        return EstimatorOutput(
+            landmarks=ps.landmarks_of(best),
+            diagnostics=diagnostics,
+            particle_snapshots=tuple(self._snapshots),
+            reading_landmarks=chosen,
+            landmark_numbering=LandmarkIds.DATASET if self._ids_used else LandmarkIds.OWN,
+        )
+
+    def landmark_estimate(self) -> LandmarkEstimate:
+        """The map of the particle with the largest weight now (animation frames)."""
+        ps = self.particles
+        return ps.landmarks_of(ps.best)
+
+    def particle_poses(self) -> FloatArray:
+        """The particle poses ``(P, 3)`` now (animation frames); for 2.0 between a control
+        and its scan, the means of each particle's motion since the scan."""
+        if self._pending is not None:
+            return self._pending_gaussian()[0].copy()
+        return self._poses.copy()
+
+    # -- read-only views (tests, plots) ---------------------------------------------------
+
+    @property
+    def particles(self) -> FastSlamParticles:
+        """The current particle set (a copy: later steps do not change it)."""
+        return self._w.particles(self._poses.copy(), self._log_weights.copy())
+
+    @property
+    def settings(self) -> UpdateSettings:
+        return self._settings
+
+    @property
+    def resample_pending(self) -> bool:
+        """Whether the ESS fell below the threshold: the set is resampled before it moves."""
+        return self._resample_pending
+
+    @property
+    def ess_history(self) -> tuple[float, ...]:
+        """The effective sample size after every measurement update."""
+        return tuple(self._ess)
+
+    def reading_log(self) -> tuple[FloatArray, NDArray[np.int64], NDArray[np.int64]]:
+        """Every reading handled so far, as the particle that now has the largest weight saw
+        it (its own association and those of its ancestors): ``(times, landmark ids,
+        status)`` — the id of the landmark the reading updated or started (``-1`` if none);
+        status codes as :meth:`EkfSlam.reading_log <slamkit.slam.EkfSlam.reading_log>`'s:
+        :data:`~slamkit.mapping.ekf_mapping.UPDATED`, ``INITIALISED``, ``DISCARDED`` (the
+        landmark was at the sensor) and ``TOO_CLOSE`` (skipped, see
+        :attr:`FastSlamConfig.min_range`)."""
+        p = int(np.argmax(self._log_weights))
+        times, ids, status = [], [], []
+        for entry in reversed(self._history):
+            if isinstance(entry, np.ndarray):
+                p = int(entry[p])  # the parent of particle p before that resampling
+                continue
+            t, a, s = entry
+            times.append(np.full(a.shape[0], t))
+            ids.append(a[:, p] if a.ndim == 2 else a)
+            status.append(s[:, p] if s.ndim == 2 else s)
+
+        def cat(parts: list[NDArray[Any]], dtype: type) -> NDArray[Any]:
+            return np.concatenate(parts[::-1]).astype(dtype) if parts else np.zeros(0, dtype)
+
+        return cat(times, np.float64), cat(ids, np.int64), cat(status, np.int64)
+
+    # -- steps ----------------------------------------------------------------------------
+
+    def _log_scan(
+        self,
+        t: float,
+        assoc: IntArray,
+        status: NDArray[np.int8],
+        use: NDArray[np.bool_] | None,
+    ) -> None:
+        """Keep the association of a scan; ``use`` marks the readings that were not skipped
+        (None: all), the others are logged ``TOO_CLOSE``."""
+        if use is not None:
+            a = np.full((use.size, *assoc.shape[1:]), -1, dtype=np.int64)
+            s = np.full((use.size, *status.shape[1:]), TOO_CLOSE, dtype=np.int8)
+            if assoc.size:
+                a[use], s[use] = assoc, status
+            assoc, status = a, s
+        self._history.append((float(t), assoc, status))
+
+    def _maybe_snapshot(self, t: float) -> None:
+        if self._schedule.due(t, self._updates):
+            self._snapshot(t)
+
+    def _snapshot(self, t: float) -> None:
+        self._snapshots.append(ParticleSnapshot(float(t), self._poses.copy(), self._weights.copy()))
+
+    def _resample_if_due(self) -> None:
+        if self._resample_pending:
+            # The weights are normalised and finite by construction: the unchecked kernel.
+            idx = low_variance_resample_unchecked(self._weights, self._rng, self._weights.size)
+            n = idx.size
+            self._history.append(idx)
+            self._poses = self._poses[idx]
+            if self._moved is not None:
+                self._moved = (self._moved[0][idx], self._moved[1][idx])
+            if self._after is not None:
+                self._after = (self._after[0][idx], self._after[1][idx])
+            self._w = self._w.select(idx)
+            self._log_weights, self._weights = np.empty(n), np.empty(n)
+            self._log_weights.fill(-math.log(n))
+            self._weights.fill(1.0 / n)
+            self._resamplings += 1
+            self._resample_pending = False
+
+    def _predict(self, u: FloatArray, dt: float) -> None:
+        self._resample_if_due()
+        poses = self._poses
+        # g(x, u + ε), ε = Q^½ n, n ~ N(0, I): MotionModel.sample with Q's root computed once.
+        eps = self._rng.standard_normal((poses.shape[0], self._Q_root.shape[0])) @ self._Q_root
+        eps += u
+        if self._steering_limit is not None:  # Ackermann: keep sampled steering in its domain
+            np.clip(eps[:, 1], -self._steering_limit, self._steering_limit, out=eps[:, 1])
+        self._kernels.move_particles(poses, eps, dt)  # validated once: the in-place kernel
+
+    def _motion_step(self, u: FloatArray, dt: float) -> None:
+        self._predict(u, dt)
+
+    def _pending_gaussian(self) -> tuple[FloatArray, FloatArray]:
+        """2.0: each particle's pose after the pending control as a Gaussian (means
+        ``(P, 3)``, covariances ``(P, 3, 3)``), the motion since the last scan linearised
+        (:func:`fold_motion`); computed once per control."""
+        assert self._pending is not None
+        if self._after is None:
+            u, dt = self._pending
+            x0, cov0 = self._moved if self._moved is not None else (self._poses, None)
+            self._after = fold_motion(self._motion, x0, cov0, u, dt, self._Q)
+        return self._after
+
+    def _scan(self, z: FloatArray, rid: IntArray) -> FloatArray:
+        """The scan on the state (in place); returns the new log-weights (not normalised)."""
+        w = self._w
+        w.begin_scan()
+        ll = scan_at_poses(w, self._poses, z, rid, self._R, self._model, self._settings)
+        prune_landmarks(w, self._poses, self._settings)
+        return self._log_weights + ll
+
+    def _update(self, event: LandmarkReadings) -> None:
+        z = np.asarray(event.z, dtype=float)
+        rid = np.asarray(event.ids, dtype=np.int64)
+        use = None
+        if self._settings.min_range > 0:
+            use = usable_readings(z, self._model, self._settings)
+            n_use = int(np.count_nonzero(use))
+            self._readings_skipped += use.size - n_use
+            if n_use == 0:
+                self._log_scan(event.t, np.zeros(0, np.int64), np.zeros(0, np.int8), use)
+                return
+            if n_use < use.size:
+                z, rid = z[use], rid[use]
+            else:
+                use = None
+        self._updates += 1
+        self._resample_if_due()
+        try:
+            self._log_weights, w = normalised_with_weights(self._scan(z, rid))
+        except ConvergenceError as exc:  # the shell adds the name, the time and the step
+            raise ConvergenceError(f"measurement update {self._updates}: {exc}") from exc
+        self._removed += self._w.removed
+        self._log_scan(event.t, self._w.assoc, self._w.assoc_status, use)
+        self._weights = w
+        self._maybe_snapshot(event.t)
+        ess = 1.0 / float((w * w).sum())  # effective_sample_size of normalised weights
+        self._ess.append(ess)
+        if ess < self._cfg.resample_threshold * w.size:
+            self._resample_pending = True
+
+
+class FastSlam1(_FastSlam):
+    """FastSLAM 1.0 (registered as ``fastslam1``): poses sampled from the motion model,
+    weighted by the readings' likelihood; per-particle landmark EKFs, maximum-likelihood
+    association with a new-landmark threshold, existence counters, low-variance resampling
+    when the effective sample size drops. See the module docstring and
+    :class:`FastSlamConfig`.
+
+    Needs a motion model and a range-bearing or relative-position landmark sensor. The
+    estimate is the particles' weighted mean (or best particle) with their covariance;
+    :meth:`finish` returns the map of the particle with the largest weight.
+    """
+
+
+class FastSlam2(_FastSlam):
+    """FastSLAM 2.0 (registered as ``fastslam2``): as :class:`FastSlam1`, but the controls
+    since the last scan and the scan are processed together, and each particle's pose is
+    drawn from the Gaussian proposal that includes the readings (over the control noise and
+    the linearised error of the earlier controls, see the module docstring), weighted by the
+    marginal likelihood with the motion noise integrated out.
+
+    Nothing is sampled until the scan: each particle's pose since its last scan is a
+    Gaussian (EKF predictions), and :meth:`estimate` meanwhile reports their mixture (the
+    weighted mean of the means; the spread of the means plus the mean covariance).
+    """
+
+    version = 2
+    name = "fastslam2"
+
+    def _motion_step(self, u: FloatArray, dt: float) -> None:
+        if self._pending is None:
+            self._resample_if_due()  # before the motion, as 1.0
+        else:  # an earlier control since the scan: into each particle's pose Gaussian
+            self._moved = self._pending_gaussian()
+        self._pending, self._after = (u, dt), None
+
+    def _scan(self, z: FloatArray, rid: IntArray) -> FloatArray:
+        if self._pending is None:
+            return super()._scan(z, rid)
+        u, dt = self._pending
+        x0, cov0 = self._moved if self._moved is not None else (self._poses, None)
+        self._pending = self._moved = self._after = None
+        self._poses, lw, _ = update2(
+            self._w, x0, self._log_weights, self._motion, u, dt, self._Q, z, rid,
+            self._R, self._model, self._settings, self._rng, cov0,
+        )  # fmt: skip
+        return lw  # normalised already: normalising again changes nothing
