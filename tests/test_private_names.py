@@ -24,7 +24,6 @@ PENDING = {
     "test_ekf_slam.py",
     "test_fastslam.py",
     "test_fastslam_real.py",
-    "test_mcl.py",
     "test_seif.py",
 }
 
