@@ -12,25 +12,18 @@ from dataclasses import field as dataclass_field
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray
-from slamkit.datasets.stream import (
-    Control,
-    Dataset,
-    Event,
-    LandmarkReadings,
-    LaserScan,
-    Odometry,
-)
+from slamkit.datasets.stream import Dataset, LandmarkReadings, LaserScan
 from slamkit.errors import ConfigError, ConvergenceError, GeometryError, InputError
 from slamkit.estimation.contract import (
     EstimatorOutput,
-    InnovationLog,
     ParticleSnapshot,
     PoseEstimate,
     SnapshotSchedule,
 )
+from slamkit.estimation.shell import EstimatorShell, InnovationRecorder
 from slamkit.localization.likelihood_field import LikelihoodField, usable_beams
 from slamkit.localization.mcl.augmented import Augmentation, advance_augmentation
 from slamkit.localization.mcl.config import MclConfig
@@ -44,6 +37,7 @@ from slamkit.localization.mcl.core import (
 )
 from slamkit.localization.mcl.kld import kld_resample_predict
 from slamkit.localization.mcl.landmarks import (
+    LandmarkInnovations,
     landmark_innovations_unchecked,
     landmark_log_likelihood_unchecked,
     whitener,
@@ -60,7 +54,7 @@ from slamkit.localization.particles import (
     particle_estimate_unchecked,
 )
 from slamkit.maps import LandmarkMap
-from slamkit.models import MotionModel, odometry_control
+from slamkit.models import LandmarkModel, MotionModel
 
 __all__ = ["MonteCarloLocalization"]
 
@@ -134,6 +128,56 @@ def _laser_field(dataset: Dataset, config: MclConfig) -> LikelihoodField:
     )
 
 
+def _injection_sampler(
+    dataset: Dataset, config: MclConfig, use_laser: bool
+) -> tuple[PoseSampler, float]:
+    """Where random particles come from, and the area they cover [m²]: the free cells of the
+    known grid (laser worlds) or the landmarks' box grown by ``injection_margin``."""
+    if use_laser:
+        assert dataset.known_grid is not None
+        return free_space_sampler(dataset.known_grid)
+    assert dataset.known_landmarks is not None
+    return landmark_box_sampler(dataset.known_landmarks.positions, config.injection_margin)
+
+
+def _start_poses(
+    dataset: Dataset,
+    config: MclConfig,
+    global_start: bool,
+    sampler: PoseSampler,
+    area: float,
+    rng: np.random.Generator,
+) -> FloatArray:
+    """The start particles: uniform over the map (``global_start``), else drawn from the
+    prior ``N(initial_pose, prior_cov_scale · initial_cov)``."""
+    if global_start:
+        n_global, per_m2 = config.n_particles_global, config.global_particles_per_m2
+        return initial_poses(sampler, area, n_global, per_m2, rng)
+    assert dataset.initial_pose is not None
+    cov = dataset.initial_cov if dataset.initial_cov is not None else np.zeros((3, 3))
+    start: FloatArray = rng.multivariate_normal(
+        dataset.initial_pose, config.prior_cov_scale * cov, config.n_particles
+    )
+    return start
+
+
+def _innovations_before(
+    particles: ParticleSet,
+    zk: FloatArray,
+    ids: NDArray[np.int64],
+    lm: FloatArray,
+    model: LandmarkModel,
+    R: FloatArray,
+) -> LandmarkInnovations | None:
+    """The readings' innovations against the particles' mean and covariance (before the
+    update); ``None`` when a landmark lies on the mean pose (no bearing)."""
+    mean, cov = particle_estimate_unchecked(particles.poses, particles.weights)
+    try:
+        return landmark_innovations_unchecked(mean, cov, zk, ids, lm, model, R)
+    except GeometryError:
+        return None
+
+
 def _kld_predict(
     particles: ParticleSet,
     u: ArrayLike,
@@ -163,7 +207,7 @@ def _kld_predict(
     )
 
 
-class MonteCarloLocalization:
+class MonteCarloLocalization(EstimatorShell):
     """Particle-filter localization in a known map (registered as ``mcl``).
 
     Needs a motion model and either a landmark sensor with ``known_landmarks`` or a laser
@@ -173,9 +217,12 @@ class MonteCarloLocalization:
     box grown by ``injection_margin``. See :class:`MclConfig` for the rest.
     """
 
+    name = "mcl"
+
     def __init__(self, dataset: Dataset, config: MclConfig, rng: np.random.Generator) -> None:
         use_laser, use_landmarks = _check_inputs(dataset, config)
         assert dataset.motion is not None
+        super().__init__()
         self._cfg = config
         self._rng = rng
         self._motion = dataset.motion
@@ -184,12 +231,10 @@ class MonteCarloLocalization:
 
         self._field: LikelihoodField | None = None
         self._beam_angles: FloatArray | None = None
-        self._sampler: PoseSampler
         if use_laser:
-            assert dataset.laser is not None and dataset.known_grid is not None
+            assert dataset.laser is not None
             self._field = _laser_field(dataset, config)
             self._beam_angles = dataset.laser.beam_angles
-            self._sampler, area = free_space_sampler(dataset.known_grid)
         self._landmarks: LandmarkMap | None = None
         if use_landmarks:
             assert dataset.landmark_sensor is not None and dataset.known_landmarks is not None
@@ -197,22 +242,9 @@ class MonteCarloLocalization:
             self._lm_model = dataset.landmark_sensor.model()
             self._lm_cov = config.measurement_noise_scale**2 * dataset.landmark_sensor.noise_cov
             self._lm_whitener = whitener(self._lm_cov)
-            if not use_laser:
-                self._sampler, area = landmark_box_sampler(
-                    self._landmarks.positions, config.injection_margin
-                )
-
+        self._sampler, area = _injection_sampler(dataset, config, use_laser)
         self._global_start = dataset.initial_pose is None or config.global_start
-        if self._global_start:
-            start = initial_poses(
-                self._sampler, area, config.n_particles_global, config.global_particles_per_m2, rng
-            )
-        else:
-            assert dataset.initial_pose is not None
-            cov = dataset.initial_cov if dataset.initial_cov is not None else np.zeros((3, 3))
-            start = rng.multivariate_normal(
-                dataset.initial_pose, config.prior_cov_scale * cov, config.n_particles
-            )
+        start = _start_poses(dataset, config, self._global_start, self._sampler, area, rng)
         self._particles = ParticleSet.uniform_weights(start)
         # A uniform belief over the map stays (nearly) uniform under the motion model, so a
         # global start's particles are not moved until the first measurement has weighted
@@ -225,43 +257,38 @@ class MonteCarloLocalization:
         self._resample_pending = False
         self._inject_pending = 0
         self._p_inject = 0.0
-        self._last_odometry: FloatArray | None = None
         self._c = _Counters(particle_counts=[len(self._particles)])
         self._snapshots: list[ParticleSnapshot] = []
-        self._innov_t: list[float] = []
-        self._innov_nis: list[float] = []
-        self._innov_id: list[int] = []
+        self._innovations = InnovationRecorder(use_landmarks and config.record_innovations)
         self._schedule = SnapshotSchedule(config.snapshot_every, config.snapshot_times)
         if config.snapshot_every > 0:
             self._snapshot(dataset.start_time)
 
     # -- the Estimator protocol ---------------------------------------------------------
 
-    def handle(self, event: Event) -> None:
-        if isinstance(event, Control):
-            self._predict(event.u, event.dt)
-        elif isinstance(event, Odometry):
-            if self._last_odometry is not None:
-                u = odometry_control(self._last_odometry, event.pose)
-                self._predict(u, 0.0)
-            self._last_odometry = event.pose
-        elif isinstance(event, LaserScan):
-            if self._field is not None and self._beam_angles is not None:
-                field_, angles = self._field, self._beam_angles
-                cfg = self._cfg
-                offset = cfg.laser_offset if any(cfg.laser_offset) else None
-                exponent = 1.0
-                if cfg.laser_independent_beams is not None:
-                    used = usable_beams(field_, event.ranges, angles, cfg.beam_stride)
-                    exponent = min(1.0, cfg.laser_independent_beams / max(used, 1))
-                self._update(
-                    event.t,
-                    lambda ps: mcl_update_laser(
-                        ps, event.ranges, field_, angles, offset, cfg.beam_stride, exponent
-                    ),
-                    exponent,
-                )
-        elif isinstance(event, LandmarkReadings) and self._landmarks is not None:
+    def on_control(self, u: FloatArray, dt: float) -> None:
+        self._predict(u, dt)
+
+    def on_scan(self, event: LaserScan) -> None:
+        if self._field is None or self._beam_angles is None:
+            return
+        field_, angles = self._field, self._beam_angles
+        cfg = self._cfg
+        offset = cfg.laser_offset if any(cfg.laser_offset) else None
+        exponent = 1.0
+        if cfg.laser_independent_beams is not None:
+            used = usable_beams(field_, event.ranges, angles, cfg.beam_stride)
+            exponent = min(1.0, cfg.laser_independent_beams / max(used, 1))
+        self._update(
+            event.t,
+            lambda ps: mcl_update_laser(
+                ps, event.ranges, field_, angles, offset, cfg.beam_stride, exponent
+            ),
+            exponent,
+        )
+
+    def on_landmarks(self, event: LandmarkReadings) -> None:
+        if self._landmarks is not None:
             self._landmark_readings(event, self._landmarks)
 
     def estimate(self) -> PoseEstimate:
@@ -278,17 +305,12 @@ class MonteCarloLocalization:
     def finish(self) -> EstimatorOutput:
         c = self._c
         diagnostics = c.diagnostics(self._global_start)
-        innovations = None
-        if self._landmarks is not None and self._cfg.record_innovations:
-            nis = np.asarray(self._innov_nis, dtype=np.float64)
-            dim = self._lm_model.dim
+        innovations = self._innovations.log()
+        if innovations is not None:
+            nis = innovations.nis
             diagnostics["innovations_skipped"] = c.innovations_skipped
-            diagnostics["mean_nis_per_dof"] = float(nis.mean()) / dim if nis.size else None
-            innovations = InnovationLog(
-                times=np.asarray(self._innov_t, dtype=np.float64),
-                nis=nis,
-                dof=np.full(nis.size, dim, dtype=np.int64),
-                landmark_ids=np.asarray(self._innov_id, dtype=np.int64),
+            diagnostics["mean_nis_per_dof"] = (
+                float(nis.mean()) / self._lm_model.dim if nis.size else None
             )
         return EstimatorOutput(
             diagnostics=diagnostics,
@@ -329,30 +351,20 @@ class MonteCarloLocalization:
             self._c.particle_counts.append(len(self._particles))
             return
         if cfg.kld and self._resample_pending:
+            ps, p, sampler = self._particles, self._p_inject, self._sampler
             self._particles, n_random = _kld_predict(
-                self._particles,
-                u,
-                dt,
-                self._motion.model,
-                self._Q,
-                rng,
-                cfg,
-                self._p_inject,
-                self._sampler,
+                ps, u, dt, self._motion.model, self._Q, rng, cfg, p, sampler
             )
             self._c.resamplings += 1
             self._count_injection(n_random)
         else:
             if self._resample_pending and not cfg.kld:
+                k = min(self._inject_pending, self._n_target)
                 self._particles = mcl_resample(
-                    self._particles,
-                    rng,
-                    self._n_target,
-                    n_random=min(self._inject_pending, self._n_target),
-                    sampler=self._sampler,
+                    self._particles, rng, self._n_target, n_random=k, sampler=self._sampler
                 )
                 self._c.resamplings += 1
-                self._count_injection(min(self._inject_pending, self._n_target))
+                self._count_injection(k)
             ps = self._particles
             moved = mcl_predict_unchecked(
                 ps.poses, np.asarray(u, dtype=np.float64), dt, self._motion.model, self._Q_root, rng
@@ -375,11 +387,8 @@ class MonteCarloLocalization:
         model = self._lm_model
         innov = None
         if self._cfg.record_innovations:
-            ps = self._particles
-            mean, cov = particle_estimate_unchecked(ps.poses, ps.weights)
-            try:
-                innov = landmark_innovations_unchecked(mean, cov, zk, used, lm, model, self._lm_cov)
-            except GeometryError:  # a landmark on the mean pose: no bearing
+            innov = _innovations_before(self._particles, zk, used, lm, model, self._lm_cov)
+            if innov is None:
                 self._c.innovations_skipped += 1
         L_inv, log_norm = self._lm_whitener
 
@@ -389,9 +398,8 @@ class MonteCarloLocalization:
             return MeasurementUpdate(out.particles, ll, out.log_evidence, int(used.size))
 
         if self._update(event.t, correct) and innov is not None:
-            self._innov_t.extend([float(event.t)] * innov.nis.size)
-            self._innov_nis.extend(innov.nis.tolist())
-            self._innov_id.extend(innov.landmark_ids.tolist())
+            for nis, lm_id in zip(innov.nis.tolist(), innov.landmark_ids.tolist(), strict=True):
+                self._innovations.add(event.t, nis, model.dim, lm_id)
 
     def _count_injection(self, n: int) -> None:
         if n > 0:
@@ -420,7 +428,7 @@ class MonteCarloLocalization:
                 self._c.first_underflow_update = self._c.updates
                 self._c.first_underflow_t = float(t)
             if cfg.on_weight_underflow == "raise":
-                raise ConvergenceError(f"mcl at t = {t}: {exc}", step=self._c.updates) from exc
+                raise ConvergenceError(f"mcl at t = {t}: {exc}", step=self.clock.step) from exc
             log.warning("mcl at t = %s: measurement skipped (%s)", t, exc)
             return False
         self._particles = result.particles
