@@ -414,7 +414,7 @@ def long_run_rate(identities: bool, peer_steps: int) -> tuple[Record, str]:
     window = events[mid:end]
     loop = LoopFastSlam(run.settings)
     loop.next_id = half.particles.next_id
-    twin = copy.deepcopy(half)._rng  # the estimator's generator, in its mid-run state
+    twin = copy.deepcopy(half).generator  # the estimator's generator, in its mid-run state
     start = loop.from_particles(half.particles)
     t0 = time.perf_counter()
     theirs, _ = loop.run(start, window, twin, half.resample_pending)

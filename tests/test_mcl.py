@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2, multivariate_normal
 
-import slamkit.localization.mcl as mcl_module
+import slamkit.localization.mcl.core as mcl_core
 from slamkit.datasets import load_dataset
 from slamkit.datasets.stream import Dataset, LandmarkReadings, LaserScan, group_by_time
 from slamkit.errors import ConfigError, ConvergenceError, InputError
@@ -349,7 +349,7 @@ def test_weight_underflow_is_reported_not_silently_reset(
     def nothing_fits(field: object, poses: np.ndarray, *args: object) -> np.ndarray:
         return np.full(len(poses), -np.inf)
 
-    monkeypatch.setattr(mcl_module, "log_likelihood", nothing_fits)
+    monkeypatch.setattr(mcl_core, "log_likelihood", nothing_fits)
     est.handle(scans[1])
     est.handle(scans[2])
     assert est.particles is before  # the weights are kept, not reset to uniform
@@ -621,7 +621,7 @@ def test_kld_resamples_only_when_the_ess_drops() -> None:
 
 
 def test_fast_prediction_draws_what_the_model_samples() -> None:
-    from slamkit.localization.mcl import _control_noise_root, _predict_unchecked
+    from slamkit.localization.mcl.core import control_noise_root, mcl_predict_unchecked
     from slamkit.models import OdometryModel, UnicycleArc
 
     rng = np.random.default_rng(3)
@@ -631,8 +631,8 @@ def test_fast_prediction_draws_what_the_model_samples() -> None:
         (UnicycleEuler(), np.array([0.5, -0.2]), np.diag([0.01, 0.0])),  # singular Q
         (OdometryModel(), np.array([0.1, 0.4, -0.05]), np.diag([1e-4, 4e-4, 1e-4])),
     ):
-        fast = _predict_unchecked(
-            poses, u, 0.2, model, _control_noise_root(Q), np.random.default_rng(9)
+        fast = mcl_predict_unchecked(
+            poses, u, 0.2, model, control_noise_root(Q), np.random.default_rng(9)
         )
         slow = model.sample(poses, u, 0.2, Q, np.random.default_rng(9))
         np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12)

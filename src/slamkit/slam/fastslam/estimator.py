@@ -247,6 +247,12 @@ class _FastSlam(EstimatorShell):
         return self._w.particles(self._poses.copy(), self._log_weights.copy())
 
     @property
+    def generator(self) -> np.random.Generator:
+        """The random generator the estimator was given and draws from (its state advances
+        as the filter runs; a deep copy of the estimator copies it too)."""
+        return self._rng
+
+    @property
     def settings(self) -> UpdateSettings:
         return self._settings
 

@@ -1,0 +1,366 @@
+"""Line parsing for the laser-log readers of :mod:`slamkit.datasets.carmen`: reading a (gzip
+or plain) text file, checking and parsing blocks of numbers, the beam geometry of a scan,
+and the CARMEN log itself (:func:`parse_carmen_log`, :class:`CarmenLog`). The formats and
+the rules for malformed lines are described in :mod:`slamkit.datasets.carmen`.
+"""
+
+from __future__ import annotations
+
+import gzip
+import math
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slamkit._validation import FloatArray
+from slamkit.errors import DatasetFormatError
+
+__all__ = [
+    "SKIPPED_SHOWN",
+    "CarmenLog",
+    "LineProblems",
+    "beam_angles_from_geometry",
+    "parse_carmen_log",
+    "parse_floats",
+    "read_lines",
+    "resolve_geometry",
+]
+
+SKIPPED_SHOWN = 20
+"""Malformed lines listed (line number and reason) in the metadata of a lenient read."""
+
+# Beam counts whose geometry is known without PARAM lines: count -> (fov, resolution) in deg.
+_KNOWN_COUNTS: dict[int, tuple[float, float]] = {
+    180: (180.0, 1.0),
+    181: (180.0, 1.0),
+    360: (180.0, 0.5),
+    361: (180.0, 0.5),
+}
+
+
+def read_lines(path: Path) -> list[str]:
+    """The lines of a gzip or plain text file (gzip recognised by its magic bytes)."""
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise DatasetFormatError(f"cannot read the file ({exc.strerror})", path) from exc
+    if raw[:2] == b"\x1f\x8b":
+        try:
+            raw = gzip.decompress(raw)
+        except (OSError, EOFError) as exc:
+            raise DatasetFormatError(f"not a valid gzip file ({exc})", path) from exc
+    return raw.decode("utf-8", errors="replace").splitlines()
+
+
+class LineProblems:
+    """Malformed lines: raise at the first one, or (lenient) collect and count them."""
+
+    def __init__(self, path: Path, lenient: bool) -> None:
+        self.path = path
+        self.lenient = lenient
+        self.lines: list[tuple[int, str]] = []
+
+    def report(self, line: int, message: str) -> None:
+        """A malformed ``line``: raise :class:`DatasetFormatError`, or (lenient) keep it."""
+        if not self.lenient:
+            raise DatasetFormatError(message, self.path, line)
+        self.lines.append((line, message))
+
+    def metadata(self) -> dict[str, Any]:
+        """How many lines were skipped, and the first :data:`SKIPPED_SHOWN` of them."""
+        return {
+            "count": len(self.lines),
+            "first": [{"line": n, "reason": m} for n, m in self.lines[:SKIPPED_SHOWN]],
+        }
+
+
+def parse_floats(tokens: list[str]) -> list[float] | None:
+    """The tokens as numbers, or None when one of them is not a number."""
+    try:
+        return [float(t) for t in tokens]
+    except ValueError:
+        return None
+
+
+def _parse_block(
+    bodies: list[str], width: int, numbers: list[int], problems: LineProblems, what: str
+) -> tuple[FloatArray, list[int]]:
+    """Parse ``bodies`` (whitespace-separated numbers, ``width`` per line) into a
+    ``(n, width)`` array. Fast path: one C-level parse of all lines; only if that fails are
+    the lines parsed one by one to find (or, lenient, drop) the malformed ones."""
+    # Count the fields of every line first: a line short of one number and another with one
+    # too many would otherwise parse into a block of the right total size, misaligned.
+    if bodies and all(len(b.split()) == width for b in bodies):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # a partial parse warns: treat it as a failure
+            try:
+                flat = np.fromstring("\n".join(bodies), dtype=np.float64, sep=" ")
+            except (ValueError, DeprecationWarning):
+                flat = np.empty(0)
+        if flat.size == width * len(bodies):
+            return flat.reshape(len(bodies), width), list(numbers)
+    rows: list[list[float]] = []
+    kept: list[int] = []
+    for body, lineno in zip(bodies, numbers, strict=True):
+        tokens = body.split()
+        if len(tokens) != width:
+            problems.report(lineno, f"{what}: expected {width} numbers, got {len(tokens)}")
+            continue
+        values = parse_floats(tokens)
+        if values is None:
+            problems.report(lineno, f"{what}: a field is not a number")
+            continue
+        rows.append(values)
+        kept.append(lineno)
+    return np.asarray(rows, dtype=np.float64).reshape(len(rows), width), kept
+
+
+def _check_ranges(
+    ranges: FloatArray, numbers: list[int], problems: LineProblems, what: str
+) -> NDArray[np.bool_]:
+    """Rows whose ranges are all finite and >= 0 (others reported as malformed)."""
+    ok = np.all(np.isfinite(ranges) & (ranges >= 0.0), axis=1)
+    for i in np.flatnonzero(~ok):
+        row = ranges[i]
+        bad = row[~(np.isfinite(row) & (row >= 0.0))]
+        problems.report(
+            numbers[i], f"{what}: ranges must be finite and >= 0, got {float(bad[0])!r}"
+        )
+    return ok
+
+
+# --------------------------------------------------------------------------------------------
+# beam geometry
+# --------------------------------------------------------------------------------------------
+
+
+def beam_angles_from_geometry(n_beams: int, fov_deg: float, resolution_deg: float) -> FloatArray:
+    """Beam angles ``(n,)`` [rad]: ``-fov/2 + i * resolution``, i = 0 .. n-1 (counter-
+    clockwise from the right-most beam)."""
+    return np.deg2rad(-fov_deg / 2.0 + resolution_deg * np.arange(n_beams, dtype=np.float64))
+
+
+def _geometry_counts(fov_deg: float, resolution_deg: float) -> tuple[int, int]:
+    """Beam counts consistent with a field of view and a resolution: ``fov/res`` beams (the
+    last end excluded) or ``fov/res + 1`` (both ends included)."""
+    n = round(fov_deg / resolution_deg)
+    return n, n + 1
+
+
+def resolve_geometry(
+    n_beams: int, fov: float | None, res: float | None, source: str
+) -> tuple[float, float, str] | None:
+    """``(fov, resolution, how)`` for ``n_beams`` given what is declared (either may be
+    None); None if the declared geometry contradicts the beam count."""
+    if fov is None and res is None:
+        if n_beams not in _KNOWN_COUNTS:
+            return None
+        f, r = _KNOWN_COUNTS[n_beams]
+        return f, r, "beam count"
+    if fov is None:
+        assert res is not None
+        fov = n_beams * res if n_beams * res <= 180.0 + 1e-9 else (n_beams - 1) * res
+    if res is None:
+        known = _KNOWN_COUNTS.get(n_beams)
+        res = known[1] if known is not None and abs(known[0] - fov) < 1e-9 else fov / n_beams
+    if n_beams not in _geometry_counts(fov, res):
+        return None
+    return fov, res, source
+
+
+# --------------------------------------------------------------------------------------------
+# CARMEN
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class CarmenLog:
+    """The scans of a CARMEN log as arrays (what :func:`parse_carmen_log` found).
+
+    ``ranges (N, B)`` are the raw readings in metres (max-range codes not yet replaced);
+    ``laser_poses``/``odom_poses (N, 3)`` the two pose triples of each ``FLASER`` line;
+    ``times (N,)`` the ``ts`` field; ``line_numbers (N,)`` 1-based lines of the scans;
+    ``params`` the ``PARAM`` values as text (``param_lines`` their line numbers);
+    ``counts`` the number of lines per message type; ``skipped`` the malformed lines a
+    lenient read dropped, as (line, reason).
+    """
+
+    path: Path
+    times: FloatArray
+    ranges: FloatArray
+    laser_poses: FloatArray
+    odom_poses: FloatArray
+    line_numbers: NDArray[np.int64]
+    params: dict[str, str] = field(default_factory=dict)
+    param_lines: dict[str, int] = field(default_factory=dict)
+    counts: dict[str, int] = field(default_factory=dict)
+    skipped: tuple[tuple[int, str], ...] = ()
+
+    def param_float(self, name: str) -> float | None:
+        """The ``PARAM`` value ``name`` as a number > 0, or None when the log does not set
+        it; raises :class:`DatasetFormatError` (with its line) when it is not such a number."""
+        return _param_number(self.params, self.param_lines, self.path, name)
+
+    @property
+    def n_scans(self) -> int:
+        return int(self.times.size)
+
+    @property
+    def n_beams(self) -> int:
+        return int(self.ranges.shape[1])
+
+
+def _param_number(
+    params: Mapping[str, str], lines: Mapping[str, int], path: Path, name: str
+) -> float | None:
+    """The ``PARAM`` value ``name`` as a number > 0, or None when the log does not set it;
+    raises :class:`DatasetFormatError` (with its line) when it is not such a number."""
+    if name not in params:
+        return None
+    try:
+        value = float(params[name])
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise DatasetFormatError(
+            f"PARAM {name}: expected a number > 0, got {params[name]!r}", path, lines.get(name)
+        )
+    return value
+
+
+def parse_carmen_log(
+    path: str | Path,
+    *,
+    lenient: bool = False,
+    fov_deg: float | None = None,
+    angular_resolution_deg: float | None = None,
+) -> CarmenLog:
+    """Read the ``FLASER``, ``PARAM``, ``ODOM`` and ``NEFF`` lines of a CARMEN log.
+
+    Checks every line's form (see the module docstring); the beam count of every scan must
+    match the declared geometry (``fov_deg``/``angular_resolution_deg`` if given, else the
+    ``PARAM`` lines, else the first scan's count). Other message types (``RLASER``, ``SYNC``,
+    ``TRUEPOS``, …) are counted and ignored.
+    """
+    p = Path(path)
+    lines = read_lines(p)
+    problems = LineProblems(p, lenient)
+    params: dict[str, str] = {}
+    param_lines: dict[str, int] = {}
+    counts: dict[str, int] = {}
+    # FLASER lines split cheaply: "FLASER n <ranges and 6 pose numbers> ts host logger_ts".
+    bodies: list[str] = []
+    body_lines: list[int] = []
+    stamps: list[str] = []
+    beams_of: list[int] = []
+    for number, line in enumerate(lines, start=1):
+        stripped = line.strip()
+        if not stripped or stripped.startswith("#"):
+            continue
+        first = stripped.split(None, 1)  # any whitespace separates the fields
+        kind, rest = first[0], (first[1] if len(first) > 1 else "")
+        counts[kind] = counts.get(kind, 0) + 1
+        if kind == "FLASER":
+            head = rest.split(None, 1)
+            try:
+                n = int(head[0]) if head else -1
+            except ValueError:
+                n = -1
+            if n < 1 or len(head) < 2:
+                problems.report(number, "FLASER: expected a beam count >= 1 and the readings")
+                continue
+            parts = head[1].rsplit(None, 3)
+            if len(parts) != 4:
+                problems.report(number, "FLASER: too few fields")
+                continue
+            bodies.append(parts[0])
+            body_lines.append(number)
+            stamps.append(parts[1])
+            beams_of.append(n)
+        elif kind == "PARAM":
+            fields_ = rest.split()
+            if len(fields_) < 2:
+                problems.report(number, "PARAM: expected a name and a value")
+                continue
+            params[fields_[0]] = fields_[1]
+            param_lines[fields_[0]] = number
+        elif kind == "ODOM":
+            fields_ = rest.split()
+            if len(fields_) != 9 or parse_floats(fields_[:7]) is None:
+                problems.report(number, "ODOM: expected x y theta tv rv accel ts host logger_ts")
+        elif kind == "NEFF":
+            fields_ = rest.split()
+            if len(fields_) != 1 or parse_floats(fields_) is None:
+                problems.report(number, "NEFF: expected one number")
+
+    fov = fov_deg
+    if fov is None:
+        fov = _param_number(params, param_lines, p, "laser_front_laser_fov")
+    res = angular_resolution_deg
+    if res is None:
+        res = _param_number(params, param_lines, p, "laser_front_laser_resolution")
+    declared = fov is not None or res is not None
+    n_beams: int | None = None
+    keep: list[int] = []
+    for i, n in enumerate(beams_of):
+        if n_beams is None:
+            geometry = resolve_geometry(n, fov, res, "declared")
+            if geometry is None:
+                what = (
+                    f"field of view {fov} deg at {res} deg"
+                    if declared
+                    else "the known laser geometries (180/181 or 360/361 beams); "
+                    "give fov_deg and angular_resolution_deg"
+                )
+                problems.report(body_lines[i], f"FLASER: {n} beams do not match {what}")
+                continue
+            n_beams = n
+        elif n != n_beams:
+            problems.report(
+                body_lines[i],
+                f"FLASER: {n} beams disagree with the log's geometry of {n_beams} beams",
+            )
+            continue
+        keep.append(i)
+    if n_beams is None:
+        raise DatasetFormatError("no FLASER scans found", p)
+
+    width = n_beams + 6
+    values, numbers = _parse_block(
+        [bodies[i] for i in keep], width, [body_lines[i] for i in keep], problems, "FLASER"
+    )
+    stamp_of = {body_lines[i]: stamps[i] for i in keep}
+    times_list: list[float] = []
+    ok_time = np.ones(len(numbers), dtype=bool)
+    for j, number in enumerate(numbers):
+        try:
+            t = float(stamp_of[number])
+        except ValueError:
+            t = math.nan
+        if not math.isfinite(t):
+            problems.report(number, f"FLASER: time stamp {stamp_of[number]!r} is not a number")
+            ok_time[j] = False
+        times_list.append(t)
+    ranges = values[:, :n_beams]
+    ok = ok_time & _check_ranges(ranges, numbers, problems, "FLASER")
+    ok &= np.all(np.isfinite(values[:, n_beams:]), axis=1)
+    for row in np.flatnonzero(~np.all(np.isfinite(values[:, n_beams:]), axis=1) & ok_time):
+        problems.report(numbers[int(row)], "FLASER: the poses must be finite numbers")
+    numbers_arr = np.asarray(numbers, dtype=np.int64)[ok]
+    return CarmenLog(
+        path=p,
+        times=np.asarray(times_list, dtype=np.float64)[ok],
+        ranges=np.ascontiguousarray(ranges[ok]),
+        laser_poses=np.ascontiguousarray(values[ok, n_beams : n_beams + 3]),
+        odom_poses=np.ascontiguousarray(values[ok, n_beams + 3 : n_beams + 6]),
+        line_numbers=numbers_arr,
+        params=params,
+        param_lines=param_lines,
+        counts=counts,
+        skipped=tuple(sorted(problems.lines)),
+    )
