@@ -50,7 +50,7 @@ def test_run_dead_reckoning_writes_trajectory_metrics_config_and_plots(tmp_path)
 
 def test_config_file_sets_estimator_and_dataset(tmp_path):
     cfg = tmp_path / "c.toml"
-    cfg.write_text("seed = 5\n[estimator]\nnoise_scale = 4.0\n[dataset]\nsigma_v = 0.2\n")
+    cfg.write_text("seed = 5\n[estimator]\nmotion_cov_scale = 4.0\n[dataset]\nsigma_v = 0.2\n")
     out = tmp_path / "o"
     res = runner.invoke(
         app, ["run", "dead-reckoning", "--config", str(cfg), "--out", str(out), "--no-plots"]
@@ -58,7 +58,7 @@ def test_config_file_sets_estimator_and_dataset(tmp_path):
     assert res.exit_code == 0, res.output
     config = json.loads((out / "config.json").read_text())
     assert config["seed"] == 5
-    assert config["estimator"]["noise_scale"] == 4.0
+    assert config["estimator"]["motion_cov_scale"] == 4.0
     assert config["dataset"]["sigma_v"] == 0.2
     assert not list(out.glob("*.png"))
 
@@ -84,7 +84,7 @@ def test_bad_config_leaves_no_output_folder(tmp_path):
     res = runner.invoke(
         app, ["run", "dead-reckoning", "--config", str(cfg), "--out", str(tmp_path / "x")]
     )
-    assert res.exit_code == 1 and "noise_scale" in res.output
+    assert res.exit_code == 1 and "motion_cov_scale" in res.output
     assert not (tmp_path / "x").exists()
     assert [p.name for p in tmp_path.iterdir()] == ["c.toml"]
 

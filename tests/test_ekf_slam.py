@@ -659,7 +659,7 @@ def test_bad_input_raises_typed_errors() -> None:
         {"provisional_trace": -1.0},
         {"max_misses": 0},
         {"new_landmark_probability": 0.9},
-        {"measurement_noise_scale": 0.0},
+        {"measurement_cov_scale": 0.0},
         {"jcbb_max_nodes": 0},
     ):
         with pytest.raises(ConfigError):

@@ -562,9 +562,9 @@ def test_gate_rejects_an_outlier_and_none_disables_it(entry):
 
 def test_config_validation():
     with pytest.raises(ConfigError):
-        EkfConfig(measurement_noise_scale=0.0)
+        EkfConfig(measurement_cov_scale=0.0)
     with pytest.raises(ConfigError):
-        EkfConfig(motion_noise_scale=-1.0)
+        EkfConfig(motion_cov_scale=-1.0)
     with pytest.raises(ConfigError):
         EkfConfig(gate_probability=1.0)
     with pytest.raises(ConfigError):

@@ -254,7 +254,7 @@ def test_mrclam_lockout_guard_recovers_an_overconfident_filter(
 ) -> None:
     # With half the nominal control noise the EKF's covariance outgrows too slowly over the
     # 33 s without readings that end at 472 s: the filter locks out there.
-    cfg = {"motion_noise_scale": 0.5}
+    cfg = {"motion_cov_scale": 0.5}
     off = run("ekf-localization", mrclam, config={**cfg, "relocalize_after": None})
     d = off.output.diagnostics
     # Measured: 0.622 of the readings accepted, 90th pct error 4.66 m.

@@ -102,7 +102,7 @@ def test_mrclam_mcl_from_a_global_start_follows_the_ekf(mrclam: Dataset) -> None
     below; the EKF's over the same 300 s 0.419. Both are low for the reason given in
     ``tests/test_localization_real.py`` (reading errors that are not white, so the next
     reading is predicted better than its noise). The band [0.35, 0.8] excludes the filter
-    with a wrong reading noise: R / 4 (``measurement_noise_scale = 0.5``) gives 1.24 and
+    with a wrong reading noise: R / 4 (``measurement_cov_scale = 0.25``) gives 1.24 and
     2 R gives 0.32.
     """
     assert mrclam.initial_pose is None

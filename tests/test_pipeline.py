@@ -46,7 +46,7 @@ def test_runner_records_one_pose_per_time_stamp_and_reports_progress():
     assert calls[-1] == (len(ds), len(ds)) and 50 <= len(calls) <= 102
     assert all(a[0] <= b[0] for a, b in itertools.pairwise(calls))
     assert res.step_seconds.shape == res.times.shape and np.all(res.step_seconds >= 0)
-    assert res.config == {"noise_scale": 1.0}
+    assert res.config == {"motion_cov_scale": 1.0}
 
 
 def test_evaluate_dead_reckoning_against_truth():
@@ -150,8 +150,8 @@ def test_config_from_mapping_validates_keys_and_types(tmp_path):
     with pytest.raises(ConfigError, match="true or false"):
         config_from_mapping(_Cfg, {"flag": 1})
     p = tmp_path / "c.toml"
-    p.write_text("[estimator]\nnoise_scale = 2.0\n")
-    assert load_config_file(p) == {"estimator": {"noise_scale": 2.0}}
+    p.write_text("[estimator]\nmotion_cov_scale = 2.0\n")
+    assert load_config_file(p) == {"estimator": {"motion_cov_scale": 2.0}}
     p.write_text("[estimator\n")
     with pytest.raises(ConfigError, match="not valid"):
         load_config_file(p)
@@ -227,3 +227,14 @@ def test_metrics_that_do_not_apply_are_skipped_with_a_reason():
     )
     m = evaluate(run("dead-reckoning", short), short).metrics
     assert "skipped" in m["rpe_10_m"] and "rmse" in m["ate"]
+
+
+def test_a_renamed_setting_is_named_with_its_replacement():
+    """Noise scaling has one meaning, a factor on the covariance (``*_cov_scale``); a config
+    with the old names is refused with what to write instead."""
+    ds = load_dataset("five-features", seed=0)
+    with pytest.raises(ConfigError, match="measurement_cov_scale.*square the old value"):
+        run("fastslam1", ds, config={"measurement_noise_scale": 6.0})
+    # FastSLAM's reading covariance is the sensor's times the factor
+    a = run("fastslam1", ds, config={"measurement_cov_scale": 4.0, "n_particles": 20})
+    assert a.config["measurement_cov_scale"] == 4.0

@@ -121,7 +121,7 @@ def test_synthetic_files_convert_units_and_conventions(tmp_path: Path) -> None:
     np.testing.assert_allclose(np.diag(sensor.noise_cov), [0.1**2, 0.01**2])
     assert sensor.offset == (3.78, 0.5)  # the laser sees from here (FastSLAM's misses)
     # FastSLAM's measured settings are a preset of the app layer; EKF-SLAM has none.
-    fs = {"measurement_noise_scale": 6.0, "motion_noise_scale": 0.5, "hit_weight": 3}
+    fs = {"measurement_cov_scale": 36.0, "motion_cov_scale": 0.5, "hit_weight": 3}
     for name in ("fastslam1", "fastslam2"):
         preset = preset_for(name, "victoria-park")
         assert preset is not None and dict(preset.settings) == fs

@@ -85,6 +85,17 @@ def _coerce(value: Any, annotation: Any, where: str) -> Any:
     return value
 
 
+RENAMED: dict[str, str] = {
+    "measurement_noise_scale": "now measurement_cov_scale, a factor on the covariance; "
+    "FastSLAM and MCL scaled standard deviations: square the old value",
+    "motion_noise_scale": "now motion_cov_scale, a factor on the covariance",
+    "noise_scale": "now motion_cov_scale (dead reckoning, least squares) or "
+    "measurement_cov_scale (EKF mapping), factors on the covariance",
+    "method": "now solver",
+}
+"""Settings that were renamed, with what to write instead (named in the error)."""
+
+
 def config_from_mapping(cls: type[C], values: Mapping[str, Any] | None, where: str = "") -> C:
     """Build the frozen dataclass ``cls`` from ``values``; missing keys keep their defaults.
 
@@ -102,9 +113,9 @@ def config_from_mapping(cls: type[C], values: Mapping[str, Any] | None, where: s
     unknown = sorted(set(values) - set(fields))
     label = where or cls.__name__
     if unknown:
-        raise ConfigError(
-            f"{label}: unknown setting(s) {', '.join(unknown)}; known: {', '.join(sorted(fields))}"
-        )
+        named = ", ".join(k + (f" ({RENAMED[k]})" if k in RENAMED else "") for k in unknown)
+        known = ", ".join(sorted(fields))
+        raise ConfigError(f"{label}: unknown setting(s) {named}; known: {known}")
     kwargs = {
         name: _coerce(value, hints[name], f"{label}.{name}") for name, value in values.items()
     }

@@ -37,9 +37,10 @@ PRESETS: dict[str, Preset] = {
             "victoria-park-fastslam",
             ("fastslam1", "fastslam2"),
             ("victoria-park",),
-            {"measurement_noise_scale": 6.0, "motion_noise_scale": 0.5, "hit_weight": 3},
-            "FastSLAM on Victoria Park without ids: 6x the tree-reading standard deviations, "
-            "half the control covariance, hit weight 3 (whole run, seeds 0-3)",
+            {"measurement_cov_scale": 36.0, "motion_cov_scale": 0.5, "hit_weight": 3},
+            "FastSLAM on Victoria Park without ids: 36x the tree-reading covariance (6x the "
+            "standard deviations), half the control covariance, hit weight 3 (whole run, "
+            "seeds 0-3)",
         ),
     )
 }

@@ -25,12 +25,14 @@ __all__ = ["DeadReckoning", "DeadReckoningConfig"]
 class DeadReckoningConfig:
     """Settings of :class:`DeadReckoning`."""
 
-    noise_scale: float = 1.0
+    motion_cov_scale: float = 1.0
     """Multiplies the data set's nominal control-noise covariance (1 = trust it as given)."""
 
     def __post_init__(self) -> None:
-        if not self.noise_scale >= 0:
-            raise ConfigError(f"noise_scale: expected a number >= 0, got {self.noise_scale}")
+        if not self.motion_cov_scale >= 0:
+            raise ConfigError(
+                f"motion_cov_scale: expected a number >= 0, got {self.motion_cov_scale}"
+            )
 
 
 class DeadReckoning(EstimatorShell):
@@ -44,7 +46,7 @@ class DeadReckoning(EstimatorShell):
         if dataset.motion is None:
             raise InputError(f"dead reckoning needs a motion model; {dataset.name} has none")
         self._motion = dataset.motion
-        self._Q = config.noise_scale * dataset.motion.noise_cov
+        self._Q = config.motion_cov_scale * dataset.motion.noise_cov
         start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
         self._belief = GaussianBelief.from_pose(start, dataset.initial_cov)
         self._steps = 0

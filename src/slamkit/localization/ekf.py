@@ -173,10 +173,10 @@ def ekf_update(
 class GaussianFilterConfig:
     """Settings shared by :class:`EkfConfig` and the UKF's config."""
 
-    motion_noise_scale: float = 1.0
+    motion_cov_scale: float = 1.0
     """Multiplies the data set's nominal control-noise covariance ``Q`` (1 = trust it as
     given; > 1 inflates it, e.g. to cover unmodelled slip). Must be >= 0."""
-    measurement_noise_scale: float = 1.0
+    measurement_cov_scale: float = 1.0
     """Multiplies the landmark sensor's nominal noise covariance ``R``. Must be > 0."""
     gate_probability: float | None = 0.999
     """Probability mass of the χ² validation gate, in (0, 1). With ``association="known"``
@@ -203,7 +203,7 @@ class GaussianFilterConfig:
     that would correct it, and without the guard never recovers. On MRCLAM 1 (labels
     corrected) the nominal filter rejects 4 readings in a row, its longest run, after the
     33 s without readings that end at 472 s; with half the nominal control noise
-    (``motion_noise_scale=0.5``) it locks out there for good — 38 % of all readings
+    (``motion_cov_scale=0.5``) it locks out there for good — 38 % of all readings
     rejected, position error 4.7 m (90th percentile) at the true poses — while with the
     guard it re-initialises three times, accepts 98 % and stays within 0.09 m (90th
     percentile). Needs known ids (``association="known"``) and a gate; ``None`` disables
@@ -216,14 +216,13 @@ class GaussianFilterConfig:
     """Keep every update's NIS in the output's :class:`InnovationLog`."""
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.motion_noise_scale) and self.motion_noise_scale >= 0):
+        if not (math.isfinite(self.motion_cov_scale) and self.motion_cov_scale >= 0):
             raise ConfigError(
-                f"motion_noise_scale: expected a number >= 0, got {self.motion_noise_scale}"
+                f"motion_cov_scale: expected a number >= 0, got {self.motion_cov_scale}"
             )
-        if not (math.isfinite(self.measurement_noise_scale) and self.measurement_noise_scale > 0):
+        if not (math.isfinite(self.measurement_cov_scale) and self.measurement_cov_scale > 0):
             raise ConfigError(
-                "measurement_noise_scale: expected a number > 0, got "
-                f"{self.measurement_noise_scale}"
+                f"measurement_cov_scale: expected a number > 0, got {self.measurement_cov_scale}"
             )
         p = self.gate_probability
         if p is not None and not 0.0 < p < 1.0:
@@ -317,11 +316,11 @@ class GaussianLocalization(EstimatorShell):
             raise InputError(f"{self.name} needs a known landmark map; {dataset.name} has none")
         self._config = config
         self._motion = dataset.motion.model
-        self._Q = config.motion_noise_scale * dataset.motion.noise_cov
+        self._Q = config.motion_cov_scale * dataset.motion.noise_cov
         self._sensor = dataset.landmark_sensor
         self._meas = dataset.landmark_sensor.model()
         self._R = as_covariance(
-            config.measurement_noise_scale * dataset.landmark_sensor.noise_cov, "R", None
+            config.measurement_cov_scale * dataset.landmark_sensor.noise_cov, "R", None
         )
         self._angular = angular_indices(self._meas)
         self._landmarks = dataset.known_landmarks

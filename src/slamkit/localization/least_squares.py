@@ -52,7 +52,7 @@ class LeastSquaresConfig:
     predict_between: bool = True
     """Dead-reckon from the last fix with the data set's motion model between fixes (when it
     has one); otherwise hold the last fix unchanged."""
-    noise_scale: float = 1.0
+    motion_cov_scale: float = 1.0
     """Multiplies the data set's nominal control-noise covariance when dead-reckoning."""
     max_condition: float = MAX_CONDITION
     """Refuse a fix when the Jacobi-scaled normal matrix has a larger condition number."""
@@ -61,8 +61,10 @@ class LeastSquaresConfig:
     has no prior (the reported pose is then the origin with a uniform heading)."""
 
     def __post_init__(self) -> None:
-        if not self.noise_scale >= 0:
-            raise ConfigError(f"noise_scale: expected a number >= 0, got {self.noise_scale}")
+        if not self.motion_cov_scale >= 0:
+            raise ConfigError(
+                f"motion_cov_scale: expected a number >= 0, got {self.motion_cov_scale}"
+            )
         if not self.max_condition > 1:
             raise ConfigError(f"max_condition: expected a number > 1, got {self.max_condition}")
         if not (np.isfinite(self.unknown_position_sigma) and self.unknown_position_sigma > 0):
@@ -99,7 +101,7 @@ class LeastSquaresLocalization(EstimatorShell):
         self._sensor, self._map = _check_dataset(dataset)
         self._config = config
         self._motion = dataset.motion if config.predict_between else None
-        self._Q = None if self._motion is None else config.noise_scale * self._motion.noise_cov
+        self._Q = None if self._motion is None else config.motion_cov_scale * self._motion.noise_cov
         if dataset.initial_pose is not None:
             self._belief = GaussianBelief.from_pose(dataset.initial_pose, dataset.initial_cov)
         else:

@@ -41,7 +41,7 @@ class MclConfig:
     fraction of the number of particles; 1 = after every update, 0 = only for injections.
     Resampling is done just before the next prediction, so the estimate after a measurement
     is always that of the weighted set."""
-    motion_noise_scale: float = 1.0
+    motion_cov_scale: float = 1.0
     """Multiplies the data set's nominal control-noise covariance (> 1 helps a particle set
     cover unmodelled motion)."""
     augmented: bool = True
@@ -85,7 +85,7 @@ class MclConfig:
     """KLD-sampling: never more particles than this."""
     sigma_hit: float | None = 0.2
     """Likelihood field: standard deviation of a hit's end-point distance [m]. ``None``:
-    derived from the data set, ``measurement_noise_scale · sqrt(σ_r² + res²/3)`` with the
+    derived from the data set, ``sqrt(measurement_cov_scale · (σ_r² + res²/3))`` with the
     laser's range noise ``σ_r`` and the map resolution (an end point and the wall it hits
     each lie anywhere in their cells: variance ``res²/6`` each). That is right for a particle
     at the true pose but far too sharp for a particle set, whose particles are never exactly
@@ -110,9 +110,10 @@ class MclConfig:
     docs/estimators/mcl.md)."""
     laser_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """Pose of the laser in the robot frame: (forward [m], left [m], yaw [rad])."""
-    measurement_noise_scale: float = 1.0
-    """Multiplies the measurement standard deviations: the landmark sensor's (its covariance
-    by the square) and the laser's range noise when ``sigma_hit`` is derived."""
+    measurement_cov_scale: float = 1.0
+    """Multiplies the measurement noise covariances (standard deviations by the square
+    root): the landmark sensor's, and the laser's range noise when ``sigma_hit`` is
+    derived."""
     on_weight_underflow: Literal["skip", "raise"] = "skip"
     """What to do when a measurement leaves every particle with zero weight: ``"skip"``
     drops that measurement (keeps the predicted weights) and reports it in the
@@ -155,13 +156,13 @@ class MclConfig:
             )
         for name in (
             "prior_cov_scale",
-            "motion_noise_scale",
+            "motion_cov_scale",
             "injection_margin",
             "injection_sigmas",
         ):
             if not getattr(self, name) >= 0:
                 raise ConfigError(f"{name}: expected a number >= 0, got {getattr(self, name)}")
-        for name in ("kld_epsilon", "kld_bin_xy", "kld_bin_theta_deg", "measurement_noise_scale"):
+        for name in ("kld_epsilon", "kld_bin_xy", "kld_bin_theta_deg", "measurement_cov_scale"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"{name}: expected a number > 0, got {getattr(self, name)}")
         if not 0.0 < self.kld_quantile < 1.0:

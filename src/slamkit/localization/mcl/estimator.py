@@ -6,6 +6,7 @@ drives over the particle-filter steps of :mod:`.core`, :mod:`.landmarks`, :mod:`
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from dataclasses import field as dataclass_field
@@ -122,7 +123,9 @@ def _laser_field(dataset: Dataset, config: MclConfig) -> LikelihoodField:
     sigma = config.sigma_hit
     if sigma is None:
         s_r = dataset.laser.range_sigma
-        sigma = config.measurement_noise_scale * float(np.sqrt(s_r**2 + grid.resolution**2 / 3.0))
+        sigma = math.sqrt(config.measurement_cov_scale) * float(
+            np.sqrt(s_r**2 + grid.resolution**2 / 3.0)
+        )
     return LikelihoodField.from_grid(
         grid, sigma, config.z_hit, config.z_rand, dataset.laser.max_range
     )
@@ -226,7 +229,7 @@ class MonteCarloLocalization(EstimatorShell):
         self._cfg = config
         self._rng = rng
         self._motion = dataset.motion
-        self._Q = config.motion_noise_scale * dataset.motion.noise_cov
+        self._Q = config.motion_cov_scale * dataset.motion.noise_cov
         self._Q_root = control_noise_root(self._Q)
 
         self._field: LikelihoodField | None = None
@@ -240,7 +243,7 @@ class MonteCarloLocalization(EstimatorShell):
             assert dataset.landmark_sensor is not None and dataset.known_landmarks is not None
             self._landmarks = dataset.known_landmarks
             self._lm_model = dataset.landmark_sensor.model()
-            self._lm_cov = config.measurement_noise_scale**2 * dataset.landmark_sensor.noise_cov
+            self._lm_cov = config.measurement_cov_scale * dataset.landmark_sensor.noise_cov
             self._lm_whitener = whitener(self._lm_cov)
         self._sampler, area = _injection_sampler(dataset, config, use_laser)
         self._global_start = dataset.initial_pose is None or config.global_start

@@ -16,9 +16,9 @@ __all__ = ["EkfSlamConfig"]
 class EkfSlamConfig:
     """Settings of :class:`EkfSlam`. Units: metres, radians, m² for covariance traces."""
 
-    motion_noise_scale: float = 1.0
+    motion_cov_scale: float = 1.0
     """Multiplies the data set's nominal control-noise covariance ``Q`` (>= 0)."""
-    measurement_noise_scale: float = 1.0
+    measurement_cov_scale: float = 1.0
     """Multiplies the landmark sensor's noise covariance ``R`` (> 0)."""
     use_ids: bool = True
     """Use the landmark ids the readings carry when the sensor provides them
@@ -78,14 +78,13 @@ class EkfSlamConfig:
     """Keep the NIS of every map update in the output's :class:`InnovationLog`."""
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.motion_noise_scale) and self.motion_noise_scale >= 0):
+        if not (math.isfinite(self.motion_cov_scale) and self.motion_cov_scale >= 0):
             raise ConfigError(
-                f"motion_noise_scale: expected a number >= 0, got {self.motion_noise_scale}"
+                f"motion_cov_scale: expected a number >= 0, got {self.motion_cov_scale}"
             )
-        if not (math.isfinite(self.measurement_noise_scale) and self.measurement_noise_scale > 0):
+        if not (math.isfinite(self.measurement_cov_scale) and self.measurement_cov_scale > 0):
             raise ConfigError(
-                f"measurement_noise_scale: expected a number > 0, got "
-                f"{self.measurement_noise_scale}"
+                f"measurement_cov_scale: expected a number > 0, got {self.measurement_cov_scale}"
             )
         if self.association not in ("nn", "jcbb"):
             raise ConfigError(f"association: expected 'nn' or 'jcbb', got {self.association!r}")

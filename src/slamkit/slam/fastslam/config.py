@@ -46,10 +46,11 @@ class FastSlamConfig:
     prune: bool = True
     """Remove landmarks started by unlabelled readings when their existence counter falls
     below zero (see the module docstring)."""
-    motion_noise_scale: float = 1.0
+    motion_cov_scale: float = 1.0
     """Multiplies the data set's control-noise covariance (> 1 spreads the particles more)."""
-    measurement_noise_scale: float = 1.0
-    """Multiplies the sensor's standard deviations (its covariance by the square)."""
+    measurement_cov_scale: float = 1.0
+    """Multiplies the sensor's noise covariance (its standard deviations by the square root),
+    as every ``*_cov_scale`` setting of slamkit does."""
     prior_cov_scale: float = 1.0
     """The particles start from ``N(initial_pose, prior_cov_scale · initial_cov)``; without a
     prior in the data set, all at the origin (the map then defines the frame)."""
@@ -115,14 +116,13 @@ class FastSlamConfig:
                 "new_landmark_probability: expected a probability in (0, 1), got "
                 f"{self.new_landmark_probability}"
             )
-        for name in ("motion_noise_scale", "prior_cov_scale", "min_range"):
+        for name in ("motion_cov_scale", "prior_cov_scale", "min_range"):
             v = getattr(self, name)
             if not (v >= 0 and math.isfinite(v)):
                 raise ConfigError(f"{name}: expected a number >= 0, got {v}")
-        if not (self.measurement_noise_scale > 0 and math.isfinite(self.measurement_noise_scale)):
+        if not (self.measurement_cov_scale > 0 and math.isfinite(self.measurement_cov_scale)):
             raise ConfigError(
-                "measurement_noise_scale: expected a number > 0, got "
-                f"{self.measurement_noise_scale}"
+                f"measurement_cov_scale: expected a number > 0, got {self.measurement_cov_scale}"
             )
         if self.estimate not in ("mean", "best"):
             raise ConfigError(f"estimate: expected 'mean' or 'best', got {self.estimate!r}")

@@ -76,7 +76,7 @@ class _FastSlam(EstimatorShell):
         self._rng = rng
         self._motion = dataset.motion.model
         self._Q = as_covariance(
-            config.motion_noise_scale * dataset.motion.noise_cov,
+            config.motion_cov_scale * dataset.motion.noise_cov,
             "scaled motion noise_cov",
             self._motion.control_dim,
             semidefinite=True,
@@ -84,7 +84,7 @@ class _FastSlam(EstimatorShell):
         self._Q_root = sym_sqrt(self._Q)  # symmetric: ε = n @ root = root @ n
         self._model: InvertibleLandmarkModel = model
         self._R = as_covariance(
-            config.measurement_noise_scale**2 * sensor.noise_cov, "scaled landmark noise_cov", 2
+            config.measurement_cov_scale * sensor.noise_cov, "scaled landmark noise_cov", 2
         )
         p0 = (
             config.p0

@@ -28,9 +28,9 @@ class SeifConfig:
     relax_sweeps: int = 2
     """Gauss–Seidel sweeps over the robot and the active landmarks per step (they are
     strongly coupled, and the robot's mean is the estimate reported at every step)."""
-    motion_noise_scale: float = 1.0
+    motion_cov_scale: float = 1.0
     """Multiplies the data set's control-noise covariance (>= 0)."""
-    measurement_noise_scale: float = 1.0
+    measurement_cov_scale: float = 1.0
     """Multiplies the landmark sensor's noise covariance (> 0)."""
     initial_capacity: int = 32
     """Landmarks the buffers hold before their first doubling."""
@@ -80,11 +80,11 @@ class SeifConfig:
             raise ConfigError(
                 f"relax_per_step: expected an integer >= 0, got {self.relax_per_step}"
             )
-        if not (math.isfinite(self.motion_noise_scale) and self.motion_noise_scale >= 0):
-            raise ConfigError(f"motion_noise_scale: expected >= 0, got {self.motion_noise_scale}")
-        s = self.measurement_noise_scale
+        if not (math.isfinite(self.motion_cov_scale) and self.motion_cov_scale >= 0):
+            raise ConfigError(f"motion_cov_scale: expected >= 0, got {self.motion_cov_scale}")
+        s = self.measurement_cov_scale
         if not (math.isfinite(s) and s > 0):
-            raise ConfigError(f"measurement_noise_scale: expected > 0, got {s}")
+            raise ConfigError(f"measurement_cov_scale: expected > 0, got {s}")
         if not (math.isfinite(self.prior_information) and self.prior_information > 0):
             raise ConfigError(f"prior_information: expected > 0, got {self.prior_information}")
         association_probabilities(self.gate_probability, self.new_landmark_probability)

@@ -107,10 +107,10 @@ class Seif(EstimatorShell):
         motion, sensor, model = _check_dataset(dataset)
         self._config = config
         self._motion = motion.model
-        self._Q = config.motion_noise_scale * motion.noise_cov
+        self._Q = config.motion_cov_scale * motion.noise_cov
         self._meas: InvertibleLandmarkModel = model
         self._model: LandmarkModel = sensor.model()
-        self._R = as_covariance(config.measurement_noise_scale * sensor.noise_cov, "R")
+        self._R = as_covariance(config.measurement_cov_scale * sensor.noise_cov, "R")
         self._R_inv = np.asarray(np.linalg.inv(self._R), dtype=np.float64)
         self._m = int(self._R.shape[0])
         self._angular = angular_indices(self._model)
