@@ -471,9 +471,9 @@ def test_block_path_equals_the_per_scan_model_exactly(rooms, kwargs):
 def test_block_path_without_the_tail_shortcut(rooms, kwargs, monkeypatch):
     """With no margin on the tail, nearly every ray's free run is found by testing every
     step (the exhaustive branch, normally never needed): the same exact map."""
-    import slamkit.mapping.occupancy as occupancy
+    import slamkit.mapping.occupancy.rays as rays
 
-    monkeypatch.setattr(occupancy, "_TAIL_MARGIN", 0)
+    monkeypatch.setattr(rays, "TAIL_MARGIN", 0)
     cfg = OccupancyMappingConfig(**kwargs)
     scans = range(3, 522, 11)
     fast = build_occupancy_map(rooms, cfg, scans=list(scans))
@@ -516,11 +516,11 @@ def test_offer_many_equals_offer_scan_by_scan(rooms, kwargs, bounds):
 
 
 def test_too_long_rays_take_the_general_path(rooms, monkeypatch):
-    import slamkit.mapping.occupancy as occupancy
+    import slamkit.mapping.occupancy.rays as rays
 
     cfg = OccupancyMappingConfig(resolution=0.1)
     fast = build_occupancy_map(rooms, cfg, scans=slice(0, 100))
-    monkeypatch.setattr(occupancy, "MAX_SEGMENT_STEPS", 20)  # most rays now count as too long
+    monkeypatch.setattr(rays, "MAX_SEGMENT_STEPS", 20)  # most rays now count as too long
     general = build_occupancy_map(rooms, cfg, scans=slice(0, 100))
     np.testing.assert_array_equal(general.log_odds.log_odds, fast.log_odds.log_odds)
     assert general.stats.cell_updates == fast.stats.cell_updates

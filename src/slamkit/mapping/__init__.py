@@ -4,8 +4,10 @@
 * :mod:`~slamkit.mapping.inverse_model` — the inverse laser model and its regions;
 * :mod:`~slamkit.mapping.bresenham` — integer ray tracing, one ray or many at once;
 * :mod:`~slamkit.mapping.grid` — the growable log-odds grid on a world-anchored lattice;
-* :mod:`~slamkit.mapping.occupancy` — per-scan update paths, :func:`build_occupancy_map`
-  and the :class:`OccupancyMapping` estimator;
+* :mod:`~slamkit.mapping.occupancy` (a package) — per-scan update paths,
+  :func:`build_occupancy_map` and the :class:`OccupancyMapping` estimator;
+* :mod:`~slamkit.mapping.ekf_mapping` (a package) — EKF landmark mapping with known poses
+  (imported by path, not re-exported here);
 * :mod:`~slamkit.mapping.quality` — occupied/free/unknown fractions, entropy, map agreement.
 """
 

@@ -1,0 +1,184 @@
+"""The input of occupancy mapping: range readings checked, scans and their known poses taken
+from a data set, and the box of world coordinates a set of scans reaches.
+
+Known poses are the data set's true trajectory, interpolated at the scan times
+(:func:`known_pose_at`), or its odometry readings (the latest at or before each scan).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from slamkit._validation import FloatArray, as_array
+from slamkit.datasets.stream import Dataset, LaserScan, Odometry
+from slamkit.errors import InputError, NonFiniteError, ShapeError
+from slamkit.geometry.angles import wrap_angle
+from slamkit.mapping.inverse_model import ResolvedModel, ray_extents
+from slamkit.mapping.occupancy.config import OccupancyMappingConfig
+
+__all__ = [
+    "check_ranges",
+    "data_bounds",
+    "known_pose_at",
+    "laser_scans",
+    "scan_bounds",
+    "scan_poses",
+]
+
+_POSE_TIME_TOL = 1e-9  # [s] a scan time within this of a true pose's time uses that pose
+
+
+# --------------------------------------------------------------------------------------------
+# input: range readings
+# --------------------------------------------------------------------------------------------
+
+
+def check_ranges(
+    ranges: ArrayLike, *, first_scan: int = 0, times: ArrayLike | None = None
+) -> FloatArray:
+    """``ranges (B,)`` (one scan) or ``(S, B)`` as float64, every reading a finite number
+    ``>= 0`` [m]; a reading ``>= max range`` is the "no return" mark. A NaN or infinite
+    reading raises :class:`~slamkit.errors.NonFiniteError`, a negative one
+    :class:`~slamkit.errors.InputError`, naming the scan (``first_scan`` + its row, and its
+    time if ``times (S,)`` is given), the beam and the value. Two reductions over the array
+    when all is well (NaN propagates through ``min``); the culprit is searched only on
+    failure."""
+    R = np.asarray(ranges, dtype=np.float64)
+    if R.ndim not in (1, 2):
+        raise ShapeError(f"ranges: expected (B,) or (S, B), got shape {R.shape}")
+    if R.size == 0:
+        return R
+    low, high = float(R.min()), float(R.max())
+    if low >= 0.0 and high < math.inf:
+        return R
+    rows = R.reshape(-1, R.shape[-1])
+    non_finite = ~np.isfinite(rows)
+    bad = non_finite | (rows < 0.0)
+    k, j = divmod(int(np.argmax(bad)), rows.shape[1])
+    where = f"scan {first_scan + k}"
+    if times is not None:
+        where += f" (t={float(np.asarray(times, dtype=np.float64).reshape(-1)[k]):.6f} s)"
+    message = (
+        f"{where}, beam {j}: expected a finite range >= 0 m (a reading at the max range "
+        f"means no return), got {float(rows[k, j])}"
+    )
+    raise (NonFiniteError if non_finite[k, j] else InputError)(message)
+
+
+def scan_bounds(
+    poses: ArrayLike,
+    ranges: ArrayLike,
+    beam_angles: ArrayLike,
+    model: ResolvedModel,
+) -> tuple[float, float, float, float]:
+    """``(xmin, ymin, xmax, ymax)`` of every sensor position and every ray end actually used
+    (``min(r_k + alpha/2, r_max)``) over scans ``ranges (S, B)`` from ``poses (S, 3)``, widened
+    by the beam width's spread at the longest ray. Works through the scans in blocks, so
+    memory stays small for long logs."""
+    P = as_array(poses, "poses", (None, 3))
+    R = as_array(ranges, "ranges", (P.shape[0], None), finite=False)
+    check_ranges(R)
+    beams = np.asarray(beam_angles, dtype=np.float64)
+    lo = np.full(2, np.inf)
+    hi = np.full(2, -np.inf)
+    longest = 0.0
+    for s0 in range(0, P.shape[0], 512):
+        p = P[s0 : s0 + 512]
+        _, d_end = ray_extents(R[s0 : s0 + 512], model)
+        longest = max(longest, float(d_end.max(initial=0.0)))
+        ang = p[:, 2:3] + beams[None, :]
+        ex = p[:, 0:1] + d_end * np.cos(ang)
+        ey = p[:, 1:2] + d_end * np.sin(ang)
+        lo = np.minimum(lo, [min(ex.min(), p[:, 0].min()), min(ey.min(), p[:, 1].min())])
+        hi = np.maximum(hi, [max(ex.max(), p[:, 0].max()), max(ey.max(), p[:, 1].max())])
+    spread = longest * math.sin(min(model.beta, math.pi) / 2.0)
+    return (
+        float(lo[0] - spread),
+        float(lo[1] - spread),
+        float(hi[0] + spread),
+        float(hi[1] + spread),
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# known poses
+# --------------------------------------------------------------------------------------------
+
+
+def known_pose_at(times: ArrayLike, poses: ArrayLike, t: ArrayLike) -> FloatArray:
+    """Poses ``(..., 3)`` at times ``t`` from a trajectory ``times (N,)``, ``poses (N, 3)``:
+    the recorded pose where a time matches (to 1 ns), else linear interpolation of the
+    position and of the wrapped heading difference between the two neighbours. A time
+    outside the trajectory raises :class:`InputError`."""
+    T = as_array(times, "trajectory times", (None,))
+    P = as_array(poses, "trajectory poses", (T.size, 3))
+    q = np.asarray(t, dtype=np.float64)
+    if T.size == 0:
+        raise InputError("known poses: the trajectory is empty")
+    if np.any(q < T[0] - _POSE_TIME_TOL) or np.any(q > T[-1] + _POSE_TIME_TOL):
+        raise InputError(
+            f"known poses: times {float(q.min()):.6g}..{float(q.max()):.6g} s reach outside "
+            f"the trajectory's {T[0]:.6g}..{T[-1]:.6g} s"
+        )
+    hi = np.clip(np.searchsorted(T, q, side="left"), 0, T.size - 1)
+    lo = np.clip(hi - 1, 0, T.size - 1)
+    exact_hi = np.abs(T[hi] - q) <= _POSE_TIME_TOL
+    span = T[hi] - T[lo]
+    w = np.where(span > 0, (q - T[lo]) / np.where(span > 0, span, 1.0), 1.0)
+    w = np.where(exact_hi, 1.0, np.clip(w, 0.0, 1.0))
+    xy = P[lo, :2] + w[..., None] * (P[hi, :2] - P[lo, :2])
+    th = wrap_angle(P[lo, 2] + w * wrap_angle(P[hi, 2] - P[lo, 2]))
+    return np.concatenate([xy, th[..., None]], axis=-1)
+
+
+def laser_scans(dataset: Dataset) -> tuple[FloatArray, FloatArray]:
+    """Scan times ``(S,)`` and ranges ``(S, B)`` of a data set."""
+    scans = [ev for ev in dataset.events if isinstance(ev, LaserScan)]
+    if not scans:
+        raise InputError(f"data set {dataset.name!r} has no laser scans")
+    times = np.array([ev.t for ev in scans], dtype=np.float64)
+    return times, np.stack([ev.ranges for ev in scans])
+
+
+def _odometry_at(dataset: Dataset, times: FloatArray) -> FloatArray:
+    """The latest odometry pose at or before each scan time."""
+    odo = [ev for ev in dataset.events if isinstance(ev, Odometry)]
+    if not odo:
+        raise InputError(f"pose_source 'odometry': data set {dataset.name!r} has no odometry")
+    t_odo = np.array([ev.t for ev in odo])
+    idx = np.searchsorted(t_odo, times, side="right") - 1
+    if np.any(idx < 0):
+        raise InputError("pose_source 'odometry': a scan comes before the first odometry reading")
+    return np.stack([odo[i].pose for i in idx])
+
+
+def scan_poses(dataset: Dataset, times: FloatArray, source: str) -> FloatArray:
+    """Known sensor poses ``(S, 3)`` at the scan ``times``: the true trajectory (mapping with
+    known poses) or the odometry (see :class:`OccupancyMappingConfig.pose_source`)."""
+    if source == "odometry":
+        return _odometry_at(dataset, times)
+    truth = dataset.truth
+    if truth.times is None or truth.poses is None:
+        raise InputError(
+            f"occupancy mapping with known poses needs the true trajectory, which data set "
+            f"{dataset.name!r} does not have (use pose_source='odometry')"
+        )
+    return known_pose_at(truth.times, truth.poses, times)
+
+
+def data_bounds(
+    dataset: Dataset, config: OccupancyMappingConfig
+) -> tuple[float, float, float, float]:
+    """:func:`scan_bounds` of the scans ``config`` would use from ``dataset`` (scan and beam
+    strides applied), at the poses of ``config.pose_source``."""
+    if dataset.laser is None:
+        raise InputError(f"occupancy mapping needs laser scans; {dataset.name!r} has none")
+    times, ranges = laser_scans(dataset)
+    used = slice(None, None, config.scan_stride)
+    poses = scan_poses(dataset, times[used], config.pose_source)
+    beams = dataset.laser.beam_angles[:: config.beam_stride]
+    model = config.model.resolve(config.resolution, beams, dataset.laser.max_range)
+    return scan_bounds(poses, ranges[used, :: config.beam_stride], beams, model)
