@@ -747,6 +747,7 @@ ENTRY = EstimatorEntry(
     "slamkit.mapping.occupancy:OccupancyMapping",
     "slamkit.mapping.occupancy:OccupancyMappingConfig",
     requires=("laser",),
+    known_poses=True,
 )
 
 

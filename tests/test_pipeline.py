@@ -233,7 +233,7 @@ def test_a_renamed_setting_is_named_with_its_replacement():
     """Noise scaling has one meaning, a factor on the covariance (``*_cov_scale``); a config
     with the old names is refused with what to write instead."""
     ds = load_dataset("five-features", seed=0)
-    with pytest.raises(ConfigError, match="measurement_cov_scale.*square the old value"):
+    with pytest.raises(ConfigError, match=r"measurement_cov_scale.*square the old value"):
         run("fastslam1", ds, config={"measurement_noise_scale": 6.0})
     # FastSLAM's reading covariance is the sensor's times the factor
     a = run("fastslam1", ds, config={"measurement_cov_scale": 4.0, "n_particles": 20})

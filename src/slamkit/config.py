@@ -92,6 +92,7 @@ RENAMED: dict[str, str] = {
     "noise_scale": "now motion_cov_scale (dead reckoning, least squares) or "
     "measurement_cov_scale (EKF mapping), factors on the covariance",
     "method": "now solver",
+    "pose_time_tolerance": "no longer used: known poses arrive through the stream",
 }
 """Settings that were renamed, with what to write instead (named in the error)."""
 

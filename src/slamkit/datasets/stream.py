@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal, NoReturn, TypeAlias
 
 import numpy as np
@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray, as_array, as_covariance, as_positive
 from slamkit.errors import InputError, NonFiniteError, ShapeError
+from slamkit.geometry.pose2 import interpolate_poses
 from slamkit.maps import LandmarkMap, OccupancyGrid, SegmentMap
 from slamkit.models import (
     BearingOnly,
@@ -54,6 +55,7 @@ __all__ = [
     "Dataset",
     "Event",
     "GroundTruth",
+    "KnownPose",
     "LandmarkReadings",
     "LandmarkSensorSpec",
     "LaserScan",
@@ -62,6 +64,7 @@ __all__ = [
     "Odometry",
     "group_by_time",
     "measured_detection_range",
+    "with_known_poses",
 ]
 
 UNKNOWN_ID = -1
@@ -85,6 +88,16 @@ class Odometry:
 
 
 @dataclass(frozen=True, slots=True)
+class KnownPose:
+    """The robot's pose ``(3,)`` at ``t``, given: the input of mapping *with known poses*
+    (:func:`with_known_poses` puts one at the head of every time stamp of a data set with a
+    true trajectory). Estimators that localize ignore it."""
+
+    t: float
+    pose: FloatArray
+
+
+@dataclass(frozen=True, slots=True)
 class LandmarkReadings:
     """Readings ``z (K, m)`` of point landmarks at ``t``; ``ids (K,)``, ``-1`` = unknown."""
 
@@ -101,7 +114,7 @@ class LaserScan:
     ranges: FloatArray
 
 
-Event: TypeAlias = Control | Odometry | LandmarkReadings | LaserScan
+Event: TypeAlias = Control | Odometry | KnownPose | LandmarkReadings | LaserScan
 
 
 @dataclass(frozen=True)
@@ -351,6 +364,8 @@ class Dataset:
                 if self.motion is None or self.motion.source != "odometry":
                     self._fail(idx[0], "an Odometry event needs an odometry MotionSpec")
                 self._check_rows(idx, "pose", (3,))
+            elif kind is KnownPose:
+                self._check_rows(idx, "pose", (3,))
             elif kind is LandmarkReadings:
                 if self.landmark_sensor is None:
                     self._fail(idx[0], "landmark readings need a LandmarkSensorSpec")
@@ -492,3 +507,27 @@ def group_by_time(events: tuple[Event, ...]) -> Iterator[tuple[float, tuple[Even
             j += 1
         yield t, events[i:j]
         i = j
+
+
+def with_known_poses(dataset: Dataset) -> Dataset:
+    """``dataset`` with a :class:`KnownPose` event at the head of every group of events that
+    share a time stamp: the true pose then, interpolated on SE(2) between the true poses
+    around it (held at the ends; :func:`~slamkit.geometry.pose2.interpolate_poses`). This is
+    how mapping with known poses gets its poses — through the stream, one at a time, as a
+    system given them online would — rather than by reading ``truth``
+    (:func:`slamkit.pipeline.run` does it for the estimators registered with
+    ``known_poses``). Raises :class:`~slamkit.errors.InputError` without a true trajectory."""
+    truth = dataset.truth
+    if truth.times is None or truth.poses is None or truth.times.size == 0:
+        raise InputError(
+            f"mapping with known poses needs the true trajectory, which data set "
+            f"{dataset.name!r} does not have"
+        )
+    events: list[Event] = []
+    groups = list(group_by_time(dataset.events))
+    t = np.clip([g[0] for g in groups], truth.times[0], truth.times[-1])
+    poses = interpolate_poses(truth.times, truth.poses, t) if groups else np.zeros((0, 3))
+    for (time, group), pose in zip(groups, poses, strict=True):
+        events.append(KnownPose(time, pose))
+        events.extend(group)
+    return replace(dataset, events=tuple(events))

@@ -23,7 +23,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
-from slamkit.datasets.stream import Control, Event, LandmarkReadings, LaserScan, Odometry
+from slamkit.datasets.stream import (
+    Control,
+    Event,
+    KnownPose,
+    LandmarkReadings,
+    LaserScan,
+    Odometry,
+)
 from slamkit.estimation.contract import InnovationLog, StepClock
 from slamkit.models import odometry_control
 
@@ -118,6 +125,8 @@ class EstimatorShell:
             control = self.motion_input.control(event)
             if control is not None:
                 self.on_control(*control)
+            elif isinstance(event, KnownPose):
+                self.on_known_pose(event)
             elif isinstance(event, LandmarkReadings):
                 self.on_landmarks(event)
             elif isinstance(event, LaserScan):
@@ -126,6 +135,9 @@ class EstimatorShell:
 
     def on_control(self, u: FloatArray, dt: float) -> None:
         """A motion step with control ``u`` over ``dt`` seconds. Default: ignored."""
+
+    def on_known_pose(self, event: KnownPose) -> None:
+        """The robot's pose, given (mapping with known poses). Default: ignored."""
 
     def on_landmarks(self, event: LandmarkReadings) -> None:
         """A set of landmark readings. Default: ignored."""

@@ -15,10 +15,19 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from slamkit._validation import FloatArray
+from slamkit._validation import FloatArray, as_array
+from slamkit.errors import InputError
 from slamkit.geometry.angles import wrap_angle
 
-__all__ = ["between", "compose", "inverse", "inverse_transform_points", "transform_points"]
+__all__ = [
+    "POSE_TIME_TOL",
+    "between",
+    "compose",
+    "interpolate_poses",
+    "inverse",
+    "inverse_transform_points",
+    "transform_points",
+]
 
 
 def _arr(x: ArrayLike) -> FloatArray:
@@ -83,3 +92,33 @@ def inverse_transform_points(T_a_b: ArrayLike, p_a: ArrayLike) -> FloatArray:
     c, s = np.cos(T[..., 2]), np.sin(T[..., 2])
     dx, dy = p[..., 0] - T[..., 0], p[..., 1] - T[..., 1]
     return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
+
+
+POSE_TIME_TOL = 1e-9
+"""[s] A time within this of a recorded pose's time takes that pose (:func:`interpolate_poses`)."""
+
+
+def interpolate_poses(times: ArrayLike, poses: ArrayLike, t: ArrayLike) -> FloatArray:
+    """Poses ``(..., 3)`` at times ``t`` from a trajectory ``times (N,)``, ``poses (N, 3)``:
+    the recorded pose where a time matches (to 1 ns), else linear interpolation of the
+    position and of the wrapped heading difference between the two neighbours. A time
+    outside the trajectory raises :class:`InputError`."""
+    T = as_array(times, "trajectory times", (None,))
+    P = as_array(poses, "trajectory poses", (T.size, 3))
+    q = np.asarray(t, dtype=np.float64)
+    if T.size == 0:
+        raise InputError("known poses: the trajectory is empty")
+    if np.any(q < T[0] - POSE_TIME_TOL) or np.any(q > T[-1] + POSE_TIME_TOL):
+        raise InputError(
+            f"known poses: times {float(q.min()):.6g}..{float(q.max()):.6g} s reach outside "
+            f"the trajectory's {T[0]:.6g}..{T[-1]:.6g} s"
+        )
+    hi = np.clip(np.searchsorted(T, q, side="left"), 0, T.size - 1)
+    lo = np.clip(hi - 1, 0, T.size - 1)
+    exact_hi = np.abs(T[hi] - q) <= POSE_TIME_TOL
+    span = T[hi] - T[lo]
+    w = np.where(span > 0, (q - T[lo]) / np.where(span > 0, span, 1.0), 1.0)
+    w = np.where(exact_hi, 1.0, np.clip(w, 0.0, 1.0))
+    xy = P[lo, :2] + w[..., None] * (P[hi, :2] - P[lo, :2])
+    th = wrap_angle(P[lo, 2] + w * wrap_angle(P[hi, 2] - P[lo, 2]))
+    return np.concatenate([xy, th[..., None]], axis=-1)

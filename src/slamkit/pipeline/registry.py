@@ -50,6 +50,9 @@ class EstimatorEntry:
     target: str
     config: str
     requires: tuple[Requirement, ...] = ()
+    known_poses: bool = False
+    """The estimator maps with known poses: the runner gives it the data set's true poses
+    through the stream (:func:`~slamkit.datasets.stream.with_known_poses`)."""
 
     @staticmethod
     def _resolve(spec: str) -> Any:
@@ -128,6 +131,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.mapping.occupancy:OccupancyMapping",
             "slamkit.mapping.occupancy:OccupancyMappingConfig",
             requires=("laser",),
+            known_poses=True,
         ),
         EstimatorEntry(
             "ekf-mapping",
@@ -136,6 +140,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.mapping.ekf_mapping:EkfMapping",
             "slamkit.mapping.ekf_mapping:EkfMappingConfig",
             requires=("landmark_sensor", "true_poses"),
+            known_poses=True,
         ),
         EstimatorEntry(
             "ekf-slam",

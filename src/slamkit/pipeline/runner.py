@@ -12,7 +12,7 @@ import numpy as np
 
 from slamkit._validation import FloatArray
 from slamkit.config import config_to_dict
-from slamkit.datasets.stream import Dataset, group_by_time
+from slamkit.datasets.stream import Dataset, group_by_time, with_known_poses
 from slamkit.errors import ConvergenceError, InputError
 from slamkit.estimation.contract import (
     Estimator,
@@ -102,6 +102,8 @@ def run(
         raise InputError(f"frames: expected an integer >= 0, got {frames!r}")
     entry = get_estimator_entry(estimator) if isinstance(estimator, str) else estimator
     cfg = entry.make_config(config)
+    if entry.known_poses and dataset.truth.poses is not None:
+        dataset = with_known_poses(dataset)  # mapping with known poses: given in the stream
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     est = entry.create(dataset, cfg, rng)

@@ -16,7 +16,7 @@ __all__ = ["EkfMappingConfig"]
 class EkfMappingConfig:
     """Settings of :class:`EkfMapping` (EKF landmark mapping with known poses)."""
 
-    noise_scale: float = 1.0
+    measurement_cov_scale: float = 1.0
     """Multiplies the sensor's measurement-noise covariance ``R`` (1 = trust the data set)."""
     use_ids: bool = True
     """Use the landmark ids the readings carry. False ignores them and associates every
@@ -35,17 +35,12 @@ class EkfMappingConfig:
     variance ``(r σ_bearing)²`` is far too small, so its NEES grows without bound (the
     measured effect is in ``docs/estimators/mapping.md``). The relative-position model is
     linear and needs no such limit."""
-    pose_time_tolerance: float = 1e-6
-    """A reading at time ``t`` uses the true pose whose time stamp is within this many
-    seconds of ``t``; none there is an error (no interpolation)."""
 
     def __post_init__(self) -> None:
-        if not (self.noise_scale > 0 and np.isfinite(self.noise_scale)):
-            raise ConfigError(f"noise_scale: expected a number > 0, got {self.noise_scale}")
+        if not (self.measurement_cov_scale > 0 and np.isfinite(self.measurement_cov_scale)):
+            raise ConfigError(
+                f"measurement_cov_scale: expected a number > 0, got {self.measurement_cov_scale}"
+            )
         association_probabilities(self.gate_probability, self.new_landmark_probability)
         if not (self.min_range >= 0 and np.isfinite(self.min_range)):
             raise ConfigError(f"min_range: expected a number >= 0, got {self.min_range}")
-        if not self.pose_time_tolerance >= 0:
-            raise ConfigError(
-                f"pose_time_tolerance: expected a number >= 0, got {self.pose_time_tolerance}"
-            )

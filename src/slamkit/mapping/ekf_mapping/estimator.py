@@ -9,9 +9,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
-from slamkit.datasets.stream import Dataset, Event, LandmarkReadings
+from slamkit.datasets.stream import Dataset, KnownPose, LandmarkReadings
 from slamkit.errors import InputError
-from slamkit.estimation.contract import EstimatorOutput, InnovationLog, PoseEstimate
+from slamkit.estimation.contract import EstimatorOutput, InnovationLog, LandmarkIds, PoseEstimate
+from slamkit.estimation.shell import EstimatorShell
 from slamkit.mapping.ekf_mapping.beliefs import LandmarkBelief
 from slamkit.mapping.ekf_mapping.config import EkfMappingConfig
 from slamkit.mapping.ekf_mapping.inputs import require_invertible
@@ -28,14 +29,15 @@ from slamkit.prob import chi2_gate
 __all__ = ["EkfMapping"]
 
 
-class EkfMapping:
+class EkfMapping(EstimatorShell):
     """EKF landmark mapping with KNOWN poses, as an estimator of the pipeline.
 
-    The robot pose at each event is read from ``dataset.truth`` by time stamp — the one
-    estimator allowed to do so, because mapping with known poses assumes exactly that. The
-    landmark map is estimated from the :class:`~slamkit.datasets.LandmarkReadings` events with
-    the block-diagonal EKF of :mod:`slamkit.mapping.ekf_mapping`; every other event only moves
-    the current time. :meth:`estimate` returns the known pose with a zero covariance.
+    The robot's pose arrives through the stream as :class:`~slamkit.datasets.KnownPose`
+    events (:func:`slamkit.pipeline.run` adds them from the data set's true trajectory, one
+    at the head of every time stamp); the estimator never reads ``truth``. The landmark map
+    is estimated from the :class:`~slamkit.datasets.LandmarkReadings` events with the
+    block-diagonal EKF of :mod:`slamkit.mapping.ekf_mapping`; other events are ignored.
+    :meth:`estimate` returns the known pose with a zero covariance.
 
     Works with any landmark sensor whose model has an inverse (``"range-bearing"``,
     ``"position"``); range-only and bearing-only sensors raise :class:`InputError` (a single
@@ -54,48 +56,37 @@ class EkfMapping:
                 "reading does not locate a landmark, so a first sighting cannot be "
                 "initialised (use range-bearing or position readings)"
             )
-        truth = dataset.truth
-        if truth.times is None or truth.poses is None or truth.times.size == 0:
+        if dataset.truth.poses is None:
             raise InputError(
                 f"EKF mapping with known poses needs the true trajectory; {dataset.name} has none"
             )
+        super().__init__()
         self._config = config
         self._model = require_invertible(sensor.model())
-        self._R = config.noise_scale * sensor.noise_cov
+        self._R = config.measurement_cov_scale * sensor.noise_cov
         m = self._model.dim
         self._gate = chi2_gate(m, config.gate_probability)
         self._new_gate = chi2_gate(m, config.new_landmark_probability)
-        self._times = truth.times
-        self._poses = truth.poses
-        self._pose = truth.poses[0].copy()
+        self._pose: FloatArray | None = None  # the latest KnownPose
         self._belief = LandmarkBelief.empty()
+        self._ids_used = config.use_ids and sensor.identities
         self._log_t: list[FloatArray] = []
         self._log_ids: list[NDArray[np.int64]] = []
         self._log_status: list[NDArray[np.int64]] = []
         self._log_nis: list[FloatArray] = []
 
-    def _pose_at(self, t: float) -> FloatArray | None:
-        i = int(np.searchsorted(self._times, t))
-        best: int | None = None
-        for j in (i - 1, i):
-            if 0 <= j < self._times.size and (
-                best is None or abs(self._times[j] - t) < abs(self._times[best] - t)
-            ):
-                best = j
-        if best is None or abs(self._times[best] - t) > self._config.pose_time_tolerance:
-            return None
-        return self._poses[best]
+    name = "EKF mapping"
 
-    def handle(self, event: Event) -> None:
-        pose = self._pose_at(event.t)
-        if pose is not None:
-            self._pose = pose.copy()
-        if not isinstance(event, LandmarkReadings):
-            return
+    def on_known_pose(self, event: KnownPose) -> None:
+        self._pose = np.array(event.pose, dtype=np.float64)
+
+    def on_landmarks(self, event: LandmarkReadings) -> None:
+        pose = self._pose
         if pose is None:
             raise InputError(
-                f"EKF mapping with known poses: no true pose within "
-                f"{self._config.pose_time_tolerance:g} s of the readings at t={event.t}"
+                f"EKF mapping with known poses: no KnownPose before the readings at "
+                f"t={event.t} (run it through slamkit.pipeline.run on a data set with a true "
+                "trajectory, or give KnownPose events)"
             )
         z = np.asarray(event.z, dtype=np.float64)
         ids = np.asarray(event.ids, dtype=np.int64)
@@ -120,7 +111,8 @@ class EkfMapping:
 
     def estimate(self) -> PoseEstimate:
         """The known (true) pose at the current time, with a zero covariance."""
-        return PoseEstimate(self._pose.copy(), np.zeros((3, 3)))
+        pose = np.zeros(3) if self._pose is None else self._pose.copy()
+        return PoseEstimate(pose, np.zeros((3, 3)))
 
     @property
     def belief(self) -> LandmarkBelief:
@@ -161,6 +153,7 @@ class EkfMapping:
             landmarks=self._belief.to_landmark_estimate(),
             innovations=log,
             diagnostics=diagnostics,
+            landmark_numbering=LandmarkIds.DATASET if self._ids_used else LandmarkIds.OWN,
         )
 
 

@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike
 from slamkit._validation import FloatArray, as_array
 from slamkit.datasets.stream import Dataset, LaserScan, Odometry
 from slamkit.errors import InputError, NonFiniteError, ShapeError
-from slamkit.geometry.angles import wrap_angle
+from slamkit.geometry.pose2 import interpolate_poses as known_pose_at
 from slamkit.mapping.inverse_model import ResolvedModel, ray_extents
 from slamkit.mapping.occupancy.config import OccupancyMappingConfig
 
@@ -27,8 +27,6 @@ __all__ = [
     "scan_bounds",
     "scan_poses",
 ]
-
-_POSE_TIME_TOL = 1e-9  # [s] a scan time within this of a true pose's time uses that pose
 
 
 # --------------------------------------------------------------------------------------------
@@ -106,32 +104,6 @@ def scan_bounds(
 # --------------------------------------------------------------------------------------------
 # known poses
 # --------------------------------------------------------------------------------------------
-
-
-def known_pose_at(times: ArrayLike, poses: ArrayLike, t: ArrayLike) -> FloatArray:
-    """Poses ``(..., 3)`` at times ``t`` from a trajectory ``times (N,)``, ``poses (N, 3)``:
-    the recorded pose where a time matches (to 1 ns), else linear interpolation of the
-    position and of the wrapped heading difference between the two neighbours. A time
-    outside the trajectory raises :class:`InputError`."""
-    T = as_array(times, "trajectory times", (None,))
-    P = as_array(poses, "trajectory poses", (T.size, 3))
-    q = np.asarray(t, dtype=np.float64)
-    if T.size == 0:
-        raise InputError("known poses: the trajectory is empty")
-    if np.any(q < T[0] - _POSE_TIME_TOL) or np.any(q > T[-1] + _POSE_TIME_TOL):
-        raise InputError(
-            f"known poses: times {float(q.min()):.6g}..{float(q.max()):.6g} s reach outside "
-            f"the trajectory's {T[0]:.6g}..{T[-1]:.6g} s"
-        )
-    hi = np.clip(np.searchsorted(T, q, side="left"), 0, T.size - 1)
-    lo = np.clip(hi - 1, 0, T.size - 1)
-    exact_hi = np.abs(T[hi] - q) <= _POSE_TIME_TOL
-    span = T[hi] - T[lo]
-    w = np.where(span > 0, (q - T[lo]) / np.where(span > 0, span, 1.0), 1.0)
-    w = np.where(exact_hi, 1.0, np.clip(w, 0.0, 1.0))
-    xy = P[lo, :2] + w[..., None] * (P[hi, :2] - P[lo, :2])
-    th = wrap_angle(P[lo, 2] + w * wrap_angle(P[hi, 2] - P[lo, 2]))
-    return np.concatenate([xy, th[..., None]], axis=-1)
 
 
 def laser_scans(dataset: Dataset) -> tuple[FloatArray, FloatArray]:
