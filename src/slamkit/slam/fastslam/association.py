@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
+from slamkit.datasets.stream import LandmarkReadings
 from slamkit.localization.particles import (
     normalize_log_weights,
 )
@@ -423,3 +424,18 @@ def update1(
     ll = scan_at_poses(w, poses, z, rid, R, model, s)
     prune_landmarks(w, poses, s)
     return normalised_log_weights(log_weights + ll), ll
+
+
+def kept_readings(
+    event: LandmarkReadings, model: InvertibleLandmarkModel, s: UpdateSettings
+) -> tuple[FloatArray, IntArray, NDArray[np.bool_] | None]:
+    """A scan's readings ``z``, ids and the mask of those kept (None: all): readings that
+    place their landmark closer than ``s.min_range`` to the sensor are skipped."""
+    z = np.asarray(event.z, dtype=float)
+    rid = np.asarray(event.ids, dtype=np.int64)
+    if s.min_range <= 0:
+        return z, rid, None
+    use = usable_readings(z, model, s)
+    if use.all():
+        return z, rid, None
+    return z[use], rid[use], use

@@ -7,9 +7,13 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
-from slamkit.datasets.stream import Dataset
-from slamkit.errors import ConfigError
+from slamkit._validation import FloatArray
+from slamkit.datasets.stream import Dataset, LandmarkSensorSpec, MotionSpec
+from slamkit.errors import ConfigError, InputError
 from slamkit.models import Ackermann, MotionModel
+from slamkit.models.measurement import InvertibleLandmarkModel
+from slamkit.slam.common import OWN_ID_BASE
+from slamkit.slam.fastslam.settings import UpdateSettings, default_p0
 
 # --------------------------------------------------------------------------------------------
 # The estimators
@@ -175,3 +179,54 @@ def steering_limit(motion: MotionModel) -> float | None:
     if not isinstance(motion, Ackermann):
         return None
     return 0.99 * motion.max_steering
+
+
+def update_settings(
+    dataset: Dataset, sensor: LandmarkSensorSpec, config: FastSlamConfig, R: FloatArray
+) -> UpdateSettings:
+    """The measurement-update settings of a run: from the config and what the sensor's spec
+    says (its range limits, field of view, detection range and mounting), with ``R`` the
+    scaled reading covariance. Nothing here looks at the data set's events."""
+    p0 = config.p0 if config.p0 is not None else default_p0(R, config.new_landmark_probability)
+    # Landmarks the filter numbers itself (readings without ids) start at OWN_ID_BASE
+    # when the readings' ids are used, so that they never alias a data set's id (an
+    # online filter cannot look ahead for the largest id); all are its own otherwise.
+    first_unlabelled = OWN_ID_BASE if config.use_ids else 0
+    offset = sensor_offset_of(dataset) if config.sensor_offset is None else config.sensor_offset
+    miss_range = config.miss_max_range
+    if miss_range is None:
+        miss_range = sensor.reach  # the sensor's detection range (its spec says)
+    fov = min(float(sensor.fov), 2.0 * math.pi)
+    if fov < 2.0 * math.pi:
+        fov = max(fov - 2.0 * config.miss_fov_margin, 1e-9)
+    return UpdateSettings(
+        p0=p0,
+        use_ids=config.use_ids,
+        prune=config.prune,
+        visible_min_range=sensor.min_range,
+        visible_max_range=min(sensor.max_range, miss_range),
+        fov=fov,
+        hit_weight=config.hit_weight,
+        sensor_offset=offset,
+        min_range=config.min_range,
+        first_unlabelled_id=first_unlabelled,
+    )
+
+
+def check_dataset(
+    dataset: Dataset, name: str
+) -> tuple[MotionSpec, LandmarkSensorSpec, InvertibleLandmarkModel]:
+    """The motion spec, landmark sensor and its model a FastSLAM run needs, or an
+    :class:`~slamkit.errors.InputError` naming what the data set lacks."""
+    if dataset.motion is None:
+        raise InputError(f"{name} needs a motion model; data set {dataset.name!r} has none")
+    sensor = dataset.landmark_sensor
+    if sensor is None:
+        raise InputError(f"{name} needs a landmark sensor; data set {dataset.name!r} has none")
+    model = sensor.model()
+    if not isinstance(model, InvertibleLandmarkModel) or model.dim != 2:
+        raise InputError(
+            f"{name} cannot use the {sensor.kind!r} sensor of {dataset.name!r}: one "
+            "reading must locate a landmark (use range-bearing or position readings)"
+        )
+    return dataset.motion, sensor, model

@@ -10,7 +10,7 @@ from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray, as_covariance
 from slamkit.datasets.stream import Dataset, Event, LandmarkReadings
-from slamkit.errors import ConfigError, ConvergenceError, InputError
+from slamkit.errors import ConfigError, ConvergenceError
 from slamkit.estimation.contract import (
     EstimatorOutput,
     LandmarkEstimate,
@@ -22,29 +22,32 @@ from slamkit.estimation.contract import (
 from slamkit.estimation.shell import EstimatorShell
 from slamkit.localization.particles import (
     low_variance_resample_unchecked,
-    particle_estimate_unchecked,
 )
 from slamkit.mapping.ekf_mapping import (
     INITIALISED,
-    TOO_CLOSE,
 )
 from slamkit.models.measurement import InvertibleLandmarkModel
 from slamkit.models.motion import motion_kernels
-from slamkit.slam.common import OWN_ID_BASE
 from slamkit.slam.fastslam.association import (
+    kept_readings,
     normalised_with_weights,
     prune_landmarks,
     scan_at_poses,
-    usable_readings,
 )
 from slamkit.slam.fastslam.config import (
     FastSlamConfig,
-    sensor_offset_of,
+    check_dataset,
     steering_limit,
+    update_settings,
+)
+from slamkit.slam.fastslam.history import (
+    AssociationHistory,
+    mixture_estimate,
+    particle_diagnostics,
 )
 from slamkit.slam.fastslam.particles import FastSlamParticles, IntArray
 from slamkit.slam.fastslam.proposal import fold_motion, sym_sqrt, update2
-from slamkit.slam.fastslam.settings import UpdateSettings, default_p0
+from slamkit.slam.fastslam.settings import UpdateSettings
 from slamkit.slam.fastslam.store import Work
 
 
@@ -57,26 +60,12 @@ class _FastSlam(EstimatorShell):
     def __init__(self, dataset: Dataset, config: FastSlamConfig, rng: np.random.Generator) -> None:
         if not isinstance(config, FastSlamConfig):
             raise ConfigError(f"config: expected a FastSlamConfig, got {type(config).__name__}")
-        if dataset.motion is None:
-            raise InputError(
-                f"{self.name} needs a motion model; data set {dataset.name!r} has none"
-            )
-        sensor = dataset.landmark_sensor
-        if sensor is None:
-            raise InputError(
-                f"{self.name} needs a landmark sensor; data set {dataset.name!r} has none"
-            )
-        model = sensor.model()
-        if not isinstance(model, InvertibleLandmarkModel) or model.dim != 2:
-            raise InputError(
-                f"{self.name} cannot use the {sensor.kind!r} sensor of {dataset.name!r}: one "
-                "reading must locate a landmark (use range-bearing or position readings)"
-            )
+        motion, sensor, model = check_dataset(dataset, self.name)
         self._cfg = config
         self._rng = rng
-        self._motion = dataset.motion.model
+        self._motion = motion.model
         self._Q = as_covariance(
-            config.motion_cov_scale * dataset.motion.noise_cov,
+            config.motion_cov_scale * motion.noise_cov,
             "scaled motion noise_cov",
             self._motion.control_dim,
             semidefinite=True,
@@ -86,34 +75,7 @@ class _FastSlam(EstimatorShell):
         self._R = as_covariance(
             config.measurement_cov_scale * sensor.noise_cov, "scaled landmark noise_cov", 2
         )
-        p0 = (
-            config.p0
-            if config.p0 is not None
-            else default_p0(self._R, config.new_landmark_probability)
-        )
-        # Landmarks the filter numbers itself (readings without ids) start at OWN_ID_BASE
-        # when the readings' ids are used, so that they never alias a data set's id (an
-        # online filter cannot look ahead for the largest id); all are its own otherwise.
-        first_unlabelled = OWN_ID_BASE if config.use_ids else 0
-        offset = sensor_offset_of(dataset) if config.sensor_offset is None else config.sensor_offset
-        miss_range = config.miss_max_range
-        if miss_range is None:
-            miss_range = sensor.reach  # the sensor's detection range (its spec says)
-        fov = min(float(sensor.fov), 2.0 * math.pi)
-        if fov < 2.0 * math.pi:
-            fov = max(fov - 2.0 * config.miss_fov_margin, 1e-9)
-        self._settings = UpdateSettings(
-            p0=p0,
-            use_ids=config.use_ids,
-            prune=config.prune,
-            visible_min_range=sensor.min_range,
-            visible_max_range=min(sensor.max_range, miss_range),
-            fov=fov,
-            hit_weight=config.hit_weight,
-            sensor_offset=offset,
-            min_range=config.min_range,
-            first_unlabelled_id=first_unlabelled,
-        )
+        self._settings = update_settings(dataset, sensor, config, self._R)
         n = config.n_particles
         if dataset.initial_pose is None:
             start = np.zeros((n, 3))
@@ -151,9 +113,7 @@ class _FastSlam(EstimatorShell):
         self._removed = 0
         self._ess: list[float] = []
         self._snapshots: list[ParticleSnapshot] = []
-        # Per scan (time, ids (K,) or (K, P), status codes) and per resampling the parent
-        # indices (P,): the association of any final particle, traced through its ancestors.
-        self._history: list[tuple[float, IntArray, NDArray[np.int8]] | NDArray[np.intp]] = []
+        self._history = AssociationHistory()  # to trace any final particle's association
         times: Any = config.snapshot_times
         if config.snapshot_every == 0 and not times and config.n_snapshots > 0:
             times = np.linspace(dataset.start_time, dataset.end_time, config.n_snapshots)
@@ -175,45 +135,24 @@ class _FastSlam(EstimatorShell):
             self._update(event)
 
     def estimate(self) -> PoseEstimate:
-        poses = self._poses
-        spread = None
-        if self._pending is not None:
-            # 2.0 between a control and its scan: each particle's motion since the scan as a
-            # Gaussian; the estimate is their mixture (mean, spread of the means + mean cov).
-            poses, covs = self._pending_gaussian()
-            spread = np.einsum("p,pij->ij", self._weights, covs)
-        # The weights are normalised by construction, the poses the filter's own.
-        mean, cov = particle_estimate_unchecked(poses, self._weights)
-        if spread is not None:
-            cov = cov + spread
-        if self._cfg.estimate == "best":
-            mean = poses[int(np.argmax(self._log_weights))].copy()
-        return PoseEstimate(mean, cov)
+        # 2.0 between a control and its scan: each particle's motion since the scan as a
+        # Gaussian (the estimate is their mixture).
+        poses, covs = (self._poses, None) if self._pending is None else self._pending_gaussian()
+        best = int(np.argmax(self._log_weights)) if self._cfg.estimate == "best" else None
+        return PoseEstimate(*mixture_estimate(poses, self._weights, covs, best))
 
     def finish(self) -> EstimatorOutput:
         ps = self.particles
         best = ps.best
-        ess = np.asarray(self._ess) if self._ess else np.zeros(0)
-        counts = ps.counts
-        diagnostics: dict[str, Any] = {
-            "version": self.version,
-            "n_particles": len(ps),
-            "measurement_updates": self._updates,
-            "resamplings": self._resamplings,
-            "readings_skipped": self._readings_skipped,
-            "landmarks": int(counts[best]),
-            "landmarks_mean": float(counts.mean()),
-            "landmarks_min": int(counts.min()),
-            "landmarks_max": int(counts.max()),
-            "landmarks_removed": self._removed,
-            "capacity": ps.capacity,
-            "p0": self._settings.p0,
-            "ess_min": float(ess.min()) if ess.size else None,
-            "ess_mean": float(ess.mean()) if ess.size else None,
-            "ess_median": float(np.median(ess)) if ess.size else None,
-            "ess_final": float(ess[-1]) if ess.size else None,
-            "best_particle_weight": float(ps.weights[best]),
-        }
+        diagnostics = particle_diagnostics(ps, np.asarray(self._ess, dtype=float))
+        diagnostics.update(
+            version=self.version,
+            measurement_updates=self._updates,
+            resamplings=self._resamplings,
+            readings_skipped=self._readings_skipped,
+            landmarks_removed=self._removed,
+            p0=self._settings.p0,
+        )
         if self._schedule.pending and (not self._snapshots or self._snapshots[-1].t < self._t):
             self._snapshot(self._t)  # times left after the last update: the final set
         _, chosen, status = self.reading_log()
@@ -274,40 +213,9 @@ class _FastSlam(EstimatorShell):
         :data:`~slamkit.mapping.ekf_mapping.UPDATED`, ``INITIALISED``, ``DISCARDED`` (the
         landmark was at the sensor) and ``TOO_CLOSE`` (skipped, see
         :attr:`FastSlamConfig.min_range`)."""
-        p = int(np.argmax(self._log_weights))
-        times, ids, status = [], [], []
-        for entry in reversed(self._history):
-            if isinstance(entry, np.ndarray):
-                p = int(entry[p])  # the parent of particle p before that resampling
-                continue
-            t, a, s = entry
-            times.append(np.full(a.shape[0], t))
-            ids.append(a[:, p] if a.ndim == 2 else a)
-            status.append(s[:, p] if s.ndim == 2 else s)
-
-        def cat(parts: list[NDArray[Any]], dtype: type) -> NDArray[Any]:
-            return np.concatenate(parts[::-1]).astype(dtype) if parts else np.zeros(0, dtype)
-
-        return cat(times, np.float64), cat(ids, np.int64), cat(status, np.int64)
+        return self._history.trace(int(np.argmax(self._log_weights)))
 
     # -- steps ----------------------------------------------------------------------------
-
-    def _log_scan(
-        self,
-        t: float,
-        assoc: IntArray,
-        status: NDArray[np.int8],
-        use: NDArray[np.bool_] | None,
-    ) -> None:
-        """Keep the association of a scan; ``use`` marks the readings that were not skipped
-        (None: all), the others are logged ``TOO_CLOSE``."""
-        if use is not None:
-            a = np.full((use.size, *assoc.shape[1:]), -1, dtype=np.int64)
-            s = np.full((use.size, *status.shape[1:]), TOO_CLOSE, dtype=np.int8)
-            if assoc.size:
-                a[use], s[use] = assoc, status
-            assoc, status = a, s
-        self._history.append((float(t), assoc, status))
 
     def _maybe_snapshot(self, t: float) -> None:
         if self._schedule.due(t, self._updates):
@@ -321,7 +229,7 @@ class _FastSlam(EstimatorShell):
             # The weights are normalised and finite by construction: the unchecked kernel.
             idx = low_variance_resample_unchecked(self._weights, self._rng, self._weights.size)
             n = idx.size
-            self._history.append(idx)
+            self._history.log_resampling(idx)
             self._poses = self._poses[idx]
             if self._moved is not None:
                 self._moved = (self._moved[0][idx], self._moved[1][idx])
@@ -367,20 +275,12 @@ class _FastSlam(EstimatorShell):
         return self._log_weights + ll
 
     def _update(self, event: LandmarkReadings) -> None:
-        z = np.asarray(event.z, dtype=float)
-        rid = np.asarray(event.ids, dtype=np.int64)
-        use = None
-        if self._settings.min_range > 0:
-            use = usable_readings(z, self._model, self._settings)
-            n_use = int(np.count_nonzero(use))
-            self._readings_skipped += use.size - n_use
-            if n_use == 0:
-                self._log_scan(event.t, np.zeros(0, np.int64), np.zeros(0, np.int8), use)
+        z, rid, use = kept_readings(event, self._model, self._settings)
+        if use is not None:
+            self._readings_skipped += use.size - int(np.count_nonzero(use))
+            if not use.any():
+                self._history.log_scan(event.t, np.zeros(0, np.int64), np.zeros(0, np.int8), use)
                 return
-            if n_use < use.size:
-                z, rid = z[use], rid[use]
-            else:
-                use = None
         self._updates += 1
         self._resample_if_due()
         try:
@@ -388,7 +288,7 @@ class _FastSlam(EstimatorShell):
         except ConvergenceError as exc:  # the shell adds the name, the time and the step
             raise ConvergenceError(f"measurement update {self._updates}: {exc}") from exc
         self._removed += self._w.removed
-        self._log_scan(event.t, self._w.assoc, self._w.assoc_status, use)
+        self._history.log_scan(event.t, self._w.assoc, self._w.assoc_status, use)
         self._weights = w
         self._maybe_snapshot(event.t)
         ess = 1.0 / float((w * w).sum())  # effective_sample_size of normalised weights
