@@ -254,7 +254,7 @@ def main() -> str:
             "",
             "SE-Sync objective F minimised from the chordal initialisation (manhattan: the "
             "minimum 6431.39 lies below the published 6.432e3, which rounds a solution SE-Sync "
-            "stopped at a relative decrease of 1e-5; see tests/test_optim_real.py):",
+            "stopped at a relative decrease of 1e-5; see tests/optim/test_optim_real.py):",
             "",
             *f_rows,
         ]

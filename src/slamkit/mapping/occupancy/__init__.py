@@ -34,7 +34,7 @@ the α/β inverse sensor model). Two update paths compute which cells a scan tou
     bit for bit, as tracing every cell.
 
 The two paths agree on which cells a scan makes free or occupied except where the per-cell
-model's beam width fills the gaps between diverging rays (``tests/test_occupancy.py`` holds
+model's beam width fills the gaps between diverging rays (``tests/mapping/test_occupancy.py`` holds
 them to ≥ 98 % of the touched cells on a simulated scan).
 
 Computational options (the notes' list): beam subsampling (``beam_stride``), scan

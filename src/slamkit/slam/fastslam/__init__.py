@@ -84,7 +84,7 @@ is the control-space proposal. Sampling only the newest control from the proposa
 earlier ones blindly is still valid importance sampling, but the proposal then sees a fifth
 of the heading noise on cityTrees: the weights collapse (median ESS 1 of 100) and the filter
 diverges (ATE 57 m); with the whole motion in the proposal, median ESS ~40, ATE 1.1-3.4 m
-over seeds 0-4 (``tests/test_fastslam_real.py``).
+over seeds 0-4 (``tests/slam/test_fastslam_real.py``).
 
 Consistency
 -----------

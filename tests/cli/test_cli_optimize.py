@@ -377,7 +377,7 @@ def test_pose_graph_plot_draws_the_loop_closures_under_the_trajectory():
 def test_victoria_park_graph_reaches_its_optimum_from_the_default_start(data_root, tmp_path):
     """victoriaPark.txt (iSAM: 6969 poses, 151 landmarks, no vertices): the default start of a
     landmark graph (grown prefixes) leads LM to χ² 6184.12 (measured), the optimum
-    ``tests/test_optim_landmarks_real.py`` establishes; from the chordal start LM stops far
+    ``tests/optim/test_optim_landmarks_real.py`` establishes; from the chordal start LM stops far
     above it (measured: not converged in 100 iterations, F 7.2e5)."""
     m = _optimize(_real(data_root, "isam/victoriaPark.txt"), tmp_path / "vp", "--no-plots")
     assert (m["poses"], m["landmarks"]) == (6969, 151)

@@ -1,5 +1,6 @@
 """Localization data sets in maps slamkit builds (:mod:`slamkit.mapping.built_maps`), on the
-simulated laser tour; the Intel data set itself is tested in ``tests/test_mcl_real.py``."""
+simulated laser tour; the Intel data set itself is tested in
+``tests/localization/test_mcl_real.py``."""
 
 from __future__ import annotations
 

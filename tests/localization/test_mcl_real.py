@@ -58,7 +58,7 @@ def test_plaza_mcl_tracks_far_better_than_dead_reckoning(plaza: Dataset) -> None
     random particles: augmentation must inject none here (measured: none in seeds 0-4).
     MCL's NIS (each reading against the particle mean and covariance before the update):
     measured 1.007-1.013 per dof; the band is the EKF's on this data (heavier-than-Gaussian
-    range errors, correlated in time), see ``tests/test_localization_real.py``.
+    range errors, correlated in time), see ``tests/localization/test_localization_real.py``.
     """
     dr = evaluate(run("dead-reckoning", plaza), plaza, max_dt=1e-3).metrics
     dr_ate = float(dr["ate_unaligned"]["rmse"])
@@ -100,7 +100,7 @@ def test_mrclam_mcl_from_a_global_start_follows_the_ekf(mrclam: Dataset) -> None
     before the update: the standard innovation log, which ``evaluate`` summarises): measured
     0.538 per dof (seed 1: 0.548), none of the 50-update windows above its 95 % band, 74 %
     below; the EKF's over the same 300 s 0.419. Both are low for the reason given in
-    ``tests/test_localization_real.py`` (reading errors that are not white, so the next
+    ``tests/localization/test_localization_real.py`` (reading errors that are not white, so the next
     reading is predicted better than its noise). The band [0.35, 0.8] excludes the filter
     with a wrong reading noise: R / 4 (``measurement_cov_scale = 0.25``) gives 1.24 and
     2 R gives 0.32.

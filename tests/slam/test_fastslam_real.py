@@ -76,8 +76,8 @@ def test_fastslam1_on_victoria_park_judges_misses_from_the_laser(data_root: Path
     With the preset measured for FastSLAM there (``victoria-park-fastslam``), seeds 0-3:
     125-126 landmarks in the best particle, association accuracy 0.957-0.963, GPS RMSE
     4.27-4.32 m. EKF-SLAM on the same window: 155 landmarks, accuracy 0.96, GPS RMSE 4.35 m
-    (``test_slam_real.py``): FastSLAM locates the truck as well with fewer trees, the near
-    ones that matter for the pose. With the nominal noise instead (seed 0): 118 landmarks,
+    (``tests/slam/test_slam_real.py``): FastSLAM locates the truck as well with fewer trees,
+    the near ones that matter for the pose. With the nominal noise instead (seed 0): 118 landmarks,
     accuracy 0.71, GPS 4.14 m; judging misses from the axle as well (trees beside the cab
     counted as missed at every scan): 96 landmarks, accuracy 0.77, GPS 4.26 m; with the full
     80 m range on top: 54 landmarks, accuracy 0.58."""
@@ -104,7 +104,7 @@ def test_fastslam1_maps_the_15_mrclam_landmarks(data_root: Path) -> None:
     Measured on the first 900 s (of 1,500; cut to keep the test short): 15 of 15
     landmarks, RMSE 0.137 m (seeds 1-2: 0.127, 0.143 m); EKF-SLAM on the same window
     0.108 m. The whole run: 0.121 m (FastSLAM 2.0: 0.089 m, in ~3x the time), EKF-SLAM
-    0.099 m (``test_slam_real.py``)."""
+    0.099 m (``tests/slam/test_slam_real.py``)."""
     ds = load_dataset(
         "mrclam1", options={"landmarks_known": False, "max_duration_s": 900.0}, data_root=data_root
     )

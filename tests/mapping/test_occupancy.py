@@ -1,6 +1,6 @@
 """Occupancy-grid mapping with known poses: log odds, the inverse model, Bresenham, the two
 update paths, the computational options, map quality, the estimator, the app and the command
-(the maps of real buildings: tests/test_building_maps.py)."""
+(the maps of real buildings: tests/mapping/test_building_maps.py)."""
 
 from __future__ import annotations
 
