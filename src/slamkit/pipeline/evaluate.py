@@ -27,7 +27,6 @@ from slamkit.eval import (
     relative_pose_error,
 )
 from slamkit.eval.records import NeesSummary, RunScores, RunTime, Skipped
-from slamkit.pipeline.registry import ESTIMATORS
 from slamkit.pipeline.runner import Result
 
 __all__ = ["CONVERGENCE", "CONVERGENCE_LOST", "Evaluation", "evaluate"]
@@ -108,8 +107,6 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
     same_ids = _same_ids(result)
     if result.output.landmarks is not None and truth.landmarks is not None:
         est_map, true_map = result.output.landmarks.landmarks, truth.landmarks
-        if result.output.landmark_numbering is None:  # undeclared: by id where ids meet
-            same_ids = bool(np.intersect1d(est_map.ids, true_map.ids).size)
         by: Literal["id", "position"] = "id" if same_ids else "position"
         scores = replace(
             scores,
@@ -124,14 +121,10 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
 
 
 def _same_ids(result: Result) -> bool:
-    """Whether the estimator's landmark ids are the data set's (its output says so)."""
-    numbering = result.output.landmark_numbering
-    if numbering is not None:
-        return numbering is LandmarkIds.DATASET
-    # Not declared (an estimator written before the output said it): a localization
-    # estimator, which needs the known map, numbers landmarks as the map does.
-    entry = ESTIMATORS.get(result.estimator)
-    return entry is not None and "known_landmarks" in entry.requires
+    """Whether the estimator's landmark ids are the data set's: its output says so (an
+    output that does not say is taken as numbering its own, which position matching and a
+    relabelling association score handle either way)."""
+    return result.output.landmark_numbering is LandmarkIds.DATASET
 
 
 def _trajectory_scores(
