@@ -17,6 +17,7 @@ __all__ = [
     "DatasetFormatError",
     "GeometryError",
     "InputError",
+    "MatchError",
     "NonFiniteError",
     "ShapeError",
     "SlamkitError",
@@ -90,3 +91,14 @@ class ConvergenceError(SlamkitError, RuntimeError):
     def __init__(self, message: str, step: int | None = None) -> None:
         self.step = step
         super().__init__(message if step is None else f"step {step}: {message}")
+
+
+class MatchError(SlamkitError, RuntimeError):
+    """A scan matcher could not register two scans (or a scan and a map): too few
+    correspondences, geometry that leaves a direction unconstrained (a featureless corridor),
+    an empty scan. ``reason`` is a short machine-readable code (``"too_few_points"``,
+    ``"too_few_correspondences"``, ``"degenerate"``, ``"no_convergence"``, ``"low_score"``)."""
+
+    def __init__(self, message: str, reason: str) -> None:
+        self.reason = reason
+        super().__init__(message)

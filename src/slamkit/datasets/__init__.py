@@ -15,6 +15,7 @@ from slamkit.datasets.registry import (
     list_datasets,
     load_dataset,
 )
+from slamkit.datasets.relations import Relations, read_relations
 from slamkit.datasets.stream import (
     Control,
     Dataset,
@@ -46,6 +47,7 @@ __all__ = [
     "LaserSpec",
     "MotionSpec",
     "Odometry",
+    "Relations",
     "data_root",
     "dataset_available",
     "find_data_root",
@@ -53,4 +55,5 @@ __all__ = [
     "group_by_time",
     "list_datasets",
     "load_dataset",
+    "read_relations",
 ]

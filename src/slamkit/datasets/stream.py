@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray, as_array, as_covariance, as_positive
+from slamkit.datasets.relations import Relations
 from slamkit.errors import InputError, NonFiniteError, ShapeError
 from slamkit.geometry.pose2 import interpolate_poses
 from slamkit.maps import LandmarkMap, OccupancyGrid, SegmentMap
@@ -277,6 +278,10 @@ class GroundTruth:
     """The true landmark id of every reading, one array per :class:`LandmarkReadings` event
     in stream order (``-1`` = unknown): the data association, for scoring an estimator that
     was given no ids (matched against the events by :meth:`Dataset.check_reading_ids`)."""
+    relations: Relations | None = None
+    """Reference relations (the Freiburg benchmark's ground truth): the pose at ``t2`` in the
+    frame at ``t1``, scored by :mod:`slamkit.eval.relations` against a trajectory that has
+    the stamps."""
 
     def __post_init__(self) -> None:
         if (self.times is None) != (self.poses is None):
