@@ -14,17 +14,128 @@ import math
 import tomllib
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from dataclasses import field
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, ClassVar, Literal, TypeVar
 
 import numpy as np
 
 from slamkit.errors import ConfigError
 
-__all__ = ["config_from_mapping", "config_to_dict", "load_config_file"]
+__all__ = [
+    "Check",
+    "Section",
+    "config_from_mapping",
+    "config_to_dict",
+    "finite_above",
+    "finite_at_least",
+    "fraction",
+    "int_at_least",
+    "load_config_file",
+    "optional",
+    "setting",
+]
 
 C = TypeVar("C")
+
+# -- declarative validation of config sections ----------------------------------------------
+
+Check = Callable[[Any], bool]
+"""A field's range test: true when the value is allowed."""
+
+
+def setting(default: Any, check: Check, expected: str) -> Any:
+    """A dataclass field with ``default`` whose value must pass ``check`` (``expected`` says
+    what is allowed, for the error message)."""
+    return field(default=default, metadata={"check": check, "expected": expected})
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def int_at_least(low: int) -> Check:
+    """An integer ``>= low``."""
+    return lambda v: _is_int(v) and v >= low
+
+
+def finite_at_least(low: float) -> Check:
+    """A finite number ``>= low``."""
+    return lambda v: _is_number(v) and v >= low
+
+
+def finite_above(low: float) -> Check:
+    """A finite number ``> low``."""
+    return lambda v: _is_number(v) and v > low
+
+
+class Section:
+    """Base of config sections (frozen dataclasses that inherit it): ``__post_init__``
+    checks every field declared with :func:`setting` and every ``Literal``-typed field,
+    naming ``SECTION.field`` on failure."""
+
+    SECTION: ClassVar[str] = ""
+    _literal_cache: ClassVar[dict[type, dict[str, tuple[Any, ...]]]] = {}
+
+    @classmethod
+    def _literals(cls) -> dict[str, tuple[Any, ...]]:
+        """The choices of each ``Literal``-typed field (resolved once per class)."""
+        cached = Section._literal_cache.get(cls)
+        if cached is None:
+            cached = {}
+            for name, hint in typing.get_type_hints(cls).items():
+                if typing.get_origin(hint) is Literal:
+                    cached[name] = typing.get_args(hint)
+            Section._literal_cache[cls] = cached
+        return cached
+
+    def __post_init__(self) -> None:
+        prefix = f"{self.SECTION}." if self.SECTION else ""
+        choices = self._literals()
+        for f in dataclasses.fields(self):  # type: ignore[arg-type]
+            value = getattr(self, f.name)
+            if f.name in choices and value not in choices[f.name]:
+                allowed = ", ".join(repr(c) for c in choices[f.name])
+                raise ConfigError(f"{prefix}{f.name}: expected one of {allowed}, got {value!r}")
+            section = f.default_factory if f.default_factory is not dataclasses.MISSING else None
+            if isinstance(section, type) and issubclass(section, Section):
+                if not isinstance(value, section):
+                    raise ConfigError(
+                        f"{prefix}{f.name}: expected a {section.__name__} (a table of "
+                        f"settings), got {value!r}"
+                    )
+                continue
+            check = f.metadata.get("check")
+            if check is not None and not check(value):
+                raise ConfigError(
+                    f"{prefix}{f.name}: expected {f.metadata['expected']}, got {value!r}"
+                )
+
+
+def optional(check: Check) -> Check:
+    """``None``, or a value passing ``check``."""
+    return lambda v: v is None or check(v)
+
+
+def fraction(*, open_low: bool = False, open_high: bool = False) -> Check:
+    """A number in ``[0, 1]`` (``open_low``/``open_high``: excluding that end)."""
+
+    def check(v: Any) -> bool:
+        if not _is_number(v):
+            return False
+        low_ok = v > 0 if open_low else v >= 0
+        high_ok = v < 1 if open_high else v <= 1
+        return bool(low_ok and high_ok)
+
+    return check
+
+
+# -- mappings to config objects and back ------------------------------------------------------
 
 
 def _coerce(value: Any, annotation: Any, where: str) -> Any:
@@ -93,6 +204,27 @@ RENAMED: dict[str, str] = {
     "measurement_cov_scale (EKF mapping), factors on the covariance",
     "method": "now solver",
     "pose_time_tolerance": "no longer used: known poses arrive through the stream",
+    "n_particles_global": "MCL: now start.n_particles (a [estimator.start] table)",
+    "global_particles_per_m2": "MCL: now start.particles_per_m2 (a [estimator.start] table)",
+    "global_start": "MCL: now start.uniform (a [estimator.start] table)",
+    "prior_cov_scale": "MCL: now start.prior_cov_scale (a [estimator.start] table)",
+    "alpha_slow": "MCL: now augmented.alpha_slow (a [estimator.augmented] table)",
+    "alpha_fast": "MCL: now augmented.alpha_fast (a [estimator.augmented] table)",
+    "injection_sigmas": "MCL: now augmented.injection_sigmas (a [estimator.augmented] table)",
+    "injection_margin": "MCL: now augmented.injection_margin (a [estimator.augmented] table)",
+    "kld_epsilon": "MCL: now kld.epsilon (a [estimator.kld] table)",
+    "kld_quantile": "MCL: now kld.quantile (a [estimator.kld] table)",
+    "kld_bin_xy": "MCL: now kld.bin_xy (a [estimator.kld] table)",
+    "kld_bin_theta_deg": "MCL: now kld.bin_theta_deg (a [estimator.kld] table)",
+    "kld_min_particles": "MCL: now kld.min_particles (a [estimator.kld] table)",
+    "kld_max_particles": "MCL: now kld.max_particles (a [estimator.kld] table)",
+    "sigma_hit": "MCL: now laser.sigma_hit (a [estimator.laser] table)",
+    "z_hit": "MCL: now laser.z_hit (a [estimator.laser] table)",
+    "z_rand": "MCL: now laser.z_rand (a [estimator.laser] table)",
+    "laser_independent_beams": "MCL: now laser.independent_beams (a [estimator.laser] table)",
+    "laser_offset": "MCL: now laser.offset (a [estimator.laser] table)",
+    "snapshot_every": "MCL: now snapshots.every (a [estimator.snapshots] table)",
+    "snapshot_times": "MCL: now snapshots.times (a [estimator.snapshots] table)",
 }
 """Settings that were renamed, with what to write instead (named in the error)."""
 

@@ -11,6 +11,7 @@ import pytest
 from scipy.stats import chi2, multivariate_normal
 
 import slamkit.localization.mcl.core as mcl_core
+from slamkit.config import config_from_mapping, config_to_dict
 from slamkit.datasets import load_dataset
 from slamkit.datasets.stream import Dataset, LandmarkReadings, LaserScan, group_by_time
 from slamkit.errors import ConfigError, ConvergenceError, InputError
@@ -25,8 +26,12 @@ from slamkit.localization.likelihood_field import (
 )
 from slamkit.localization.mcl import (
     Augmentation,
+    AugmentedConfig,
+    KldConfig,
     MclConfig,
     MonteCarloLocalization,
+    SnapshotConfig,
+    StartConfig,
     kld_resample_predict,
     kld_sample_size,
     landmark_innovations,
@@ -333,15 +338,17 @@ def test_constructor_checks_what_the_data_set_provides(rooms: Dataset) -> None:
             dataclasses.replace(rooms, known_grid=None), MclConfig(), np.random.default_rng(0)
         )
     with pytest.raises(ConfigError):
-        MclConfig(alpha_slow=0.5, alpha_fast=0.1)
+        MclConfig(augmented=AugmentedConfig(alpha_slow=0.5, alpha_fast=0.1))
     with pytest.raises(ConfigError):
-        MclConfig(kld_min_particles=500, kld_max_particles=100)
+        MclConfig(kld=KldConfig(min_particles=500, max_particles=100))
 
 
 def test_weight_underflow_is_reported_not_silently_reset(
     rooms: Dataset, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    est = MonteCarloLocalization(rooms, MclConfig(kld=False), np.random.default_rng(0))
+    est = MonteCarloLocalization(
+        rooms, MclConfig(kld=KldConfig(enabled=False)), np.random.default_rng(0)
+    )
     scans = _scans(rooms)
     est.handle(scans[0])
     before = est.particles
@@ -366,7 +373,11 @@ def test_weight_underflow_is_reported_not_silently_reset(
 
 
 def test_tracking_snapshots_and_reproducibility(rooms: Dataset) -> None:
-    cfg = MclConfig(kld=False, n_particles=500, snapshot_every=100, snapshot_times=(10.0,))
+    cfg = MclConfig(
+        kld=KldConfig(enabled=False),
+        n_particles=500,
+        snapshots=SnapshotConfig(every=100, times=(10.0,)),
+    )
     est = MonteCarloLocalization(rooms, cfg, np.random.default_rng(2))
     errors = _errors(rooms, est, max_t=40.0)
     # Measured: RMS position error 0.047 m, largest 0.12 m, largest heading error 1.2°.
@@ -393,7 +404,8 @@ def test_runs_through_the_pipeline_runner() -> None:
         "slamkit.localization.mcl:MclConfig",
         requires=("motion",),
     )
-    result = run(entry, data, config={"n_particles": 300, "kld": False}, seed=4, frames=5)
+    config = {"n_particles": 300, "kld": {"enabled": False}}
+    result = run(entry, data, config=config, seed=4, frames=5)
     assert data.truth.poses is not None
     assert result.covariances is not None and result.poses.shape == data.truth.poses.shape
     err = np.hypot(*(result.poses[:, :2] - data.truth.poses[:, :2]).T)
@@ -437,7 +449,7 @@ def test_global_localization_converges_in_95_percent_of_seeds() -> None:
         counts = est.particle_counts
         shrunk.append((counts[0], max(counts[-20:])))
     assert sum(converged) >= 19, converged
-    # KLD adapts: 454,147 particles at the uniform start; measured 500 (kld_min_particles)
+    # KLD adapts: 454,147 particles at the uniform start; measured 500 (kld.min_particles)
     # over the last 20 steps in every seed.
     assert all(start == 454_147 and end <= 1_000 for start, end in shrunk), shrunk
 
@@ -451,14 +463,14 @@ def test_augmented_mcl_recovers_from_kidnapping() -> None:
 
     Measured, seeds 0-7: with augmentation recovered 4 8 11 11 5 7 8 13 steps after
     t = 30 s (injection only once the fast average is 8 natural spreads below the slow
-    one, see ``MclConfig.injection_sigmas``; Thrun's rule: 3 15 15 8 24 3 16 5); without it
+    one, see ``AugmentedConfig.injection_sigmas``; Thrun's rule: 3 15 15 8 24 3 16 5); without it
     none recovered. Largest error before the kidnapping 0.15 m.
     """
     with_aug, without = [], []
     for seed in range(8):
         data = load_dataset("rooms-laser-kidnapped", seed=seed)
         for augmented, out in ((True, with_aug), (False, without)):
-            cfg = MclConfig(augmented=augmented)
+            cfg = MclConfig(augmented=AugmentedConfig(enabled=augmented))
             errors = _errors(data, MonteCarloLocalization(data, cfg, np.random.default_rng(seed)))
             k = round(30.0 / 0.2)  # time stamps are 0, 0.2, 0.4, ... s: step 150 is t = 30 s
             assert errors[:k, 0].max() < POS_TOL  # tracking before the kidnapping
@@ -482,8 +494,8 @@ def test_wrong_prior_is_corrected_at_the_first_features() -> None:
     for seed in range(5):
         data = load_dataset("five-features-kidnapped", seed=seed)
         for cfg, limit in (
-            (MclConfig(prior_cov_scale=3600.0), 40),
-            (MclConfig(global_start=True), 20),
+            (MclConfig(start=StartConfig(prior_cov_scale=3600.0)), 40),
+            (MclConfig(start=StartConfig(uniform=True)), 20),
         ):
             est = MonteCarloLocalization(data, cfg, np.random.default_rng(seed))
             step = _converged_from(_errors(data, est, max_t=15.0))
@@ -537,10 +549,10 @@ def test_range_only_tracking_injects_no_particles_by_default() -> None:
     slow one) fails on range-only readings: one 1-dof reading's evidence ``N(ν; 0, S)``
     varies by a factor e^±1 from reading to reading for a filter that tracks perfectly, so
     the fast average spends half its time below the slow one. Measured on
-    "five-features-range" (seeds 0-4, ~315 updates each): Thrun's rule (``injection_sigmas =
-    0``) injected at 175 166 82 26 172 updates (up to 1.35 M random particles; position ATE
-    0.81 1.91 0.09 0.12 1.40 m); the default (3 natural spreads) at none (ATE 0.13 0.10 0.09
-    0.11 0.12 m). Seed 0 here."""
+    "five-features-range" (seeds 0-4, ~315 updates each): Thrun's rule
+    (``augmented.injection_sigmas = 0``) injected at 175 166 82 26 172 updates (up to 1.35 M
+    random particles; position ATE 0.81 1.91 0.09 0.12 1.40 m); the default (3 natural
+    spreads) at none (ATE 0.13 0.10 0.09 0.11 0.12 m). Seed 0 here."""
     for seed in (0,):
         data = load_dataset("five-features-range", seed=seed)
         assert data.truth.poses is not None
@@ -548,7 +560,7 @@ def test_range_only_tracking_injects_no_particles_by_default() -> None:
         assert res.output.diagnostics["injected_particles"] == 0
         err = np.hypot(*(res.poses[:, :2] - data.truth.poses[:, :2]).T)
         assert np.sqrt(np.mean(err**2)) < 0.2
-        thrun = run("mcl", data, config={"injection_sigmas": 0.0}, seed=seed)
+        thrun = run("mcl", data, config={"augmented": {"injection_sigmas": 0.0}}, seed=seed)
         assert thrun.output.diagnostics["injection_events"] > 100
 
 
@@ -612,7 +624,9 @@ def test_kld_resamples_only_when_the_ess_drops() -> None:
     assert d["resamplings"] == 1 and est.particle_counts[-1] < 2000
     # With the ESS trigger off (threshold 0) and no augmentation, KLD never resamples.
     never = MonteCarloLocalization(
-        data, MclConfig(resample_threshold=0.0, augmented=False), np.random.default_rng(0)
+        data,
+        MclConfig(resample_threshold=0.0, augmented=AugmentedConfig(enabled=False)),
+        np.random.default_rng(0),
     )
     for ev in data.events[:200]:
         never.handle(ev)
@@ -660,13 +674,28 @@ def test_a_global_start_is_sized_by_area_and_not_moved_before_the_first_scan() -
     cfg = MclConfig()
     est = MonteCarloLocalization(data, cfg, np.random.default_rng(0))
     area = np.count_nonzero(data.known_grid.free()) * data.known_grid.resolution**2
-    assert len(est.particles) == int(np.ceil(cfg.global_particles_per_m2 * area))
+    assert len(est.particles) == int(np.ceil(cfg.start.particles_per_m2 * area))
     start = est.particles.poses
     first_scan = next(i for i, ev in enumerate(data.events) if isinstance(ev, LaserScan))
     for ev in data.events[:first_scan]:
         est.handle(ev)
     assert est.particles.poses is start or np.array_equal(est.particles.poses, start)
     fixed = MonteCarloLocalization(
-        data, MclConfig(n_particles_global=5000), np.random.default_rng(0)
+        data, MclConfig(start=StartConfig(n_particles=5000)), np.random.default_rng(0)
     )
     assert len(fixed.particles) == 5000
+
+
+def test_config_sections_round_trip_and_old_names_are_refused_with_their_place() -> None:
+    cfg = config_from_mapping(
+        MclConfig,
+        {"n_particles": 300, "kld": {"epsilon": 0.1}, "laser": {"sigma_hit": None}},
+    )
+    assert cfg.kld == KldConfig(epsilon=0.1) and cfg.laser.sigma_hit is None
+    assert config_from_mapping(MclConfig, config_to_dict(cfg)) == cfg
+    with pytest.raises(ConfigError, match=r"kld_epsilon \(MCL: now kld.epsilon"):
+        config_from_mapping(MclConfig, {"kld_epsilon": 0.1})
+    with pytest.raises(ConfigError, match=r"kld.quantile: expected a number in \(0, 1\)"):
+        config_from_mapping(MclConfig, {"kld": {"quantile": 1.0}})
+    with pytest.raises(ConfigError, match="kld: expected a KldConfig"):
+        MclConfig(kld=False)  # type: ignore[arg-type]

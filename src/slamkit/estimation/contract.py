@@ -9,8 +9,7 @@ through :meth:`Estimator.handle`, reports its current pose estimate through
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
-from contextlib import contextmanager
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any, Protocol, runtime_checkable
@@ -161,16 +160,16 @@ class StepClock:
             self._t = t
         return self.step
 
-    @contextmanager
-    def numbering(self, name: str, t: float) -> Iterator[None]:
-        """Re-raise a :class:`~slamkit.errors.ConvergenceError` without a step as
-        ``"{name} at t = {t} s: ..."`` with the current step."""
-        try:
-            yield
-        except ConvergenceError as exc:
-            if exc.step is not None:
-                raise
-            raise ConvergenceError(f"{name} at t = {t:g} s: {exc}", step=self.step) from exc
+    def stamped(self, exc: ConvergenceError, name: str, t: float) -> ConvergenceError:
+        """``exc`` if it already names a step, else a :class:`~slamkit.errors.ConvergenceError`
+        ``"{name} at t = {t} s: ..."`` carrying the current step (raise it ``from exc``).
+
+        A method the caller uses in its own ``except`` clause rather than a context manager:
+        entering a generator-based context on every event costs as much as a small filter's
+        whole prediction step (see ``benchmarks/bench_filters.py``)."""
+        if exc.step is not None:
+            return exc
+        return ConvergenceError(f"{name} at t = {t:g} s: {exc}", step=self.step)
 
 
 class Estimator(Protocol):

@@ -31,6 +31,7 @@ from slamkit.datasets.stream import (
     LaserScan,
     Odometry,
 )
+from slamkit.errors import ConvergenceError
 from slamkit.estimation.contract import InnovationLog, StepClock
 from slamkit.models import odometry_control
 
@@ -121,7 +122,7 @@ class EstimatorShell:
 
     def handle(self, event: Event) -> None:
         step = self.clock.tick(event.t)
-        with self.clock.numbering(self.name, event.t):
+        try:
             control = self.motion_input.control(event)
             if control is not None:
                 self.on_control(*control)
@@ -132,6 +133,11 @@ class EstimatorShell:
             elif isinstance(event, LaserScan):
                 self.on_scan(event)
             self.after_event(step)
+        except ConvergenceError as exc:
+            stamped = self.clock.stamped(exc, self.name, event.t)
+            if stamped is exc:
+                raise
+            raise stamped from exc
 
     def on_control(self, u: FloatArray, dt: float) -> None:
         """A motion step with control ``u`` over ``dt`` seconds. Default: ignored."""

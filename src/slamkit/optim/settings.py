@@ -16,10 +16,9 @@ In a TOML file the sections are nested tables (``[optimizer.lm]``), in JSON nest
 :func:`~slamkit.config.config_from_mapping` and :func:`~slamkit.config.config_to_dict` read
 and write them.
 
-**Validation is declarative.** Each field that needs a range says so where it is declared,
-``setting(default, check)``, and a ``Literal`` annotation is its own list of choices; every
-section's ``__post_init__`` (from :class:`Section`) runs those checks and raises a
-:class:`~slamkit.errors.ConfigError` that names the field as ``section.field``.
+**Validation is declarative** (:class:`slamkit.config.Section`): each field that needs a
+range says so where it is declared, ``setting(default, check, expected)``, and a ``Literal``
+annotation is its own list of choices; errors name the field as ``section.field``.
 
 Units: ``f`` is the cost ``Σ ρ(‖U e‖²)`` (χ² without a robust kernel, no factor ½),
 dimensionless; steps ``δ`` are tangent vectors of the free variables (metres and radians for
@@ -29,13 +28,10 @@ damped systems and dogleg try several radii inside one iteration.
 
 from __future__ import annotations
 
-import dataclasses
-import math
-import typing
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Literal
+from typing import ClassVar, Literal
 
+from slamkit.config import Section, finite_above, finite_at_least, int_at_least, setting
 from slamkit.errors import ConfigError
 from slamkit.optim.graph import GaugeMode, ObjectiveName
 from slamkit.optim.robust import DEFAULT_WIDTHS, KernelName, RobustKernel
@@ -49,79 +45,11 @@ __all__ = [
     "MethodName",
     "OptimizerConfig",
     "RobustConfig",
-    "Section",
     "StoppingConfig",
-    "setting",
 ]
 
 MethodName = Literal["lm", "gn", "dogleg"]
 InitName = Literal["auto", "vertices", "odometry", "chordal", "grow"]
-
-Check = Callable[[Any], bool]
-"""A field's range test: true when the value is allowed."""
-
-
-def setting(default: Any, check: Check, expected: str) -> Any:
-    """A dataclass field with ``default`` whose value must pass ``check`` (``expected`` says
-    what is allowed, for the error message)."""
-    return field(default=default, metadata={"check": check, "expected": expected})
-
-
-def _is_int(v: Any) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _is_number(v: Any) -> bool:
-    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-
-
-def int_at_least(low: int) -> Check:
-    """An integer ``>= low``."""
-    return lambda v: _is_int(v) and v >= low
-
-
-def finite_at_least(low: float) -> Check:
-    """A finite number ``>= low``."""
-    return lambda v: _is_number(v) and v >= low
-
-
-def finite_above(low: float) -> Check:
-    """A finite number ``> low``."""
-    return lambda v: _is_number(v) and v > low
-
-
-class Section:
-    """Base of the config sections: ``__post_init__`` checks every field declared with
-    :func:`setting` and every ``Literal``-typed field, naming ``SECTION.field`` on failure."""
-
-    SECTION: ClassVar[str] = ""
-    _literal_cache: ClassVar[dict[type, dict[str, tuple[Any, ...]]]] = {}
-
-    @classmethod
-    def _literals(cls) -> dict[str, tuple[Any, ...]]:
-        """The choices of each ``Literal``-typed field (resolved once per class)."""
-        cached = Section._literal_cache.get(cls)
-        if cached is None:
-            cached = {}
-            for name, hint in typing.get_type_hints(cls).items():
-                if typing.get_origin(hint) is Literal:
-                    cached[name] = typing.get_args(hint)
-            Section._literal_cache[cls] = cached
-        return cached
-
-    def __post_init__(self) -> None:
-        prefix = f"{self.SECTION}." if self.SECTION else ""
-        choices = self._literals()
-        for f in dataclasses.fields(self):  # type: ignore[arg-type]
-            value = getattr(self, f.name)
-            if f.name in choices and value not in choices[f.name]:
-                allowed = ", ".join(repr(c) for c in choices[f.name])
-                raise ConfigError(f"{prefix}{f.name}: expected one of {allowed}, got {value!r}")
-            check = f.metadata.get("check")
-            if check is not None and not check(value):
-                raise ConfigError(
-                    f"{prefix}{f.name}: expected {f.metadata['expected']}, got {value!r}"
-                )
 
 
 @dataclass(frozen=True)

@@ -11,14 +11,14 @@ The filter (Probabilistic Robotics, chapter 8) as pure functions over a
 * :func:`mcl_resample` draws a new, equally weighted set by low-variance resampling;
 * **augmented MCL** (table 8.3): :class:`Augmentation` keeps a slow and a fast average of the
   measurement likelihood; when the fast one drops below the slow one — by more than its
-  natural spread (``MclConfig.injection_sigmas``) — the robot has probably been moved, and
+  natural spread (``AugmentedConfig.injection_sigmas``) — the robot has probably been moved, and
   :func:`mcl_resample` replaces a fraction ``max(0, 1 - w_fast/w_slow)`` (against the
   lowered slow average) of the particles by random poses;
 * **KLD-sampling** (Fox 2003): :func:`kld_resample_predict` draws particles until their
   number suffices, with probability ``1 - δ``, to keep the KL divergence between the sample
   and the true posterior below ``ε``, judged by how many histogram bins the sample occupies.
   The estimator resamples this way whenever it resamples, which the ESS trigger decides;
-* **tempering** of laser scans (``MclConfig.laser_independent_beams``) and the
+* **tempering** of laser scans (``LaserConfig.independent_beams``) and the
   **innovation log** of landmark readings against the particle mean and covariance
   (:func:`landmark_innovations`), which gives MCL the NIS statistics of the EKF.
 
@@ -31,7 +31,14 @@ resampling), :mod:`.landmarks` (landmark likelihoods and innovations), :mod:`.au
 """
 
 from slamkit.localization.mcl.augmented import Augmentation
-from slamkit.localization.mcl.config import MclConfig
+from slamkit.localization.mcl.config import (
+    AugmentedConfig,
+    KldConfig,
+    LaserConfig,
+    MclConfig,
+    SnapshotConfig,
+    StartConfig,
+)
 from slamkit.localization.mcl.core import (
     MeasurementUpdate,
     mcl_predict,
@@ -51,11 +58,16 @@ from slamkit.localization.mcl.sampling import PoseSampler
 
 __all__ = [
     "Augmentation",
+    "AugmentedConfig",
+    "KldConfig",
     "LandmarkInnovations",
+    "LaserConfig",
     "MclConfig",
     "MeasurementUpdate",
     "MonteCarloLocalization",
     "PoseSampler",
+    "SnapshotConfig",
+    "StartConfig",
     "kld_resample_predict",
     "kld_sample_size",
     "landmark_innovations",

@@ -120,7 +120,7 @@ def advance_augmentation(
     """One measurement update of the averages (started at the first one), and the
     probability with which a particle is then replaced by a random pose: Thrun's
     ``1 - w_fast / w_slow`` against the slow average lowered by ``injection_sigmas`` times
-    the fast average's natural spread (``MclConfig.injection_sigmas``)."""
+    the fast average's natural spread (``AugmentedConfig.injection_sigmas``)."""
     if aug is None:
         aug = Augmentation.start(log_w_avg)
     else:

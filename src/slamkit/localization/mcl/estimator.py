@@ -120,14 +120,14 @@ def _laser_field(dataset: Dataset, config: MclConfig) -> LikelihoodField:
     """The likelihood field of the known grid (``sigma_hit`` derived when ``None``)."""
     assert dataset.laser is not None and dataset.known_grid is not None
     grid = dataset.known_grid
-    sigma = config.sigma_hit
+    sigma = config.laser.sigma_hit
     if sigma is None:
         s_r = dataset.laser.range_sigma
         sigma = math.sqrt(config.measurement_cov_scale) * float(
             np.sqrt(s_r**2 + grid.resolution**2 / 3.0)
         )
     return LikelihoodField.from_grid(
-        grid, sigma, config.z_hit, config.z_rand, dataset.laser.max_range
+        grid, sigma, config.laser.z_hit, config.laser.z_rand, dataset.laser.max_range
     )
 
 
@@ -135,12 +135,14 @@ def _injection_sampler(
     dataset: Dataset, config: MclConfig, use_laser: bool
 ) -> tuple[PoseSampler, float]:
     """Where random particles come from, and the area they cover [m²]: the free cells of the
-    known grid (laser worlds) or the landmarks' box grown by ``injection_margin``."""
+    known grid (laser worlds) or the landmarks' box grown by ``augmented.injection_margin``."""
     if use_laser:
         assert dataset.known_grid is not None
         return free_space_sampler(dataset.known_grid)
     assert dataset.known_landmarks is not None
-    return landmark_box_sampler(dataset.known_landmarks.positions, config.injection_margin)
+    return landmark_box_sampler(
+        dataset.known_landmarks.positions, config.augmented.injection_margin
+    )
 
 
 def _start_poses(
@@ -151,15 +153,15 @@ def _start_poses(
     area: float,
     rng: np.random.Generator,
 ) -> FloatArray:
-    """The start particles: uniform over the map (``global_start``), else drawn from the
+    """The start particles: uniform over the map (``start.uniform``), else drawn from the
     prior ``N(initial_pose, prior_cov_scale · initial_cov)``."""
     if global_start:
-        n_global, per_m2 = config.n_particles_global, config.global_particles_per_m2
+        n_global, per_m2 = config.start.n_particles, config.start.particles_per_m2
         return initial_poses(sampler, area, n_global, per_m2, rng)
     assert dataset.initial_pose is not None
     cov = dataset.initial_cov if dataset.initial_cov is not None else np.zeros((3, 3))
     start: FloatArray = rng.multivariate_normal(
-        dataset.initial_pose, config.prior_cov_scale * cov, config.n_particles
+        dataset.initial_pose, config.start.prior_cov_scale * cov, config.n_particles
     )
     return start
 
@@ -200,11 +202,11 @@ def _kld_predict(
         model,
         Q,
         rng,
-        epsilon=cfg.kld_epsilon,
-        upper_quantile=cfg.kld_quantile,
-        bin_size=(cfg.kld_bin_xy, np.deg2rad(cfg.kld_bin_theta_deg)),
-        min_particles=cfg.kld_min_particles,
-        max_particles=cfg.kld_max_particles,
+        epsilon=cfg.kld.epsilon,
+        upper_quantile=cfg.kld.quantile,
+        bin_size=(cfg.kld.bin_xy, np.deg2rad(cfg.kld.bin_theta_deg)),
+        min_particles=cfg.kld.min_particles,
+        max_particles=cfg.kld.max_particles,
         p_random=p_random,
         sampler=sampler,
     )
@@ -216,8 +218,8 @@ class MonteCarloLocalization(EstimatorShell):
     Needs a motion model and either a landmark sensor with ``known_landmarks`` or a laser
     with ``known_grid`` (both are used when both are there). With a prior pose the particles
     start from ``N(initial_pose, prior_cov_scale · initial_cov)``; without one (or with
-    ``global_start``) uniformly over the map's free space (laser) or the landmarks' bounding
-    box grown by ``injection_margin``. See :class:`MclConfig` for the rest.
+    ``start.uniform``) uniformly over the map's free space (laser) or the landmarks' bounding
+    box grown by ``augmented.injection_margin``. See :class:`MclConfig` for the rest.
     """
 
     name = "mcl"
@@ -246,12 +248,12 @@ class MonteCarloLocalization(EstimatorShell):
             self._lm_cov = config.measurement_cov_scale * dataset.landmark_sensor.noise_cov
             self._lm_whitener = whitener(self._lm_cov)
         self._sampler, area = _injection_sampler(dataset, config, use_laser)
-        self._global_start = dataset.initial_pose is None or config.global_start
+        self._global_start = dataset.initial_pose is None or config.start.uniform
         start = _start_poses(dataset, config, self._global_start, self._sampler, area, rng)
         self._particles = ParticleSet.uniform_weights(start)
         # A uniform belief over the map stays (nearly) uniform under the motion model, so a
         # global start's particles are not moved until the first measurement has weighted
-        # them: that saves moving n_particles_global particles at every step before it.
+        # them: that saves moving start.n_particles particles at every step before it.
         self._uniform = self._global_start
         self._estimate: PoseEstimate | None = None
         self._estimate_of: ParticleSet | None = None
@@ -263,8 +265,8 @@ class MonteCarloLocalization(EstimatorShell):
         self._c = _Counters(particle_counts=[len(self._particles)])
         self._snapshots: list[ParticleSnapshot] = []
         self._innovations = InnovationRecorder(use_landmarks and config.record_innovations)
-        self._schedule = SnapshotSchedule(config.snapshot_every, config.snapshot_times)
-        if config.snapshot_every > 0:
+        self._schedule = SnapshotSchedule(config.snapshots.every, config.snapshots.times)
+        if config.snapshots.every > 0:
             self._snapshot(dataset.start_time)
 
     # -- the Estimator protocol ---------------------------------------------------------
@@ -277,15 +279,15 @@ class MonteCarloLocalization(EstimatorShell):
             return
         field_, angles = self._field, self._beam_angles
         cfg = self._cfg
-        offset = cfg.laser_offset if any(cfg.laser_offset) else None
+        offset = cfg.laser.offset if any(cfg.laser.offset) else None
         exponent = 1.0
-        if cfg.laser_independent_beams is not None:
-            used = usable_beams(field_, event.ranges, angles, cfg.beam_stride)
-            exponent = min(1.0, cfg.laser_independent_beams / max(used, 1))
+        if cfg.laser.independent_beams is not None:
+            used = usable_beams(field_, event.ranges, angles, cfg.laser.beam_stride)
+            exponent = min(1.0, cfg.laser.independent_beams / max(used, 1))
         self._update(
             event.t,
             lambda ps: mcl_update_laser(
-                ps, event.ranges, field_, angles, offset, cfg.beam_stride, exponent
+                ps, event.ranges, field_, angles, offset, cfg.laser.beam_stride, exponent
             ),
             exponent,
         )
@@ -329,7 +331,7 @@ class MonteCarloLocalization(EstimatorShell):
 
     @property
     def global_start(self) -> bool:
-        """Whether the particles started uniform over the map (no prior, or ``global_start``)."""
+        """Whether the particles started uniform over the map (no prior, or ``start.uniform``)."""
         return self._global_start
 
     @property
@@ -353,7 +355,7 @@ class MonteCarloLocalization(EstimatorShell):
             self._c.predictions += 1
             self._c.particle_counts.append(len(self._particles))
             return
-        if cfg.kld and self._resample_pending:
+        if cfg.kld.enabled and self._resample_pending:
             ps, p, sampler = self._particles, self._p_inject, self._sampler
             self._particles, n_random = _kld_predict(
                 ps, u, dt, self._motion.model, self._Q, rng, cfg, p, sampler
@@ -361,7 +363,7 @@ class MonteCarloLocalization(EstimatorShell):
             self._c.resamplings += 1
             self._count_injection(n_random)
         else:
-            if self._resample_pending and not cfg.kld:
+            if self._resample_pending and not cfg.kld.enabled:
                 k = min(self._inject_pending, self._n_target)
                 self._particles = mcl_resample(
                     self._particles, rng, self._n_target, n_random=k, sampler=self._sampler
@@ -437,14 +439,18 @@ class MonteCarloLocalization(EstimatorShell):
         self._particles = result.particles
         self._uniform = False
         n = len(self._particles)
-        if result.n_readings > 0 and cfg.augmented:
+        if result.n_readings > 0 and cfg.augmented.enabled:
             log_w_avg = result.log_evidence / (result.n_readings * exponent)
             self._aug, self._p_inject = advance_augmentation(
-                self._aug, log_w_avg, cfg.alpha_slow, cfg.alpha_fast, cfg.injection_sigmas
+                self._aug,
+                log_w_avg,
+                cfg.augmented.alpha_slow,
+                cfg.augmented.alpha_fast,
+                cfg.augmented.injection_sigmas,
             )
             # KLD-sampling injects with this probability per drawn particle; a fixed-size set
             # replaces a binomial number of particles at its next resampling.
-            if not cfg.kld and self._p_inject > 0:
+            if not cfg.kld.enabled and self._p_inject > 0:
                 self._inject_pending = int(self._rng.binomial(n, self._p_inject))
         ess = effective_sample_size(self._particles.weights)
         if ess < cfg.resample_threshold * n or self._inject_pending > 0 or self._p_inject > 0:

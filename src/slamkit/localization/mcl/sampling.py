@@ -61,7 +61,9 @@ def landmark_box_sampler(positions: FloatArray, margin: float) -> tuple[PoseSamp
         float(pos[:, 1].max()) + mg,
     )
     if not (box[2] > box[0] and box[3] > box[1]):
-        raise InputError("mcl: the landmarks' bounding box is degenerate; set injection_margin > 0")
+        raise InputError(
+            "mcl: the landmarks' bounding box is degenerate; set augmented.injection_margin > 0"
+        )
 
     def in_box(n: int, rng: np.random.Generator) -> FloatArray:
         return uniform_particles_in_box(box, n, rng)
