@@ -200,14 +200,10 @@ class GaussianFilterConfig:
     ``relocalization_times``), never silent. A consistent filter rejects ``10`` valid
     readings in a row with probability ``(1 − gate_probability)¹⁰``; a filter whose error
     has outgrown its covariance (a bad start, a long blind stretch) rejects every reading
-    that would correct it, and without the guard never recovers. On MRCLAM 1 (labels
-    corrected) the nominal filter rejects 4 readings in a row, its longest run, after the
-    33 s without readings that end at 472 s; with half the nominal control noise
-    (``motion_cov_scale=0.5``) it locks out there for good — 38 % of all readings
-    rejected, position error 4.7 m (90th percentile) at the true poses — while with the
-    guard it re-initialises three times, accepts 98 % and stays within 0.09 m (90th
-    percentile). Needs known ids (``association="known"``) and a gate; ``None`` disables
-    it."""
+    that would correct it, and without the guard never recovers (MRCLAM 1 with half the
+    nominal control noise locks out for good after its longest gap without readings; see
+    ``docs/estimators/localization.md``). Needs known ids (``association="known"``) and a
+    gate; ``None`` disables it."""
     association: Literal["known", "ml"] = "known"
     """``"known"``: use the readings' landmark ids (``-1`` readings are skipped).
     ``"ml"``: ignore the ids and associate each reading by maximum likelihood inside the gate
@@ -270,10 +266,9 @@ class GaussianLocalization(EstimatorShell):
 
     With a gate, a fix is refused when its readings contradict each other — residual
     ``χ² = Σ eᵀ R⁻¹ e`` above ``χ²_d⁻¹(gate_probability)`` with ``d`` = scalar readings minus
-    unknowns — since one outlier among two or three readings moves the fix by metres (on
-    MRCLAM 1 with two landmarks' labels swapped, the first fix, from two readings, lay 3.6 m
-    and 2.7 rad from the fix of the correctly labelled readings, with ``χ² = 409`` for
-    ``d = 1``, and the filter stayed metres off for about 400 s); the filter then waits for
+    unknowns — since one outlier among two or three readings moves the fix by metres (MRCLAM
+    1 with two landmarks' labels swapped: ``docs/estimators/localization.md``); the filter
+    then waits for
     the next readings (``rejected_static_fixes``). Not every outlier shows: with a single
     redundant reading a range error is largely absorbed by the pose, and it is the lock-out
     guard that catches the consequences.

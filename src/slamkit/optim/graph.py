@@ -520,7 +520,8 @@ class GraphProblem:
         The 2D kernels fill contiguous per-entry rows of length ``E`` (one vector operation
         per scalar entry; whitening and products are ``einsum`` over the small axes). The 3D
         kernels work on stacked 3x3 matrices, so their arrays are batch-first and whitening
-        and products are stacked ``matmul`` (5x faster than ``einsum`` on strided views).
+        and products are stacked ``matmul`` (faster than ``einsum`` on strided views:
+        ``docs/estimators/optim.md``).
         """
         z = blk.measurement
         xa = poses[blk.a]

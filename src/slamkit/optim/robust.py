@@ -19,14 +19,13 @@ cost and the IRLS weights belong to one M-estimator.
 
 **Widths.** ``s`` of an inlier relative-pose edge is χ² with 3 degrees of freedom (mean 3,
 95 % below 7.8), so a kernel must keep ``s`` of that size nearly quadratic. The defaults
-(:data:`DEFAULT_WIDTHS`) were measured on the vertigo ring and ringCity graphs with 10 % false
-loop closures, started from odometry: Geman-McClure ``c = 3`` (``c² = 9``) and DCS ``φ = 3``
-recover the outlier-free trajectory (ATE 1.00x of it), Cauchy ``c = 1`` comes within 1.5x
-(ring) and 3.5x (ringCity), Huber (convex) does not help. A redescending kernel that is too
+(:data:`DEFAULT_WIDTHS`: Geman-McClure ``c = 3``, DCS ``φ = 3``, Cauchy ``c = 1``) were chosen
+on the vertigo ring and ringCity graphs with false loop closures, started from odometry
+(measurements in ``docs/estimators/optim.md``). A redescending kernel that is too
 narrow for the *start* does nothing: from odometry, every loop closure (true or false) has
 ``s`` in the hundreds or more, so Geman-McClure ``c = 1`` or DCS ``φ = 1`` gives them all
 weight ≈ 0 and the odometry start is a stationary point of the robust cost (the first step
-changes it by 1e-8 relative, and the solver rightly stops there).
+changes it negligibly, and the solver rightly stops there).
 """
 
 from __future__ import annotations

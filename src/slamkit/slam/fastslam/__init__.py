@@ -82,9 +82,8 @@ runs over ``δ = (δx, ε)`` with prior ``N(0, blockdiag(P_p, Q_u))``: ``x = g(x
 ``A = H_x [G, V]``, the same updates as above. With one control per scan ``P_p = 0`` and this
 is the control-space proposal. Sampling only the newest control from the proposal and the
 earlier ones blindly is still valid importance sampling, but the proposal then sees a fifth
-of the heading noise on cityTrees: the weights collapse (median ESS 1 of 100) and the filter
-diverges (ATE 57 m); with the whole motion in the proposal, median ESS ~40, ATE 1.1-3.4 m
-over seeds 0-4 (``tests/slam/test_fastslam_real.py``).
+of the heading noise on cityTrees, the weights collapse and the filter diverges (measurements
+in ``docs/estimators/fastslam.md``; ``tests/slam/test_fastslam_real.py``).
 
 Consistency
 -----------
@@ -92,11 +91,9 @@ The pose covariance the estimators report is the weighted spread of the particle
 for 2.0 between a control and its scan, the mean of the particles' motion covariances). It
 is optimistic, as Bailey, Nieto and Nebot (2006) showed FastSLAM to be in general:
 resampling prunes the path hypotheses, so after a while every particle shares one ancestor
-and the spread no longer holds the drift of the whole map. Measured on the five-feature
-world, default settings, seeds 0-4: mean pose NEES (3 dof, 3 when consistent) 5-710 for
-1.0 and 21-160 for 2.0, against EKF-SLAM's 0.9-7.1, with ATE RMSE 0.04-0.06 m (1.0),
-0.06-0.14 m (2.0) and 0.03-0.06 m (EKF-SLAM). Use the trajectory, not the covariance, of
-a FastSLAM run.
+and the spread no longer holds the drift of the whole map: the pose NEES of both variants
+lies far above that of EKF-SLAM on the same runs (``docs/estimators/fastslam.md``). Use the
+trajectory, not the covariance, of a FastSLAM run.
 
 Arrays
 ------

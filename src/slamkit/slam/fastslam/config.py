@@ -73,11 +73,8 @@ class FastSlamConfig:
     in more than ``1 / (1 + hit_weight)`` of the scans that should see it. "Should see it"
     cannot know occlusion (a tree behind another) nor a detector that misses a tree now and
     then: raise it for such sensors. Clutter, read once, still dies after ``hit_weight + 1``
-    misses, but a duplicate made at a loop closure, read now and then, may live (five-features
-    without ids, 50 particles, seeds 0-5: 2 and 3 keep one in seed 1, 1 none). On Victoria
-    Park (first 300 s, 100 particles, seed 0, misses judged from the laser): 1 → 118
-    landmarks in the best particle, 3 → 156 (EKF-SLAM: 155), GPS RMSE 4.14 and 4.18 m,
-    association accuracy 0.71 and 0.77 (EKF-SLAM: 0.96)."""
+    misses, but a duplicate made at a loop closure, read now and then, may live (measurements
+    on five-features and Victoria Park in ``docs/estimators/fastslam.md``)."""
     miss_max_range: float | None = None
     """A missed landmark counts against its existence only when predicted closer than this
     [m]. None: the sensor's detection range (:attr:`LandmarkSensorSpec.reach
@@ -91,10 +88,8 @@ class FastSlamConfig:
     """Where the landmark sensor sits in the robot frame [m] (x forward, y left): ranges and
     the field of view of the miss test above are measured from there. None: the data set's
     (its landmark sensor's ``offset``; Victoria Park's laser is 3.78 m ahead of and 0.5 m
-    left of the rear axle). On Victoria Park (first 300 s, 100 particles, seed 0, nominal
-    reading noise) judging from the axle counts the trees beside the cab as missed
-    at every scan: 96 landmarks in the best particle, GPS RMSE 4.26 m; from the laser 118,
-    4.14 m (seeds 1-3: 94-96 against 116-118 landmarks)."""
+    left of the rear axle). Judging misses from the axle there counts the trees beside the
+    cab as missed at every scan, and the map loses them (``docs/estimators/fastslam.md``)."""
     n_snapshots: int = 6
     """Copies of the particle poses and weights kept for the plots (``particles.png``) when
     neither ``snapshot_every`` nor ``snapshot_times`` is set: at the first measurement update
