@@ -8,6 +8,7 @@ import pytest
 
 from slamkit.datasets.stream import Control, LandmarkReadings, LaserScan, Odometry
 from slamkit.errors import ConvergenceError
+from slamkit.estimation.contract import ParticleSnapshot, SpreadSnapshots
 from slamkit.estimation.shell import (
     AssociationRecorder,
     EstimatorShell,
@@ -79,3 +80,20 @@ def test_errors_inside_a_hook_carry_the_runners_step() -> None:
         est.handle(readings)  # same stamp: step 2
     assert info.value.step == 2
     assert est.controls == 3
+
+
+@pytest.mark.parametrize("updates", [3, 6, 50, 1000, 4097])
+def test_spread_snapshots_are_even_and_bounded_without_knowing_the_length(updates: int) -> None:
+    spread = SpreadSnapshots(6)
+    held = 0
+    for k in range(updates + 1):  # update 0: the start
+        spread.offer(k, lambda k=k: ParticleSnapshot(float(k), np.zeros((1, 3)), np.ones(1)))
+        held = max(held, spread.held)
+    assert held <= 49
+    final = ParticleSnapshot(updates + 0.5, np.zeros((1, 3)), np.ones(1))
+    times = [s.t for s in spread.pick(final)]
+    assert times[0] == 0.0 and times[-1] == updates + 0.5
+    assert len(times) == min(6, updates + 2)
+    if updates >= 50:  # evenly spread: every gap within a factor 1.5 of the even one
+        gaps, even = np.diff(times), (updates + 0.5) / 5
+        assert np.all((gaps > even / 1.5) & (gaps < even * 1.5)), gaps

@@ -27,6 +27,7 @@ from slamkit.estimation.contract import (
     ParticleView,
     PoseEstimate,
     SnapshotSchedule,
+    SpreadSnapshots,
     StepClock,
 )
 from slamkit.estimation.readings import AssociationCode, ReadingStatus
@@ -46,5 +47,6 @@ __all__ = [
     "PoseEstimate",
     "ReadingStatus",
     "SnapshotSchedule",
+    "SpreadSnapshots",
     "StepClock",
 ]

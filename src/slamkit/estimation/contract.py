@@ -9,7 +9,7 @@ through :meth:`Estimator.handle`, reports its current pose estimate through
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any, Protocol, runtime_checkable
@@ -98,6 +98,51 @@ class SnapshotSchedule:
     def pending(self) -> bool:
         """Whether requested times are still ahead."""
         return bool(self._times)
+
+
+class SpreadSnapshots:
+    """``n`` snapshots spread over a run whose length is not known in advance, chosen
+    causally: every ``stride``-th measurement update is kept (the stride starting at 1);
+    when more than ``8n`` are held, those off the doubled stride are dropped, so at most
+    ``8n + 1`` copies are ever held and the kept ones are never further apart than
+    ``1/(4n)`` of the run so far. :meth:`pick` then chooses ``n``, evenly spaced in update
+    count, the first and the final state included."""
+
+    def __init__(self, n: int) -> None:
+        self.n = int(n)
+        self.stride = 1
+        self._kept: list[tuple[int, ParticleSnapshot]] = []
+
+    def offer(self, updates: int, make: Callable[[], ParticleSnapshot]) -> None:
+        """Keep ``make()`` as the state after update number ``updates`` (0: the start) if it
+        falls on the stride."""
+        if self.n <= 0 or updates % self.stride:
+            return
+        self._kept.append((updates, make()))
+        if len(self._kept) > 8 * self.n:
+            self.stride *= 2
+            first = self._kept[0]
+            self._kept = [first] + [k for k in self._kept[1:] if k[0] % self.stride == 0]
+
+    @property
+    def held(self) -> int:
+        """How many copies are held now."""
+        return len(self._kept)
+
+    def pick(self, final: ParticleSnapshot | None = None) -> tuple[ParticleSnapshot, ...]:
+        """The ``n`` snapshots: the first, ``final`` (the state at the end, when later than
+        the last one kept) and between them the kept ones nearest to evenly spaced times."""
+        if self.n <= 0:
+            return ()
+        items = [s for _, s in self._kept]
+        if final is not None and (not items or items[-1].t < final.t):
+            items.append(final)
+        if len(items) <= self.n:
+            return tuple(items)
+        times = np.array([s.t for s in items])
+        targets = np.linspace(times[0], times[-1], self.n)
+        nearest = np.abs(times[None, :] - targets[:, None]).argmin(axis=1)
+        return tuple(items[i] for i in np.unique(nearest))
 
 
 class LandmarkIds(Enum):

@@ -28,7 +28,9 @@ def format_tum(times: ArrayLike, poses: ArrayLike) -> str:
          np.sin(half), np.cos(half)]
     )  # fmt: skip
     lines = ["# timestamp tx ty tz qx qy qz qw"]
-    lines += [" ".join(f"{v:.9g}" for v in row) for row in cols]
+    # Stamps keep 16 significant digits: a Unix time in seconds needs 10 before the point,
+    # and the Freiburg relations name scan stamps to the microsecond.
+    lines += [f"{row[0]:.16g} " + " ".join(f"{v:.9g}" for v in row[1:]) for row in cols]
     return "\n".join(lines) + "\n"
 
 

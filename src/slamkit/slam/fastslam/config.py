@@ -92,9 +92,9 @@ class FastSlamConfig:
     cab as missed at every scan, and the map loses them (``docs/estimators/fastslam.md``)."""
     n_snapshots: int = 6
     """Copies of the particle poses and weights kept for the plots (``particles.png``) when
-    neither ``snapshot_every`` nor ``snapshot_times`` is set: at the first measurement update
-    at or after each of this many times evenly spread from the data set's first to its last
-    event (the last one at the end of the run). 0: none."""
+    neither ``snapshot_every`` nor ``snapshot_times`` is set: the start, the end and states
+    between them evenly spaced in measurement updates, chosen as the run goes without
+    knowing its length (:class:`~slamkit.estimation.contract.SpreadSnapshots`). 0: none."""
     snapshot_every: int = 0
     """Keep a snapshot every this many measurement updates (0: not by count), plus the
     initial set (as :class:`~slamkit.localization.mcl.MclConfig`)."""

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,6 +17,7 @@ from slamkit.estimation.contract import (
     ParticleSnapshot,
     PoseEstimate,
     SnapshotSchedule,
+    SpreadSnapshots,
 )
 from slamkit.estimation.shell import EstimatorShell
 from slamkit.localization.particles import (
@@ -114,12 +114,12 @@ class _FastSlam(EstimatorShell):
         self._ess: list[float] = []
         self._snapshots: list[ParticleSnapshot] = []
         self._history = AssociationHistory()  # to trace any final particle's association
-        times: Any = config.snapshot_times
-        if config.snapshot_every == 0 and not times and config.n_snapshots > 0:
-            times = np.linspace(dataset.start_time, dataset.end_time, config.n_snapshots)
-        self._schedule = SnapshotSchedule(config.snapshot_every, times)
+        self._schedule = SnapshotSchedule(config.snapshot_every, config.snapshot_times)
+        spread = config.snapshot_every == 0 and not config.snapshot_times
+        self._spread = SpreadSnapshots(config.n_snapshots if spread else 0)
         if config.snapshot_every > 0:
             self._snapshot(dataset.start_time)
+        self._spread.offer(0, lambda: self._copy(dataset.start_time))
 
     # -- the Estimator protocol -------------------------------------------------------------
 
@@ -155,6 +155,8 @@ class _FastSlam(EstimatorShell):
         )
         if self._schedule.pending and (not self._snapshots or self._snapshots[-1].t < self._t):
             self._snapshot(self._t)  # times left after the last update: the final set
+        if self._spread.n > 0:
+            self._snapshots = list(self._spread.pick(self._copy(self._t)))
         _, chosen, status = self.reading_log()
         diagnostics["readings"] = int(chosen.size)
         diagnostics["readings_new_landmark"] = int(np.count_nonzero(status == INITIALISED))
@@ -220,9 +222,13 @@ class _FastSlam(EstimatorShell):
     def _maybe_snapshot(self, t: float) -> None:
         if self._schedule.due(t, self._updates):
             self._snapshot(t)
+        self._spread.offer(self._updates, lambda: self._copy(t))
+
+    def _copy(self, t: float) -> ParticleSnapshot:
+        return ParticleSnapshot(float(t), self._poses.copy(), self._weights.copy())
 
     def _snapshot(self, t: float) -> None:
-        self._snapshots.append(ParticleSnapshot(float(t), self._poses.copy(), self._weights.copy()))
+        self._snapshots.append(self._copy(t))
 
     def _resample_if_due(self) -> None:
         if self._resample_pending:
