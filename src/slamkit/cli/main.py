@@ -1,4 +1,5 @@
-"""``slamkit``: run estimators on data sets, optimise graph files, list data sets, run the demo.
+"""``slamkit``: run estimators on data sets, optimise graph files, score trajectory files
+against reference relations, list data sets, run the demo.
 
 Every command parses its options, calls one library function and renders what it returns.
 Known errors (:class:`~slamkit.errors.SlamkitError`) become one red line and exit code 1.
@@ -16,6 +17,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from slamkit.cli._common import console, known_errors, progress_bar, split_config
+from slamkit.cli.eval_cmd import eval_app
 from slamkit.cli.map_cmd import map_app
 from slamkit.cli.optimize_cmd import optimize_command
 
@@ -32,6 +34,7 @@ app = typer.Typer(
 data_app = typer.Typer(help="Data sets: simulated scenarios and real-data loaders.")
 app.add_typer(data_app, name="data")
 app.add_typer(map_app, name="map")
+app.add_typer(eval_app, name="eval")
 
 
 def _render_metrics(scores: RunScores) -> Table:
@@ -41,6 +44,7 @@ def _render_metrics(scores: RunScores) -> Table:
         ConvergenceReport,
         GpsError,
         LandmarkError,
+        RelationError,
         TrajectoryError,
     )
 
@@ -75,6 +79,19 @@ def _render_metrics(scores: RunScores) -> Table:
     if isinstance(assoc, AssociationScores):
         add("association accuracy", assoc.accuracy, ".4f")
         add("duplicate landmarks", assoc.duplicates, "d")
+    rel = scores.relations
+    if isinstance(rel, RelationError):  # mean ± std as in the published tables
+        add(
+            "relation error, translation [m]",
+            f"{rel.translation_mean:.3f} ± {rel.translation_std:.3f}",
+            "s",
+        )
+        add(
+            "relation error, rotation [deg]",
+            f"{rel.rotation_mean_deg:.1f} ± {rel.rotation_std_deg:.1f}",
+            "s",
+        )
+        add("relations covered [%]", 100 * rel.covered_fraction, ".0f")
     add("run time [s]", scores.runtime.total_seconds, ".3f")
     return table
 

@@ -1,5 +1,6 @@
-"""Evaluation: trajectory accuracy (ATE, RPE), filter consistency (NEES/NIS) and landmark-map
-accuracy. Numerics only; plotting lives in :mod:`slamkit.viz`."""
+"""Evaluation: trajectory accuracy (ATE, RPE), filter consistency (NEES/NIS), landmark-map
+accuracy and the relation metric of the Freiburg laser benchmark. Numerics only; plotting
+lives in :mod:`slamkit.viz`."""
 
 from slamkit.eval.association import AssociationScores, association_scores
 from slamkit.eval.consistency import (
@@ -22,6 +23,12 @@ from slamkit.eval.landmarks import (
     LandmarkMatch,
     landmark_map_error,
     match_landmarks,
+)
+from slamkit.eval.relations import (
+    RelationError,
+    poses_at_stamps,
+    relation_errors,
+    select_relations,
 )
 from slamkit.eval.trajectory import (
     AlignMode,
@@ -46,6 +53,7 @@ __all__ = [
     "LandmarkError",
     "LandmarkMatch",
     "NisSummary",
+    "RelationError",
     "RelativeError",
     "RpeUnit",
     "TrajectoryError",
@@ -64,5 +72,8 @@ __all__ = [
     "nis",
     "nis_summary",
     "pose_errors",
+    "poses_at_stamps",
+    "relation_errors",
     "relative_pose_error",
+    "select_relations",
 ]

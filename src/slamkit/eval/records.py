@@ -14,6 +14,7 @@ from slamkit.eval.convergence import ConvergenceReport
 from slamkit.eval.gps import GpsError
 from slamkit.eval.innovations import NisSummary
 from slamkit.eval.landmarks import LandmarkError
+from slamkit.eval.relations import RelationError
 from slamkit.eval.trajectory import RelativeError, TrajectoryError
 
 __all__ = [
@@ -97,6 +98,9 @@ class RunScores:
     landmarks_matched_by: Literal["id", "position"] | None = None
     landmarks: LandmarkError | Skipped | None = None
     association: AssociationScores | Skipped | None = None
+    relations: RelationError | Skipped | None = None
+    """The relation metric against the data set's reference relations
+    (:func:`slamkit.eval.relation_errors`); skipped when the run covers none of them."""
 
     def as_dict(self) -> dict[str, Any]:
         """The ``metrics.json`` form, in field order: plain values, records through their

@@ -24,6 +24,7 @@ from slamkit.eval import (
     nees,
     nis_summary,
     pose_errors,
+    relation_errors,
     relative_pose_error,
 )
 from slamkit.eval.records import NeesSummary, RunScores, RunTime, Skipped
@@ -75,7 +76,9 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
     rejected, SE(2)-aligned at its times), NIS statistics of the innovation log (windows of
     50 updates), landmark-map error (landmarks matched by id when the estimator's output
     says its ids are the data set's, by position otherwise), data-association scores
-    against the true association of the readings, and run times. Steps are matched by time
+    against the true association of the readings, the relation metric against the data set's
+    reference relations (:func:`~slamkit.eval.relation_errors`, default interpolation rule),
+    and run times. Steps are matched by time
     stamp within ``max_dt`` (default: half the median step of the result)."""
     n = len(result)
     scores = RunScores(
@@ -117,6 +120,12 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
     if chosen is not None and truth.reading_ids is not None:
         same = _same_ids(result)
         scores = replace(scores, association=_scored(lambda: _association(chosen, dataset, same)))
+    relations = truth.relations
+    if relations is not None:
+        scores = replace(
+            scores,
+            relations=_scored(lambda: relation_errors(result.times, result.poses, relations)),
+        )
     return Evaluation(scores, **arrays)
 
 

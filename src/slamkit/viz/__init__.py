@@ -27,6 +27,7 @@ from slamkit.viz.plots import (
     plot_trajectory,
     save_figure,
 )
+from slamkit.viz.relations import plot_relation_errors
 
 __all__ = [
     "new_figure",
@@ -39,6 +40,7 @@ __all__ = [
     "plot_particles",
     "plot_pose_errors",
     "plot_pose_graph",
+    "plot_relation_errors",
     "plot_segments",
     "plot_trajectories",
     "plot_trajectory",

@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from slamkit.eval import GpsError, chi2_bounds, nis_summary
+from slamkit.eval import GpsError, RelationError, chi2_bounds, nis_summary
 from slamkit.geometry.alignment import Similarity
 from slamkit.viz.maps import plot_map
 from slamkit.viz.plots import (
@@ -22,6 +22,7 @@ from slamkit.viz.plots import (
     plot_segments,
     plot_trajectories,
 )
+from slamkit.viz.relations import plot_relation_errors
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -60,7 +61,8 @@ def run_figures(
     """Figures keyed by file name: ``trajectory.png`` always; ``errors.png`` and ``nees.png``
     when the data set has a true trajectory (and the estimator covariances); ``particles.png``
     when the estimator kept particle snapshots; ``nis.png`` when it logged innovations;
-    ``map.png`` when it built an occupancy grid."""
+    ``map.png`` when it built an occupancy grid; ``relation_errors.png`` when it was scored
+    against the data set's reference relations."""
     figs: dict[str, Figure] = {}
     fig = new_figure(figsize=(7.0, 6.0))
     ax = fig.add_subplot()
@@ -129,6 +131,13 @@ def run_figures(
             f"{100 * summary.consistent_time_fraction:.0f} % of the run"
         )
         figs["nis.png"] = fig
+    rel = evaluation.scores.relations
+    if isinstance(rel, RelationError):
+        fig = new_figure(figsize=(7.0, 5.0))
+        axes = fig.subplots(2, 1, sharex=True)
+        plot_relation_errors(axes, rel)
+        axes[0].set_title(f"relation errors: {rel.summary()}")
+        figs["relation_errors.png"] = fig
     return figs
 
 
