@@ -40,7 +40,10 @@ class OccupancyMappingConfig:
     """Cell-level selective updating: leave a cell alone when an update would change its
     probability by less than this (0 = always write)."""
     bounds: Literal["data", "grow"] = "data"
-    """``data``: size the grid from all poses and ray ends first; ``grow``: grow as needed."""
+    """``data``: size the grid from all poses and ray ends first; ``grow``: grow as needed.
+    Only :func:`~slamkit.mapping.occupancy.build_occupancy_map` (a batch over a whole log)
+    can size from the data; the pipeline estimator sees one scan at a time and always grows
+    (the cells are the same: every grid lies on one lattice anchored at the world origin)."""
     margin: float = 1.0
     """Free border around the data bounds, and the least a growing grid adds [m]."""
     pose_source: Literal["truth", "odometry"] = "truth"

@@ -11,7 +11,6 @@ from slamkit.estimation.contract import EstimatorOutput, PoseEstimate
 from slamkit.estimation.shell import EstimatorShell
 from slamkit.mapping.occupancy.config import OccupancyMappingConfig
 from slamkit.mapping.occupancy.mapper import OccupancyMapper
-from slamkit.mapping.occupancy.scans import data_bounds
 
 __all__ = ["OccupancyMapping"]
 
@@ -44,8 +43,9 @@ class OccupancyMapping(EstimatorShell):
                 f"occupancy mapping with known poses needs the true trajectory, which "
                 f"data set {dataset.name!r} does not have (use pose_source='odometry')"
             )
-        bounds = data_bounds(dataset, config) if config.bounds == "data" else None
-        self._mapper = OccupancyMapper(dataset.laser, config, bounds)
+        # Online: the grid grows with the scans (sizing it from every future scan, as the
+        # batch builder may, would read the stream ahead and, for known poses, the truth).
+        self._mapper = OccupancyMapper(dataset.laser, config, None)
         start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
         self._odometry: FloatArray = np.asarray(start, dtype=np.float64)
         self._known: FloatArray | None = None
