@@ -98,7 +98,7 @@ class CorrelativeConfig:
     """Reference points (in scan order) closer than this to the next one are joined by a
     segment before smearing [m] (walls become polylines, see
     :func:`~slamkit.scanmatch.lookup.join_consecutive`); ``None`` keeps bare points."""
-    levels: int = 3
+    levels: int = 4
     """Resolution levels: the coarsest node covers ``2^(levels-1)`` fine cells per axis;
     1 means an exhaustive search."""
     search: Literal["branch_and_bound", "exhaustive"] = "branch_and_bound"
