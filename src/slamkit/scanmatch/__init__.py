@@ -6,6 +6,18 @@ convention of :mod:`slamkit.scanmatch.result`, and raises :class:`~slamkit.error
 when it cannot match.
 """
 
+from slamkit.scanmatch.correlative import CorrelativeConfig, CorrelativeReference, correlative_match
 from slamkit.scanmatch.result import MatchError, MatchResult, require_points, scan_points
+from slamkit.scanmatch.to_map import MapMatchConfig, match_to_map
 
-__all__ = ["MatchError", "MatchResult", "require_points", "scan_points"]
+__all__ = [
+    "CorrelativeConfig",
+    "CorrelativeReference",
+    "MapMatchConfig",
+    "MatchError",
+    "MatchResult",
+    "correlative_match",
+    "match_to_map",
+    "require_points",
+    "scan_points",
+]

@@ -1,0 +1,507 @@
+"""Correlative scan matching (Olson, "Real-time correlative scan matching", ICRA 2009).
+
+The matcher looks for the pose ``T_ref_cur = (x, y, θ)`` that maximises the log-likelihood
+of the current scan's points ``q_p`` against a reference (a scan or a map):
+
+    S(x, y, θ) = sum_p L( R(θ) q_p + (x, y) ),
+
+where ``L`` is the smeared log-likelihood table of :mod:`slamkit.scanmatch.lookup` (a
+Gaussian of the range noise around every reference point, floored by a constant miss
+likelihood). The search space is a grid around the initial guess ``(x0, y0, θ0)``:
+
+    x = x0 + j·res,  y = y0 + i·res,  |i|, |j| <= n = ceil(window_xy / res),
+    θ = θ0 + k·Δθ,   |k| <= m = ceil(window_theta / Δθ).
+
+Translations are whole cells, so after rotating the scan once per ``θ`` and finding each
+point's cell, every translation is an integer offset of the cell indices: the score of all
+``(i, j)`` is a gather from the table and a sum, with no trigonometry. The default angular
+step ``Δθ = res / r_max`` (``r_max`` the farthest point) moves no point by more than one cell
+between neighbouring rotations.
+
+**Branch and bound.** A node ``(k, i, j)`` at level ``h`` stands for the ``2^h × 2^h``
+translations ``[i, i + 2^h) × [j, j + 2^h)`` at rotation ``k``; its bound
+``sum_p M_h[cell_p + (i, j)]`` (the max tables of the lookup grid) is at least the score of
+each of them. The search starts from all top-level nodes of all rotations (so whole
+rotations are pruned too), finds a good leaf by greedy descent from the best node, then goes
+down level by level: nodes whose bound is below the best leaf so far are dropped, the others
+split into four, and the best leaf is tightened by another greedy descent. A leaf that is
+dropped had an ancestor bound below a score already reached, so the optimum found equals the
+exhaustive search over the same fine grid (``config.search = "exhaustive"``; ties go to the
+smallest ``(k, i, j)`` in both).
+
+**Covariance** (Olson, section IV). Treating ``exp(S)`` as the (unnormalised) likelihood of
+each fine pose, the poses ``x_u`` of a window around the optimum get ``p_u ∝ exp(S_u)`` and
+
+    Σ = sum_u p_u (x_u - μ)(x_u - μ)ᵀ + diag(res², res², Δθ²) / 12,    μ = sum_u p_u x_u,
+
+the second term being the variance of a uniform error within one grid step. A response that
+is flat along some direction (a featureless corridor) spreads ``p`` over the whole window; the
+matcher then raises :class:`~slamkit.errors.MatchError` ``"degenerate"`` (see
+``CorrelativeConfig.max_flatness``). The score reported is ``1 - S / (N log f)`` in
+``[0, 1]``: 1 when every point sits on the reference, 0 when every point is a miss.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from slamkit._validation import FloatArray, as_array
+from slamkit.errors import ConfigError, InputError, MatchError
+from slamkit.geometry.angles import wrap_angle_float
+from slamkit.localization.likelihood_field import LikelihoodField
+from slamkit.maps import FREE_THRESHOLD, OCCUPIED_THRESHOLD, OccupancyGrid
+from slamkit.scanmatch.lookup import (
+    LookupGrid,
+    log_likelihood_of_distance,
+    lookup_from_log_table,
+    lookup_from_points,
+)
+from slamkit.scanmatch.result import MatchResult, require_points
+
+__all__ = ["CorrelativeConfig", "CorrelativeReference", "correlative_match"]
+
+IntArray = NDArray[np.int64]
+
+# Gathers run in chunks of at most this many (node, point) pairs: 2^18 int64 indices and
+# float64 values are 2 MB each, small enough to stay in cache-friendly temporaries.
+_CHUNK_ELEMENTS = 1 << 18
+
+# Fields that shape the lookup grid: a prepared reference fixes them.
+_GRID_FIELDS = ("resolution", "sigma", "floor_likelihood", "join_gap", "levels")
+
+
+@dataclass(frozen=True)
+class CorrelativeConfig:
+    """Settings of :func:`correlative_match` (metres and radians)."""
+
+    window_xy: float = 0.5
+    """Half-width of the translation window around the initial guess [m], in x and in y."""
+    window_theta: float = math.radians(20.0)
+    """Half-width of the rotation window around the initial guess [rad]."""
+    angular_step: float | None = None
+    """Rotation step [rad]; ``None``: ``resolution / r_max`` with ``r_max`` the distance of
+    the current scan's farthest point (no point moves more than a cell per step)."""
+    resolution: float = 0.05
+    """Cell side of the lookup grid of a reference built from points [m]. References built
+    from an occupancy grid or a likelihood field use the grid's own resolution."""
+    sigma: float = 0.05
+    """Standard deviation of the Gaussian smear [m]: range noise plus the reference's own
+    discretisation (not used with a likelihood field, which has its ``sigma_hit``)."""
+    floor_likelihood: float = 0.1
+    """Likelihood of a point far from the reference, relative to a perfect hit, in (0, 1)."""
+    join_gap: float | None = 0.3
+    """Reference points (in scan order) closer than this to the next one are joined by a
+    segment before smearing [m] (walls become polylines, see
+    :func:`~slamkit.scanmatch.lookup.join_consecutive`); ``None`` keeps bare points."""
+    levels: int = 4
+    """Resolution levels: the coarsest node covers ``2^(levels-1)`` fine cells per axis;
+    1 means an exhaustive search."""
+    search: Literal["branch_and_bound", "exhaustive"] = "branch_and_bound"
+    """``exhaustive`` scores every fine pose (the reference for branch and bound)."""
+    cov_window_xy: float = 0.15
+    """Half-width of the fine window around the optimum over which the covariance is
+    computed [m]."""
+    cov_window_theta: float = math.radians(3.0)
+    """Half-width of that window in rotation [rad]."""
+    max_flatness: float | None = 0.5
+    """Raise ``MatchError("degenerate")`` when, along some direction of (x, y) or in θ, the
+    response's standard deviation over the covariance window exceeds this fraction of that
+    of a perfectly flat response over the same window (about ``window / sqrt(3)``).
+    ``None`` never raises (the covariance then shows the elongation)."""
+    min_points: int = 10
+    """Fewest valid current points accepted (else ``MatchError("too_few_points")``)."""
+    min_score: float = 0.0
+    """Raise ``MatchError("low_score")`` below this normalised score, in [0, 1]."""
+
+    def __post_init__(self) -> None:
+        for name in ("window_xy", "window_theta", "cov_window_xy", "cov_window_theta"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ConfigError(f"{name}: expected a number >= 0, got {v!r}")
+        if self.join_gap is not None and not (math.isfinite(self.join_gap) and self.join_gap > 0):
+            raise ConfigError(f"join_gap: expected None or > 0, got {self.join_gap!r}")
+        for name in ("resolution", "sigma"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ConfigError(f"{name}: expected a number > 0, got {v!r}")
+        if self.angular_step is not None and not (
+            math.isfinite(self.angular_step) and self.angular_step > 0
+        ):
+            raise ConfigError(f"angular_step: expected None or > 0, got {self.angular_step!r}")
+        if not (0.0 < self.floor_likelihood < 1.0):
+            raise ConfigError(
+                f"floor_likelihood: expected a number in (0, 1), got {self.floor_likelihood!r}"
+            )
+        if int(self.levels) != self.levels or not (1 <= self.levels <= 12):
+            raise ConfigError(f"levels: expected an integer in [1, 12], got {self.levels!r}")
+        if self.search not in ("branch_and_bound", "exhaustive"):
+            raise ConfigError(
+                f"search: expected 'branch_and_bound' or 'exhaustive', got {self.search!r}"
+            )
+        if self.max_flatness is not None and not (
+            math.isfinite(self.max_flatness) and self.max_flatness > 0
+        ):
+            raise ConfigError(f"max_flatness: expected None or > 0, got {self.max_flatness!r}")
+        if int(self.min_points) != self.min_points or self.min_points < 1:
+            raise ConfigError(f"min_points: expected an integer >= 1, got {self.min_points!r}")
+        if not (0.0 <= self.min_score <= 1.0):
+            raise ConfigError(f"min_score: expected a number in [0, 1], got {self.min_score!r}")
+
+
+def _pad_cells(config: CorrelativeConfig, resolution: float) -> int:
+    """Padding that lets a search of ``config`` (window and covariance window) read any
+    offset without bounds checks (see :meth:`LookupGrid.base_indices`)."""
+    reach = max(_cells(config.window_xy, resolution), _cells(config.cov_window_xy, resolution))
+    return 2 * reach + (1 << (config.levels - 1)) + 1
+
+
+def _cells(length: float, step: float) -> int:
+    """``ceil(length / step)``, robust to ``length`` being a whole multiple of ``step``."""
+    return math.ceil(length / step - 1e-9)
+
+
+@dataclass(frozen=True, eq=False)
+class CorrelativeReference:
+    """A reference prepared for correlative matching: the lookup grid and the config it was
+    built for. Build it once and match many scans against it (scan-to-map localisation,
+    loop-closure candidates, the scans of one particle's map).
+
+    A match may use a different config as long as it keeps the grid fields
+    (``resolution``, ``sigma``, ``floor_likelihood``, ``levels``) and searches a window no
+    larger than the one the reference was built for.
+    """
+
+    lookup: LookupGrid
+    config: CorrelativeConfig
+
+    @classmethod
+    def from_points(
+        cls, points: ArrayLike, config: CorrelativeConfig | None = None
+    ) -> CorrelativeReference:
+        """From a reference scan's points ``(M, 2)`` in the reference frame, in scan order
+        (consecutive points may be joined, see ``config.join_gap``)."""
+        cfg = _as_config(config)
+        pts = as_array(points, "reference points", (None, 2))
+        lookup = lookup_from_points(
+            pts,
+            cfg.resolution,
+            cfg.sigma,
+            cfg.floor_likelihood,
+            levels=cfg.levels,
+            pad=_pad_cells(cfg, cfg.resolution),
+            join_gap=cfg.join_gap,
+        )
+        return cls(lookup, cfg)
+
+    @classmethod
+    def from_grid(
+        cls,
+        grid: OccupancyGrid,
+        config: CorrelativeConfig | None = None,
+        *,
+        occupied_threshold: float = OCCUPIED_THRESHOLD,
+        free_threshold: float = FREE_THRESHOLD,
+    ) -> CorrelativeReference:
+        """From an occupancy grid, at the grid's resolution: the distances are those of
+        :meth:`LikelihoodField.from_grid` (unknown cells count as far from everything), the
+        table is ``L(d)`` with ``config.sigma`` and ``config.floor_likelihood``."""
+        cfg = _as_config(config)
+        dist = LikelihoodField.from_grid(
+            grid,
+            cfg.sigma,
+            occupied_threshold=occupied_threshold,
+            free_threshold=free_threshold,
+        ).distances
+        table = log_likelihood_of_distance(dist, cfg.sigma, cfg.floor_likelihood)
+        inlier = float(
+            log_likelihood_of_distance(np.array(3.0 * cfg.sigma), cfg.sigma, cfg.floor_likelihood)
+        )
+        lookup = lookup_from_log_table(
+            table,
+            grid.origin_xy,
+            grid.resolution,
+            floor=float(np.log(cfg.floor_likelihood)),
+            inlier_log=inlier,
+            levels=cfg.levels,
+            pad=_pad_cells(cfg, grid.resolution),
+        )
+        return cls(lookup, cfg)
+
+    @classmethod
+    def from_likelihood_field(
+        cls, field: LikelihoodField, config: CorrelativeConfig | None = None
+    ) -> CorrelativeReference:
+        """From MCL's likelihood field, with its own beam model: ``L = log p(d) - log p(0)``
+        of :meth:`LikelihoodField.log_p` (``config.sigma`` and ``floor_likelihood`` are
+        not used). Points outside the grid read the field's "outside" value."""
+        if not isinstance(field, LikelihoodField):
+            raise InputError(f"field: expected a LikelihoodField, got {type(field).__name__}")
+        cfg = _as_config(config)
+        top = float(field.log_p(0.0))
+        table = field.log_p(field.distances) - top
+        floor = float(field.log_p(field.outside_distance)) - top
+        inlier = float(field.log_p(3.0 * field.sigma_hit)) - top
+        lookup = lookup_from_log_table(
+            table,
+            field.grid.origin_xy,
+            field.grid.resolution,
+            floor=floor,
+            inlier_log=max(inlier, floor),
+            levels=cfg.levels,
+            pad=_pad_cells(cfg, field.grid.resolution),
+        )
+        return cls(lookup, cfg)
+
+
+def _as_config(config: CorrelativeConfig | None) -> CorrelativeConfig:
+    if config is None:
+        return CorrelativeConfig()
+    if not isinstance(config, CorrelativeConfig):
+        raise InputError(f"config: expected a CorrelativeConfig, got {type(config).__name__}")
+    return config
+
+
+def _prepare(
+    reference: CorrelativeReference | OccupancyGrid | LikelihoodField | ArrayLike,
+    config: CorrelativeConfig | None,
+) -> tuple[CorrelativeReference, CorrelativeConfig]:
+    if isinstance(reference, CorrelativeReference):
+        cfg = reference.config if config is None else _as_config(config)
+        for name in _GRID_FIELDS:
+            if getattr(cfg, name) != getattr(reference.config, name):
+                raise InputError(
+                    f"config.{name}: the reference was built with {name}="
+                    f"{getattr(reference.config, name)!r}, the match asks for "
+                    f"{getattr(cfg, name)!r}; rebuild the reference"
+                )
+        return reference, cfg
+    cfg = _as_config(config)
+    if isinstance(reference, OccupancyGrid):
+        return CorrelativeReference.from_grid(reference, cfg), cfg
+    if isinstance(reference, LikelihoodField):
+        return CorrelativeReference.from_likelihood_field(reference, cfg), cfg
+    return CorrelativeReference.from_points(reference, cfg), cfg
+
+
+def _rotated_bases(
+    lookup: LookupGrid, points: FloatArray, xy: FloatArray, thetas: FloatArray, reach: int
+) -> IntArray:
+    """Flat base cell indices ``(K, N)`` of the points rotated by each ``θ_k`` and moved by
+    ``xy``: one rotation of the scan per angle."""
+    c, s = np.cos(thetas)[:, None], np.sin(thetas)[:, None]
+    world = np.empty((thetas.size, points.shape[0], 2))
+    world[..., 0] = c * points[:, 0] - s * points[:, 1] + xy[0]
+    world[..., 1] = s * points[:, 0] + c * points[:, 1] + xy[1]
+    return lookup.base_indices(world, reach)
+
+
+def _score(flat: FloatArray, bases: IntArray, k: IntArray, offsets: IntArray) -> FloatArray:
+    """``sum_p flat[bases[k_u, p] + offsets_u]`` for every node ``u``, gathered in chunks."""
+    n_points = bases.shape[1]
+    out = np.empty(k.size)
+    step = max(1, _CHUNK_ELEMENTS // max(n_points, 1))
+    for a in range(0, k.size, step):
+        b = min(a + step, k.size)
+        idx = bases[k[a:b]] + offsets[a:b, None]
+        np.sum(np.take(flat, idx), axis=1, out=out[a:b])
+    return out
+
+
+def _first_best(scores: FloatArray, k: IntArray, i: IntArray, j: IntArray) -> int:
+    """Index of the highest score; ties go to the smallest ``(k, i, j)``."""
+    top = np.flatnonzero(scores == scores.max())
+    order = np.lexsort((j[top], i[top], k[top]))
+    return int(top[order[0]])
+
+
+@dataclass(frozen=True)
+class _Optimum:
+    k: int
+    i: int
+    j: int
+    score: float
+    levels: int
+
+
+def _exhaustive(lookup: LookupGrid, bases: IntArray, n: int) -> _Optimum:
+    cols = lookup.shape[1]
+    ks, ii, jj = np.meshgrid(
+        np.arange(bases.shape[0]), np.arange(-n, n + 1), np.arange(-n, n + 1), indexing="ij"
+    )
+    k, i, j = ks.ravel(), ii.ravel(), jj.ravel()
+    s = _score(lookup.flat(0), bases, k, i * cols + j)
+    u = _first_best(s, k, i, j)
+    return _Optimum(int(k[u]), int(i[u]), int(j[u]), float(s[u]), 1)
+
+
+def _children(
+    k: IntArray, i: IntArray, j: IntArray, half: int, n: int
+) -> tuple[IntArray, IntArray, IntArray]:
+    """The four sub-blocks (offset ``half``) of each node that start inside the window."""
+    di = np.array([0, 0, half, half])
+    dj = np.array([0, half, 0, half])
+    ck = np.repeat(k, 4)
+    ci = (i[:, None] + di).ravel()
+    cj = (j[:, None] + dj).ravel()
+    ok = (ci <= n) & (cj <= n)
+    return ck[ok], ci[ok], cj[ok]
+
+
+def _descend(
+    lookup: LookupGrid, bases: IntArray, k: int, i: int, j: int, level: int, n: int
+) -> float:
+    """Score of the leaf reached by always taking the child with the best bound."""
+    cols = lookup.shape[1]
+    ka, ia, ja = np.array([k]), np.array([i]), np.array([j])
+    score = -np.inf
+    while level > 0:
+        ka, ia, ja = _children(ka, ia, ja, 1 << (level - 1), n)
+        level -= 1
+        s = _score(lookup.flat(level), bases, ka, ia * cols + ja)
+        u = int(np.argmax(s))
+        ka, ia, ja, score = ka[u : u + 1], ia[u : u + 1], ja[u : u + 1], float(s[u])
+    return score
+
+
+def _branch_and_bound(lookup: LookupGrid, bases: IntArray, n: int) -> _Optimum:
+    cols = lookup.shape[1]
+    level = lookup.levels - 1
+    starts = np.arange(-n, n + 1, 1 << level)
+    ks, ii, jj = np.meshgrid(np.arange(bases.shape[0]), starts, starts, indexing="ij")
+    k, i, j = ks.ravel(), ii.ravel(), jj.ravel()
+    bound = _score(lookup.flat(level), bases, k, i * cols + j)
+    best = -np.inf
+    while level > 0:
+        u = int(np.argmax(bound))
+        best = max(best, _descend(lookup, bases, int(k[u]), int(i[u]), int(j[u]), level, n))
+        # A node whose bound is below a leaf already reached cannot hold the optimum.
+        keep = bound >= best
+        k, i, j = _children(k[keep], i[keep], j[keep], 1 << (level - 1), n)
+        level -= 1
+        bound = _score(lookup.flat(level), bases, k, i * cols + j)
+    u = _first_best(bound, k, i, j)
+    return _Optimum(int(k[u]), int(i[u]), int(j[u]), float(bound[u]), lookup.levels)
+
+
+def _response_covariance(
+    lookup: LookupGrid,
+    points: FloatArray,
+    pose: FloatArray,
+    dtheta: float,
+    config: CorrelativeConfig,
+) -> tuple[FloatArray, float, float]:
+    """Olson's covariance over the fine window around ``pose``, and the flatness ratios
+    (response std over flat-response std) in (x, y) and in θ."""
+    res = lookup.resolution
+    c = _cells(config.cov_window_xy, res)
+    ct = _cells(config.cov_window_theta, dtheta)
+    dk = np.arange(-ct, ct + 1)
+    bases = _rotated_bases(lookup, points, pose[:2], pose[2] + dk * dtheta, c)
+    ks, ii, jj = np.meshgrid(
+        np.arange(dk.size), np.arange(-c, c + 1), np.arange(-c, c + 1), indexing="ij"
+    )
+    k, i, j = ks.ravel(), ii.ravel(), jj.ravel()
+    s = _score(lookup.flat(0), bases, k, i * lookup.shape[1] + j)
+    p = np.exp(s - s.max())  # p_u ∝ exp(S_u); the shift only rescales
+    p /= p.sum()
+    x = np.column_stack([j * res, i * res, dk[k] * dtheta])
+    mu = p @ x
+    d = x - mu
+    resp = (d * p[:, None]).T @ d
+    cov = resp + np.diag([res**2, res**2, dtheta**2]) / 12.0
+    cov = 0.5 * (cov + cov.T)
+    # A flat response over 2c+1 equally spaced values has variance step² ((2c+1)² - 1) / 12.
+    flat_xy = res * math.sqrt(((2 * c + 1) ** 2 - 1) / 12.0)
+    flat_t = dtheta * math.sqrt(((2 * ct + 1) ** 2 - 1) / 12.0)
+    lam = float(np.linalg.eigvalsh(resp[:2, :2])[-1])
+    ratio_xy = math.sqrt(max(lam, 0.0)) / flat_xy if c > 0 else 0.0
+    ratio_t = math.sqrt(max(float(resp[2, 2]), 0.0)) / flat_t if ct > 0 else 0.0
+    return cov, ratio_xy, ratio_t
+
+
+def correlative_match(
+    reference: CorrelativeReference | OccupancyGrid | LikelihoodField | ArrayLike,
+    current_points: ArrayLike,
+    initial: ArrayLike,
+    config: CorrelativeConfig | None = None,
+) -> MatchResult:
+    """Register ``current_points (N, 2)`` (current sensor frame) to ``reference`` by
+    correlative search around ``initial = T_ref_cur (3,)`` (see the module docstring).
+
+    ``reference`` is a :class:`CorrelativeReference` (prepared once, matched many times),
+    or reference points ``(M, 2)``, an :class:`OccupancyGrid` or a :class:`LikelihoodField`
+    (each built into one with ``config`` for this call). ``config`` defaults to the
+    prepared reference's config, else :class:`CorrelativeConfig()`.
+
+    Returns the best fine-grid pose, Olson's covariance, the normalised score, the fraction
+    of points within the inlier distance (``3 sigma``) and ``iterations`` = levels searched.
+    Raises :class:`MatchError` with reason ``"too_few_points"`` (fewer than
+    ``config.min_points`` current points), ``"degenerate"`` (a flat response, see
+    ``max_flatness``) or ``"low_score"`` (below ``min_score``).
+    """
+    ref, cfg = _prepare(reference, config)
+    lookup = ref.lookup
+    pts = require_points(
+        as_array(current_points, "current points", (None, 2)), cfg.min_points, "current"
+    )
+    guess = as_array(initial, "initial pose", (3,))
+    res = lookup.resolution
+    n = _cells(cfg.window_xy, res)
+    if cfg.angular_step is not None:
+        dtheta = cfg.angular_step
+    else:
+        r_max = max(float(np.sqrt((pts**2).sum(axis=1)).max()), res)
+        dtheta = res / r_max
+    m = _cells(cfg.window_theta, dtheta)
+    thetas = guess[2] + np.arange(-m, m + 1) * dtheta
+    bases = _rotated_bases(lookup, pts, guess[:2], thetas, n)
+
+    if cfg.search == "exhaustive" or lookup.levels == 1:
+        opt = _exhaustive(lookup, bases, n)
+    else:
+        opt = _branch_and_bound(lookup, bases, n)
+
+    pose = np.array(
+        [
+            guess[0] + opt.j * res,
+            guess[1] + opt.i * res,
+            wrap_angle_float(float(thetas[opt.k])),
+        ]
+    )
+    cols = lookup.shape[1]
+    values = np.take(lookup.flat(0), bases[opt.k] + opt.i * cols + opt.j)
+    n_pts = pts.shape[0]
+    score = 1.0 - opt.score / (n_pts * lookup.floor) if lookup.floor < 0 else 1.0
+    score = min(max(score, 0.0), 1.0)
+    inliers = float(np.count_nonzero(values >= lookup.inlier_log)) / n_pts
+    if score < cfg.min_score:
+        raise MatchError(
+            f"correlative match score {score:.3f} is below min_score {cfg.min_score}",
+            "low_score",
+        )
+    cov, ratio_xy, ratio_t = _response_covariance(lookup, pts, pose, dtheta, cfg)
+    if cfg.max_flatness is not None and max(ratio_xy, ratio_t) > cfg.max_flatness:
+        w, v = np.linalg.eigh(cov[:2, :2])
+        which = (
+            f"translation along ({v[0, -1]:+.2f}, {v[1, -1]:+.2f}), std {math.sqrt(w[-1]):.3f} m"
+            if ratio_xy >= ratio_t
+            else f"rotation, std {math.sqrt(cov[2, 2]):.4f} rad"
+        )
+        raise MatchError(
+            f"correlative response is flat in {which}: {max(ratio_xy, ratio_t):.2f} of a flat "
+            f"response's spread, above max_flatness {cfg.max_flatness}",
+            "degenerate",
+        )
+    return MatchResult(
+        pose=pose,
+        cov=cov,
+        score=score,
+        inlier_fraction=inliers,
+        iterations=opt.levels,
+        method="correlative",
+    )

@@ -1,0 +1,243 @@
+"""The smeared log-likelihood lookup grid of correlative scan matching, and its max pyramid.
+
+A reference (a scan's points or a map) becomes a table ``L`` over a fine grid: the
+log-likelihood of a current-scan point that lands in a cell. With ``d`` the distance from the
+cell to the nearest reference obstacle and ``sigma`` the range noise, a point is a hit with
+Gaussian error or a miss of constant likelihood ``f`` (``floor_likelihood``, relative to a
+perfect hit):
+
+    L(d) = log( f + (1 - f) exp(-d² / (2 sigma²)) )   in [log f, 0].
+
+This is the Gaussian smear of Olson's rasterised cost table, but computed from one Euclidean
+distance transform (:func:`scipy.ndimage.distance_transform_edt`) instead of by stamping a
+kernel per reference point; ``max`` over overlapping kernels and the distance to the *nearest*
+point give the same table.
+
+For branch and bound the grid carries a pyramid of max tables. With ``w = 2^h``,
+
+    M_h[r, c] = max { L[r + a, c + b] : 0 <= a, b < w },
+
+so that ``sum_p M_h[cell_p + (i, j)]`` bounds the score of every translation offset in the
+block ``[i, i + w) × [j, j + w)`` from above. ``M_h`` follows from ``M_{h-1}`` by the max of
+four shifted copies (shift ``w / 2``), indices past the last row or column reading the last
+one (the same rule as clipping an index into the table).
+
+Every table is padded by ``pad`` cells of value ``log f`` on each side, so a point that
+falls outside the reference reads "miss", and the search can add integer offsets to flat
+indices without any per-offset bounds check (see :meth:`LookupGrid.base_indices`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.ndimage import distance_transform_edt
+
+from slamkit._validation import FloatArray, as_array, as_positive
+from slamkit.errors import InputError, MatchError
+
+__all__ = [
+    "LookupGrid",
+    "join_consecutive",
+    "log_likelihood_of_distance",
+    "lookup_from_log_table",
+    "lookup_from_points",
+]
+
+IntArray = NDArray[np.int64]
+
+
+def log_likelihood_of_distance(d: FloatArray, sigma: float, floor_likelihood: float) -> FloatArray:
+    """``L(d) = log(f + (1 - f) exp(-d² / (2 sigma²)))`` with ``f = floor_likelihood``: the
+    log-likelihood, relative to a perfect hit, of a point ``d`` metres from the reference."""
+    f = float(floor_likelihood)
+    out: FloatArray = np.log(f + (1.0 - f) * np.exp(-0.5 * (np.asarray(d) / sigma) ** 2))
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class LookupGrid:
+    """A padded log-likelihood table and its max pyramid.
+
+    * ``tables``: ``tables[0]`` is the fine table ``L (rows, cols)``; ``tables[h]`` is the max
+      table ``M_h`` over blocks of ``2^h × 2^h`` cells (module docstring). All share one shape
+      and include the padding.
+    * ``resolution`` (m): the cell side.
+    * ``origin_xy`` (m): world position of the lower-left corner of padded cell ``(0, 0)``;
+      cell ``(row, col)`` covers ``origin + (col, row) · resolution`` plus one cell, as in
+      :class:`~slamkit.maps.OccupancyGrid`.
+    * ``pad`` (cells): width of the border of value ``floor`` around the reference.
+    * ``floor``: the table value of a miss (the minimum of every table).
+    * ``inlier_log``: a point whose table value is at least this counts as an inlier.
+
+    Arrays are read-only; build with :func:`lookup_from_points` or :func:`lookup_from_log_table`.
+    """
+
+    tables: tuple[FloatArray, ...]
+    resolution: float
+    origin_xy: FloatArray
+    pad: int
+    floor: float
+    inlier_log: float
+
+    def __post_init__(self) -> None:
+        if not self.tables:
+            raise InputError("tables: expected at least the fine table, got none")
+        shape = self.tables[0].shape
+        for t in self.tables:
+            if t.shape != shape or t.ndim != 2:
+                raise InputError(f"tables: expected 2-D tables of one shape, got {t.shape}")
+            t.flags.writeable = False
+        object.__setattr__(self, "resolution", as_positive(self.resolution, "resolution"))
+        object.__setattr__(self, "origin_xy", as_array(self.origin_xy, "origin_xy", (2,)))
+
+    @property
+    def levels(self) -> int:
+        """Number of tables (the fine one and ``levels - 1`` max tables)."""
+        return len(self.tables)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        rows, cols = self.tables[0].shape
+        return int(rows), int(cols)
+
+    def flat(self, level: int) -> FloatArray:
+        """Table ``level`` flattened (row-major), for gathers by flat index."""
+        return self.tables[level].reshape(-1)
+
+    def base_indices(self, points: FloatArray, reach: int) -> IntArray:
+        """Flat cell indices ``(...,)`` of world points ``(..., 2)``, made safe for offsets.
+
+        The result ``b`` may be offset by ``di * cols + dj`` for any ``|di|, |dj| <= reach``
+        plus a block of up to ``2^(levels-1)`` cells without leaving the table, and every
+        such read gives the value the unclipped cell would have (``floor`` outside): a row or
+        column index is clipped into ``[reach, size - reach - 2^(levels-1)]``, which only
+        moves points so far outside the reference that every cell they can reach is border.
+        Requires ``pad >= 2 reach + 2^(levels-1)``.
+        """
+        top = 1 << (self.levels - 1)
+        if self.pad < 2 * reach + top:
+            raise InputError(
+                f"lookup grid padded by {self.pad} cells; a search reaching {reach} cells "
+                f"with blocks of {top} needs {2 * reach + top}: rebuild the reference with "
+                "the larger window"
+            )
+        rows, cols = self.shape
+        u = (points[..., 0] - self.origin_xy[0]) / self.resolution
+        v = (points[..., 1] - self.origin_xy[1]) / self.resolution
+        col = np.clip(np.floor(u), reach, cols - reach - top).astype(np.int64)
+        row = np.clip(np.floor(v), reach, rows - reach - top).astype(np.int64)
+        out: IntArray = row * cols + col
+        return out
+
+
+def join_consecutive(points: FloatArray, max_gap: float, spacing: float) -> FloatArray:
+    """``points (M, 2)`` (in scan order) plus samples at most ``spacing`` apart along every
+    segment between consecutive points closer than ``max_gap``.
+
+    A scan samples a wall at a spacing that grows with range and incidence; marking only the
+    end points leaves the smeared table rippled along the wall, and the summed log-likelihood
+    of a whole scan turns those ripples into false peaks (a corridor would look constrained
+    along its axis). Joining neighbours makes the reference a polyline, as the wall is.
+    """
+    pts = as_array(points, "points", (None, 2))
+    if pts.shape[0] < 2:
+        return pts
+    a, b = pts[:-1], pts[1:]
+    length = np.sqrt(((b - a) ** 2).sum(axis=1))
+    keep = (length < max_gap) & (length > spacing)
+    a, b, length = a[keep], b[keep], length[keep]
+    if a.shape[0] == 0:
+        return pts
+    # n_s interior samples per segment at t = 1/(n_s+1), ..., n_s/(n_s+1).
+    n = np.ceil(length / spacing).astype(np.int64) - 1
+    seg = np.repeat(np.arange(a.shape[0]), n)
+    first = np.cumsum(n) - n  # index of each segment's first sample
+    t = (np.arange(seg.size) - first[seg] + 1) / (n[seg] + 1)
+    inner = a[seg] + t[:, None] * (b[seg] - a[seg])
+    return np.concatenate([pts, inner])
+
+
+def _max_pyramid(fine: FloatArray, levels: int) -> tuple[FloatArray, ...]:
+    """``(L, M_1, ..., M_{levels-1})``: ``M_h`` is the max of four copies of ``M_{h-1}``
+    shifted by ``s = 2^(h-1)`` rows/columns, edge values repeated past the end."""
+    out = [fine]
+    for h in range(1, levels):
+        s = 1 << (h - 1)
+        prev = out[-1]
+        # Edge padding by s at the far ends: index r + s reads min(r + s, last).
+        ext = np.pad(prev, ((0, s), (0, s)), mode="edge")
+        rows, cols = prev.shape
+        m = np.maximum(ext[:rows, :cols], ext[s : s + rows, :cols])
+        m = np.maximum(m, ext[:rows, s : s + cols])
+        m = np.maximum(m, ext[s : s + rows, s : s + cols])
+        out.append(m)
+    return tuple(out)
+
+
+def lookup_from_log_table(
+    log_table: FloatArray,
+    origin_xy: FloatArray,
+    resolution: float,
+    *,
+    floor: float,
+    inlier_log: float,
+    levels: int,
+    pad: int,
+) -> LookupGrid:
+    """A lookup grid from a per-cell log-likelihood table ``(rows, cols)`` whose cell
+    ``(0, 0)`` has its lower-left corner at ``origin_xy``: values are clipped below at
+    ``floor``, the table is padded by ``pad`` cells of ``floor`` and the max pyramid of
+    ``levels`` tables is built."""
+    table = as_array(log_table, "log-likelihood table", (None, None))
+    if table.size == 0:
+        raise MatchError("reference lookup table is empty", "too_few_points")
+    if int(levels) != levels or levels < 1:
+        raise InputError(f"levels: expected an integer >= 1, got {levels!r}")
+    if int(pad) != pad or pad < 1:
+        raise InputError(f"pad: expected an integer >= 1, got {pad!r}")
+    fine = np.pad(np.maximum(table, floor), int(pad), mode="constant", constant_values=floor)
+    origin = as_array(origin_xy, "origin_xy", (2,)) - int(pad) * resolution
+    return LookupGrid(
+        _max_pyramid(fine, int(levels)), resolution, origin, int(pad), float(floor), inlier_log
+    )
+
+
+def lookup_from_points(
+    points: FloatArray,
+    resolution: float,
+    sigma: float,
+    floor_likelihood: float,
+    *,
+    levels: int,
+    pad: int,
+    join_gap: float | None = None,
+) -> LookupGrid:
+    """The lookup grid of reference points ``(M, 2)``: the points are marked in a grid of
+    ``resolution`` covering them plus a margin of ``4 sigma``, a distance transform gives
+    each cell's distance (centre to the nearest marked centre) and ``L(d)`` the table.
+    Inliers are points within ``3 sigma`` of the reference. With ``join_gap`` (m), points in
+    scan order closer than that to their successor are joined by a segment first
+    (:func:`join_consecutive`)."""
+    pts = as_array(points, "reference points", (None, 2))
+    if pts.shape[0] == 0:
+        raise MatchError("reference scan has no valid points", "too_few_points")
+    res = as_positive(resolution, "resolution")
+    if join_gap is not None:
+        pts = join_consecutive(pts, as_positive(join_gap, "join_gap"), 0.5 * res)
+    margin = int(np.ceil(4.0 * sigma / res)) + 1
+    lo = np.floor(pts.min(axis=0) / res) - margin  # cell-aligned origin: rebuilds agree
+    cells = np.floor(pts / res - lo).astype(np.int64)  # (col, row) per point
+    cols, rows = (cells.max(axis=0) + margin + 1).tolist()
+    free = np.ones((rows, cols), dtype=bool)
+    free[cells[:, 1], cells[:, 0]] = False
+    # EDT: for every non-zero (free) cell, the distance to the nearest zero (marked) cell.
+    dist = np.asarray(distance_transform_edt(free, sampling=res), dtype=np.float64)
+    table = log_likelihood_of_distance(dist, sigma, floor_likelihood)
+    floor = float(np.log(floor_likelihood))
+    inlier = float(log_likelihood_of_distance(np.array(3.0 * sigma), sigma, floor_likelihood))
+    return lookup_from_log_table(
+        table, lo * res, res, floor=floor, inlier_log=inlier, levels=levels, pad=pad
+    )

@@ -1,0 +1,279 @@
+"""Correlative scan matching: branch and bound against the exhaustive search, recovery of
+known transforms, the response covariance, degenerate corridors and bad input."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from slamkit.errors import ConfigError, InputError, MatchError
+from slamkit.geometry.pose2 import between, inverse_transform_points
+from slamkit.localization.likelihood_field import LikelihoodField
+from slamkit.maps import SegmentMap
+from slamkit.models.laser import LaserScanner
+from slamkit.scanmatch import (
+    CorrelativeConfig,
+    CorrelativeReference,
+    correlative_match,
+    scan_points,
+)
+from slamkit.scanmatch.lookup import (
+    join_consecutive,
+    log_likelihood_of_distance,
+    lookup_from_log_table,
+)
+from slamkit.sim.worlds import rasterize_segments, rooms_world
+
+MAX_RANGE = 12.0
+# Free spots of rooms_world (corridor and the four rooms) to put the robot at.
+SPOTS = np.array([[5.0, 6.0], [15.0, 6.2], [4.5, 2.5], [15.0, 2.0], [5.0, 9.5], [16.0, 9.5]])
+
+
+def _points(world: SegmentMap, pose: np.ndarray, rng: np.random.Generator, beams: int = 360):
+    fov = 2 * np.pi if beams == 360 else np.pi
+    laser = LaserScanner.from_fov(fov, beams, MAX_RANGE, 0.01)
+    ranges = laser.simulate(np.asarray(pose, float), world, rng)
+    return scan_points(ranges, laser.beam_angles, MAX_RANGE)
+
+
+def _pair(seed: int, max_xy: float = 0.4, max_theta: float = 0.3):
+    """Two scans of rooms_world from nearby poses: (reference points, current points, truth
+    T_ref_cur)."""
+    rng = np.random.default_rng(seed)
+    spot = SPOTS[seed % len(SPOTS)]
+    pa = np.array([*spot, rng.uniform(-np.pi, np.pi)])
+    pb = pa + np.array([*rng.uniform(-max_xy, max_xy, 2), rng.uniform(-max_theta, max_theta)])
+    world = rooms_world()
+    return _points(world, pa, rng), _points(world, pb, rng, beams=180), between(pa, pb)
+
+
+# A coarse angular step keeps the exhaustive searches of the tests short.
+SMALL = CorrelativeConfig(window_xy=0.5, window_theta=0.35, angular_step=0.01, max_flatness=None)
+
+
+@pytest.mark.parametrize("seed", range(5))
+@pytest.mark.parametrize("levels", [2, 3, 4])
+def test_branch_and_bound_equals_exhaustive_scan_to_scan(seed: int, levels: int) -> None:
+    ref_pts, cur, _ = _pair(seed)
+    cfg = replace(SMALL, levels=levels)
+    ref = CorrelativeReference.from_points(ref_pts, cfg)
+    bnb = correlative_match(ref, cur, np.zeros(3), cfg)
+    exh = correlative_match(ref, cur, np.zeros(3), replace(cfg, search="exhaustive"))
+    assert np.array_equal(bnb.pose, exh.pose)  # the same fine cell and rotation
+    assert bnb.score == exh.score
+    assert bnb.iterations == levels and exh.iterations == 1
+
+
+@pytest.mark.parametrize("seed", [7, 8])
+def test_branch_and_bound_equals_exhaustive_against_a_map(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    world = rooms_world()
+    grid = rasterize_segments(world, 0.05, padding=1.025)
+    truth = np.array([*SPOTS[seed % len(SPOTS)], rng.uniform(-np.pi, np.pi)])
+    cur = _points(world, truth, rng, beams=180)
+    guess = truth + np.array([0.3, -0.35, 0.2])
+    cfg = replace(SMALL, levels=4)
+    ref = CorrelativeReference.from_grid(grid, cfg)
+    bnb = correlative_match(ref, cur, guess, cfg)
+    exh = correlative_match(ref, cur, guess, replace(cfg, search="exhaustive"))
+    assert np.array_equal(bnb.pose, exh.pose)
+    assert bnb.score == exh.score
+
+
+def test_ties_break_the_same_way_in_both_searches() -> None:
+    # A corridor map: every translation along the corridor scores the same.
+    ref, cur, guess = _corridor()
+    cfg = SMALL  # the levels the corridor reference was built with
+    bnb = correlative_match(ref, cur, guess, cfg)
+    exh = correlative_match(ref, cur, guess, replace(cfg, search="exhaustive"))
+    assert np.array_equal(bnb.pose, exh.pose)
+    assert bnb.score == exh.score
+
+
+@pytest.mark.parametrize("seed", [11, 12, 13, 14])
+def test_recovers_a_large_offset(seed: int) -> None:
+    """No initial guess (identity) for a true motion of up to 0.5 m and 15°: the answer is
+    within one cell (0.05 m) and two angular steps of the truth."""
+    rng = np.random.default_rng(seed)
+    world = rooms_world()
+    pa = np.array([*SPOTS[seed % len(SPOTS)], rng.uniform(-np.pi, np.pi)])
+    sign = rng.choice([-1.0, 1.0], 3)
+    pb = pa + sign * np.array([0.5, 0.35, math.radians(15.0)])
+    ref_pts, cur = _points(world, pa, rng), _points(world, pb, rng)
+    truth = between(pa, pb)
+    cfg = CorrelativeConfig(window_xy=0.6)
+    r = correlative_match(ref_pts, cur, np.zeros(3), cfg)
+    r_max = float(np.sqrt((cur**2).sum(axis=1)).max())
+    step = cfg.resolution / r_max
+    assert abs(r.pose[0] - truth[0]) <= cfg.resolution
+    assert abs(r.pose[1] - truth[1]) <= cfg.resolution
+    assert abs(r.pose[2] - truth[2]) <= 2 * step
+    assert r.score > 0.5 and r.inlier_fraction > 0.8
+
+
+def test_recovers_a_pose_in_a_map_from_every_kind_of_reference() -> None:
+    rng = np.random.default_rng(21)
+    world = rooms_world()
+    grid = rasterize_segments(world, 0.05, padding=1.025)
+    truth = np.array([14.7, 2.3, 2.1])
+    cur = _points(world, truth, rng)
+    guess = truth + np.array([-0.43, 0.38, -math.radians(15.0)])
+    field = LikelihoodField.from_grid(grid, 0.05)
+    for reference in (grid, field, CorrelativeReference.from_grid(grid)):
+        r = correlative_match(reference, cur, guess)
+        assert np.hypot(*(r.pose[:2] - truth[:2])) <= 0.05
+        assert abs(r.pose[2] - truth[2]) <= 0.01
+
+
+def test_exact_transform_of_the_reference_is_recovered_exactly() -> None:
+    """Frame convention p = R(θ) q + t: points q = T⁻¹ p of the reference itself, for a T on
+    the search grid, come back as T with a near-perfect score (a point on a cell boundary
+    may fall into the neighbouring cell after the round trip)."""
+    rng = np.random.default_rng(3)
+    p = _points(rooms_world(), np.array([5.0, 9.0, 0.3]), rng)
+    T = np.array([0.2, -0.15, 0.1])
+    q = inverse_transform_points(T, p)
+    cfg = CorrelativeConfig(angular_step=0.01)
+    r = correlative_match(p, q, np.zeros(3), cfg)
+    np.testing.assert_allclose(r.pose, T, atol=1e-9)
+    assert r.score > 0.99
+    assert r.inlier_fraction == 1.0
+    assert r.method == "correlative"
+
+
+def test_covariance_of_a_constrained_match_is_about_one_grid_step() -> None:
+    """In a room the response is sharp: the covariance is the discretisation term
+    diag(res², res², Δθ²)/12 plus a small spread, symmetric and positive definite."""
+    ref_pts, cur, _ = _pair(2)
+    cfg = CorrelativeConfig(angular_step=0.005)
+    r = correlative_match(ref_pts, cur, np.zeros(3), cfg)
+    np.testing.assert_array_equal(r.cov, r.cov.T)
+    assert np.all(np.linalg.eigvalsh(r.cov) > 0)
+    floor = np.array([cfg.resolution**2, cfg.resolution**2, 0.005**2]) / 12
+    assert np.all(np.diag(r.cov) >= floor * (1 - 1e-12))
+    assert np.all(np.diag(r.cov) <= 4 * floor)
+
+
+def _corridor():
+    """A 2 m wide, 80 m long corridor map, a 360-beam scan with an 8 m range from its middle,
+    and an initial guess 0.2 m off along it."""
+    walls = SegmentMap(np.array([[[-40.0, 0.0], [40.0, 0.0]], [[-40.0, 2.0], [40.0, 2.0]]]))
+    grid = rasterize_segments(walls, 0.05, padding=1.025)
+    laser = LaserScanner.from_fov(2 * np.pi, 360, 8.0, 0.01)
+    truth = np.array([0.3, 1.1, 0.05])
+    ranges = laser.simulate(truth, walls, np.random.default_rng(5))
+    cur = scan_points(ranges, laser.beam_angles, 8.0)
+    return CorrelativeReference.from_grid(grid, SMALL), cur, truth + np.array([0.2, 0.05, 0.02])
+
+
+def test_featureless_corridor_raises_degenerate() -> None:
+    ref, cur, guess = _corridor()
+    with pytest.raises(MatchError) as err:
+        correlative_match(ref, cur, guess, replace(SMALL, max_flatness=0.5))
+    assert err.value.reason == "degenerate"
+
+
+def test_featureless_corridor_covariance_is_elongated_along_it() -> None:
+    ref, cur, guess = _corridor()
+    r = correlative_match(ref, cur, guess, SMALL)  # max_flatness=None: no raise
+    w, v = np.linalg.eigh(r.cov[:2, :2])
+    assert abs(v[0, -1]) > 0.999  # the major axis is the corridor's (x)
+    assert math.sqrt(w[-1] / w[0]) > 5.0
+    # Across the corridor and in heading the match is as sharp as in a room.
+    assert abs(r.pose[1] - 1.1) <= 0.05 and abs(r.pose[2] - 0.05) <= 0.02
+
+
+def test_empty_or_tiny_scans_raise() -> None:
+    ref_pts, cur, _ = _pair(0)
+    with pytest.raises(MatchError) as err:
+        correlative_match(ref_pts, np.empty((0, 2)), np.zeros(3))
+    assert err.value.reason == "too_few_points"
+    with pytest.raises(MatchError) as err:
+        correlative_match(ref_pts, cur[:5], np.zeros(3))
+    assert err.value.reason == "too_few_points"
+    with pytest.raises(MatchError) as err:
+        CorrelativeReference.from_points(np.empty((0, 2)))
+    assert err.value.reason == "too_few_points"
+
+
+def test_low_score_raises() -> None:
+    ref_pts, cur, _ = _pair(1)
+    far = cur + 30.0  # nowhere near the reference
+    with pytest.raises(MatchError) as err:
+        correlative_match(ref_pts, far, np.zeros(3), CorrelativeConfig(min_score=0.2))
+    assert err.value.reason == "low_score"
+
+
+def test_prepared_reference_fixes_its_grid() -> None:
+    ref_pts, cur, _ = _pair(0)
+    ref = CorrelativeReference.from_points(ref_pts, CorrelativeConfig(window_xy=0.3))
+    with pytest.raises(InputError, match="sigma"):
+        correlative_match(ref, cur, np.zeros(3), CorrelativeConfig(window_xy=0.3, sigma=0.1))
+    with pytest.raises(InputError, match="window"):
+        correlative_match(ref, cur, np.zeros(3), CorrelativeConfig(window_xy=1.0))
+    # A smaller window is fine and gives the same answer as a fresh reference.
+    small = CorrelativeConfig(window_xy=0.2)
+    a = correlative_match(ref, cur, np.zeros(3), small)
+    b = correlative_match(ref_pts, cur, np.zeros(3), small)
+    assert np.array_equal(a.pose, b.pose)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"window_xy": -0.1},
+        {"window_theta": math.nan},
+        {"resolution": 0.0},
+        {"sigma": -1.0},
+        {"angular_step": 0.0},
+        {"floor_likelihood": 1.0},
+        {"levels": 0},
+        {"levels": 2.5},
+        {"search": "greedy"},
+        {"max_flatness": 0.0},
+        {"min_points": 0},
+        {"min_score": 1.5},
+        {"join_gap": -1.0},
+    ],
+)
+def test_config_is_validated(bad: dict) -> None:
+    with pytest.raises(ConfigError):
+        CorrelativeConfig(**bad)
+
+
+def test_max_tables_bound_every_block() -> None:
+    rng = np.random.default_rng(0)
+    table = rng.uniform(-3.0, 0.0, (13, 17))
+    lk = lookup_from_log_table(
+        table, np.zeros(2), 0.1, floor=-3.0, inlier_log=-1.0, levels=4, pad=2
+    )
+    fine = lk.tables[0]
+    rows, cols = fine.shape
+    assert np.array_equal(fine[2:-2, 2:-2], table) and np.all(fine[:2] == -3.0)
+    for h in range(1, 4):
+        w = 1 << h
+        expect = np.empty_like(fine)
+        for r in range(rows):
+            for c in range(cols):
+                expect[r, c] = fine[r : min(r + w, rows), c : min(c + w, cols)].max()
+        np.testing.assert_array_equal(lk.tables[h], expect)
+
+
+def test_smear_values() -> None:
+    sigma, f = 0.05, 0.1
+    d = np.array([0.0, sigma, 2 * sigma, 100.0])
+    expect = np.log(f + (1 - f) * np.exp(-0.5 * np.array([0.0, 1.0, 4.0, 4e6])))
+    np.testing.assert_allclose(log_likelihood_of_distance(d, sigma, f), expect, rtol=1e-14)
+    assert log_likelihood_of_distance(np.array(0.0), sigma, f) == 0.0
+    np.testing.assert_allclose(log_likelihood_of_distance(np.array(1e3), sigma, f), math.log(f))
+
+
+def test_join_consecutive() -> None:
+    pts = np.array([[0.0, 0.0], [1.0, 0.0], [5.0, 0.0]])
+    out = join_consecutive(pts, max_gap=2.0, spacing=0.25)
+    # (0,0)-(1,0) joined by samples 0.25 apart; (1,0)-(5,0) is a gap and stays open.
+    np.testing.assert_allclose(out[:3], pts)
+    np.testing.assert_allclose(out[3:], [[0.25, 0.0], [0.5, 0.0], [0.75, 0.0]])
