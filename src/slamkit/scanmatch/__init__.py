@@ -6,6 +6,19 @@ convention of :mod:`slamkit.scanmatch.result`, and raises :class:`~slamkit.error
 when it cannot match.
 """
 
+from slamkit.scanmatch.icp import IcpConfig, PreparedScan, icp, prepare_scan
+from slamkit.scanmatch.plicp import PlIcpConfig, plicp
 from slamkit.scanmatch.result import MatchError, MatchResult, require_points, scan_points
 
-__all__ = ["MatchError", "MatchResult", "require_points", "scan_points"]
+__all__ = [
+    "IcpConfig",
+    "MatchError",
+    "MatchResult",
+    "PlIcpConfig",
+    "PreparedScan",
+    "icp",
+    "plicp",
+    "prepare_scan",
+    "require_points",
+    "scan_points",
+]
