@@ -47,9 +47,10 @@ __all__ = [
     "estimate_normals",
     "line_jacobian",
     "neighbour_table",
+    "normal_distance_covariance",
     "normalised_min_eigenvalue",
+    "point_to_line_covariance",
     "require_constrained",
-    "residual_covariance",
 ]
 
 
@@ -136,12 +137,105 @@ def require_constrained(
     return lam
 
 
-def residual_covariance(jacobian: FloatArray, residuals: FloatArray) -> FloatArray:
-    """``σ̂² H⁻¹`` with ``H = JᵀJ`` and ``σ̂² = Σ e² / (m - 3)``: the covariance ``(3, 3)`` of
-    the least-squares pose (module docstring). Needs ``m > 3`` rows and a non-singular ``H``
-    (callers test degeneracy first)."""
-    m = jacobian.shape[0]
-    sigma2 = float(residuals @ residuals) / max(m - 3, 1)
-    h = jacobian.T @ jacobian
-    cov = sigma2 * np.linalg.solve(h, np.eye(3))
+def _rotations(theta: float) -> tuple[FloatArray, FloatArray]:
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, s], [-s, c]]), np.array([[-s, c], [-c, -s]])  # (R, R') transposed
+
+
+def _sandwich(h: FloatArray, grad_z: FloatArray, sigma2: float) -> FloatArray:
+    """``σ² H⁻¹ (Gᵀ G) H⁻¹`` for ``H (3, 3)`` and ``G (Z, 3)`` (rows ``∂g/∂z_k``)."""
+    h_inv = np.linalg.solve(h, np.eye(3))
+    cov = sigma2 * (h_inv @ (grad_z.T @ grad_z) @ h_inv.T)
+    return 0.5 * (cov + cov.T)  # symmetric to rounding
+
+
+def point_to_line_covariance(
+    current: FloatArray,
+    ref_a: FloatArray,
+    ref_b: FloatArray,
+    index_a: NDArray[np.intp],
+    index_b: NDArray[np.intp],
+    n_reference: int,
+    pose: FloatArray,
+    kept: NDArray[np.bool_],
+) -> FloatArray:
+    """Covariance ``(3, 3)`` of the point-to-line pose by the implicit function theorem
+    (Censi, ICRA 2007) with range noise estimated from the residuals.
+
+    Inputs are the correspondences before trimming: current points ``q_i (m, 2)``, the
+    segment ends ``p_a = ref_a (m, 2)`` (nearest) and ``p_b = ref_b (m, 2)``, their indices in
+    the reference scan of ``n_reference`` points, the solution ``pose`` and the mask ``kept
+    (m,)`` of those the solution used. Each scan's sensor
+    is at its frame's origin and a reading ``z`` is a range: ``q_i = r_i u_i``,
+    ``p_j = ρ_j w_j`` with unit beam directions ``u, w``.
+
+    With ``y_i = R q_i + t``, ``d = p_b - p_a = L τ``, ``n = τ`` turned by +90° and the
+    position along the segment ``s_i = (y_i - p_a)·τ / L``, the error is ``e_i = nᵀ (y_i -
+    p_a)`` and its derivatives (using ``∂n/∂d = -τ nᵀ / L``) are
+
+        ∂e/∂r_i = nᵀ R u_i,   ∂e/∂ρ_a = -(1 - s) nᵀ w_a,   ∂e/∂ρ_b = -s nᵀ w_b,
+        ∂n/∂ρ_a = τ (nᵀ w_a) / L,   ∂n/∂ρ_b = -τ (nᵀ w_b) / L.
+
+    The solution satisfies ``g(x, z) = ∂J/∂x = 2 Σ e_i J_iᵀ = 0`` (``J_i`` the row of
+    :func:`line_jacobian`), so ``dx/dz = -H⁻¹ ∂g/∂z`` with ``H = ∂g/∂x = 2 Σ (J_iᵀ J_i + e_i
+    ∂²e_i/∂x²)`` and ``∂g/∂z = 2 Σ (J_iᵀ ∂e_i/∂z + e_i ∂J_iᵀ/∂z)``; for independent ranges of
+    variance ``σ²``, ``cov x = σ² H⁻¹ (∂g/∂z)(∂g/∂z)ᵀ H⁻¹``. ``σ²`` comes from the residuals:
+    ``Var e_i = σ² k_i`` with ``k_i = (nᵀRu_i)² + (1 - s)² (nᵀw_a)² + s² (nᵀw_b)²``, and
+    ``σ̂ = 1.4826 · median_i |e_i| / √k_i`` over *all* the correspondences given (the median
+    of ``|N(0, 1)|`` is 1/1.4826): robust to the outliers, and not shrunk by the trimming,
+    which removes the largest residuals. ``H`` and ``∂g/∂z`` sum over the kept ones only.
+    The correspondences are taken as fixed.
+    """
+    tx, ty, th = float(pose[0]), float(pose[1]), float(pose[2])
+    rot_t, drot_t = _rotations(th)
+    m = current.shape[0]
+    rq = current @ rot_t
+    y = rq + np.array([tx, ty])
+    drq = current @ drot_t  # R' q
+    d = ref_b - ref_a
+    seg_len = np.hypot(d[:, 0], d[:, 1])
+    tau = d / seg_len[:, None]
+    n = np.column_stack([-tau[:, 1], tau[:, 0]])
+    rel = y - ref_a
+    e = np.einsum("ij,ij->i", n, rel)
+    s_along = np.einsum("ij,ij->i", tau, rel) / seg_len
+    jac = np.column_stack([n, np.einsum("ij,ij->i", n, drq)])
+    wk = kept.astype(np.float64)  # rows of dropped pairs get weight 0 in H and ∂g/∂z
+    h = 2.0 * ((jac * wk[:, None]).T @ jac)
+    h[2, 2] += 2.0 * float((wk * e) @ -np.einsum("ij,ij->i", n, rq))  # ∂²e/∂θ² = -nᵀ R q
+    # Current ranges.
+    u = current / np.hypot(current[:, 0], current[:, 1])[:, None]
+    n_ru = np.einsum("ij,ij->i", n, u @ rot_t)
+    g_cur = 2.0 * n_ru[:, None] * jac
+    g_cur[:, 2] += 2.0 * e * np.einsum("ij,ij->i", n, u @ drot_t)
+    g_cur *= wk[:, None]
+    # Reference ranges of both segment ends, summed over the correspondences that share them.
+    g_ref = np.zeros((n_reference, 3))
+    coef = np.zeros(m)
+    for ends, index, weight, sign in (
+        (ref_a, index_a, 1.0 - s_along, 1.0),
+        (ref_b, index_b, s_along, -1.0),
+    ):
+        w = ends / np.hypot(ends[:, 0], ends[:, 1])[:, None]
+        n_w = np.einsum("ij,ij->i", n, w)
+        dn = sign * tau * (n_w / seg_len)[:, None]
+        g = -2.0 * (weight * n_w)[:, None] * jac
+        g[:, :2] += 2.0 * e[:, None] * dn
+        g[:, 2] += 2.0 * e * np.einsum("ij,ij->i", dn, drq)
+        np.add.at(g_ref, index, g * wk[:, None])
+        coef += (weight * n_w) ** 2
+    sigma = 1.4826 * float(np.median(np.abs(e) / np.sqrt(n_ru**2 + coef)))
+    return _sandwich(h, np.vstack([g_cur, g_ref]), sigma * sigma)
+
+
+def normal_distance_covariance(
+    jacobian: FloatArray, residuals: FloatArray, kept: NDArray[np.bool_]
+) -> FloatArray:
+    """``σ̂² H⁻¹`` of the normal-distance model (module docstring), for the point-to-point
+    matcher: ``H = Σ J_iᵀ J_i`` over the kept rows of ``jacobian (m, 3)`` and ``σ̂ = 1.4826 ·
+    median |e_i|`` over all ``residuals (m,)`` (robust, and not shrunk by the trimming)."""
+    jk = jacobian[kept]
+    sigma = 1.4826 * float(np.median(np.abs(residuals)))
+    h = jk.T @ jk
+    cov = sigma * sigma * np.linalg.solve(h, np.eye(3))
     return 0.5 * (cov + cov.T)  # symmetric to rounding

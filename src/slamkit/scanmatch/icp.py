@@ -35,8 +35,8 @@ from slamkit.scanmatch.covariance import (
     estimate_normals,
     line_jacobian,
     neighbour_table,
+    normal_distance_covariance,
     require_constrained,
-    residual_covariance,
 )
 from slamkit.scanmatch.result import MatchResult, require_points
 
@@ -263,16 +263,18 @@ def icp(
             "no_convergence",
         )
     th = math.remainder(th, 2.0 * math.pi)
-    qk = q[keep]
-    jk_idx = j[keep]
-    has = ref.has_normal[jk_idx]
-    qk, jk_idx = qk[has], jk_idx[has]
-    normals = ref.normals[jk_idx]
-    jac = line_jacobian(qk, normals, th)
-    require_constrained(jac, qk, cfg.min_eigenvalue, "icp")
+    # Covariance and degeneracy from the normal distances at the reference normals, over all
+    # pairs within range (the scale) and the kept ones (the Hessian).
+    valid = (j < m_ref) & ref.has_normal[np.minimum(j, m_ref - 1)]
+    jv = j[valid]
+    normals = ref.normals[jv]
+    qv = q[valid]
+    jac = line_jacobian(qv, normals, th)
+    kept = keep[valid]
+    require_constrained(jac[kept], qv[kept], cfg.min_eigenvalue, "icp")
     c, s = math.cos(th), math.sin(th)
-    moved = np.column_stack([c * qk[:, 0] - s * qk[:, 1] + tx, s * qk[:, 0] + c * qk[:, 1] + ty])
-    residuals = np.einsum("ij,ij->i", normals, moved - P[jk_idx])
-    cov = residual_covariance(jac, residuals)
+    moved = qv @ np.array([[c, s], [-s, c]]) + np.array([tx, ty])
+    residuals = np.einsum("ij,ij->i", normals, moved - P[jv])
+    cov = normal_distance_covariance(jac, residuals, kept)
     frac = float(np.count_nonzero(keep)) / q.shape[0]
     return MatchResult(np.array([tx, ty, th]), cov, frac, frac, it, "icp")

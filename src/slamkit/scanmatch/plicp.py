@@ -59,8 +59,8 @@ from slamkit._validation import FloatArray, as_array
 from slamkit.errors import ConfigError, MatchError
 from slamkit.scanmatch.covariance import (
     line_jacobian,
+    point_to_line_covariance,
     require_constrained,
-    residual_covariance,
 )
 from slamkit.scanmatch.icp import PreparedScan, prepare_scan, validate_common
 from slamkit.scanmatch.result import MatchResult, require_points
@@ -258,7 +258,7 @@ def plicp(
     seen: set[bytes] = set()  # every correspondence set met so far
     converged = False
     it = n_keep = 0
-    keep = np.zeros(n_cur, dtype=bool)
+    keep = valid = use_next = np.zeros(n_cur, dtype=bool)
     j1 = np.zeros(n_cur, dtype=np.intp)
     a = normals = np.zeros((n_cur, 2))
     for it in range(1, cfg.max_iterations + 1):
@@ -321,14 +321,13 @@ def plicp(
             "no_convergence",
         )
     th = math.remainder(th, 2.0 * math.pi)
-    qk, ak, nk = q[keep], a[keep], normals[keep]
     j1 = np.minimum(j1, m_ref - 1)
     has = ref.has_normal[j1] & keep
     jac_check = line_jacobian(q[has], ref.normals[j1[has]], th)
     require_constrained(jac_check, q[has], cfg.min_eigenvalue, "plicp")
-    c, s = math.cos(th), math.sin(th)
-    moved_k = np.column_stack([c * qk[:, 0] - s * qk[:, 1] + tx, s * qk[:, 0] + c * qk[:, 1] + ty])
-    residuals = np.einsum("ij,ij->i", nk, moved_k - ak)
-    cov = residual_covariance(line_jacobian(qk, nk, th), residuals)
+    j2 = np.where(use_next, j1 + 1, j1 - 1)[valid]
+    cov = point_to_line_covariance(
+        q[valid], a[valid], P[j2], j1[valid], j2, m_ref, np.array([tx, ty, th]), keep[valid]
+    )
     frac = n_keep / n_cur
     return MatchResult(np.array([tx, ty, th]), cov, frac, frac, it, "plicp")
