@@ -7,17 +7,25 @@ when it cannot match.
 """
 
 from slamkit.scanmatch.correlative import CorrelativeConfig, CorrelativeReference, correlative_match
+from slamkit.scanmatch.icp import IcpConfig, PreparedScan, icp, prepare_scan
+from slamkit.scanmatch.plicp import PlIcpConfig, plicp
 from slamkit.scanmatch.result import MatchError, MatchResult, require_points, scan_points
 from slamkit.scanmatch.to_map import MapMatchConfig, match_to_map
 
 __all__ = [
     "CorrelativeConfig",
     "CorrelativeReference",
+    "IcpConfig",
     "MapMatchConfig",
     "MatchError",
     "MatchResult",
+    "PlIcpConfig",
+    "PreparedScan",
     "correlative_match",
+    "icp",
     "match_to_map",
+    "plicp",
+    "prepare_scan",
     "require_points",
     "scan_points",
 ]

@@ -1,0 +1,241 @@
+"""The error model shared by the ICP matchers: reference normals, the Gauss-Newton Hessian of
+the point-to-line error, the pose covariance and the degeneracy test.
+
+**The final least-squares problem.** At the solution ``x = (t_x, t_y, θ)`` every kept
+correspondence ``i`` pairs a current point ``q_i`` (current sensor frame) with a reference
+point ``p_i`` and the unit normal ``n_i`` of the reference surface there. Its residual is the
+normal distance ``e_i(x) = n_iᵀ (R(θ) q_i + t - p_i)``, and its Jacobian is
+
+    J_i = ∂e_i/∂x = [n_x, n_y, n_iᵀ R'(θ) q_i],   R'(θ) q = (-sin θ q_x - cos θ q_y,
+                                                          cos θ q_x - sin θ q_y).
+
+The Hessian of ``½ Σ e_i²`` is ``H = Σ J_iᵀ J_i`` (Gauss-Newton, exact at the optimum for
+linear residuals).
+
+**Covariance** (Hessian method, *not* Censi's ICRA 2007 closed form, which also propagates
+the noise of every reading through ``∂²J/∂z∂x``): if every residual carries independent noise
+of variance ``σ²``, the least-squares estimate has covariance ``σ² H⁻¹``; ``σ²`` is estimated
+from the residuals themselves, ``σ̂² = Σ e_i² / (m - 3)``. The residual already holds the noise
+of both scans (a current reading and the reference surface it lands on), so ``σ̂²`` is the
+combined variance. Correlations between residuals (neighbouring readings share a reference
+segment) and the choice of correspondences are ignored, which is why a test checks the
+estimate against the scatter of Monte-Carlo results.
+
+The point-to-point matcher also uses this normal-distance model: its own Hessian ``Σ [I,
+R' q_i]ᵀ[I, R' q_i]`` treats the correspondences as fixed points and so reports a wall as
+constraining the motion *along* it, which it does not.
+
+**Degeneracy.** ``H`` mixes metres and radians, so the rotation column is divided by a length
+``L`` (the RMS distance of the current points from the sensor) and ``H`` by the number of
+correspondences: the *normalised* Hessian ``Ĥ = (1/m) Σ Ĵ_iᵀ Ĵ_i`` is dimensionless, with
+eigenvalues in ``[0, 2]`` (the trace is at most ``1 + 1``). An eigenvalue near 0 means a
+direction of motion that no correspondence constrains — in a featureless corridor the normals
+are all across it, so translation along it has ``Ĵ v = 0``. :func:`require_constrained`
+raises ``MatchError("degenerate")`` below a threshold.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from slamkit._validation import FloatArray
+from slamkit.errors import MatchError
+
+__all__ = [
+    "estimate_normals",
+    "line_jacobian",
+    "neighbour_table",
+    "normal_distance_covariance",
+    "normalised_min_eigenvalue",
+    "point_to_line_covariance",
+    "require_constrained",
+]
+
+
+def neighbour_table(points: FloatArray, tree: cKDTree | None, k: int) -> NDArray[np.intp]:
+    """Indices ``(M, k)`` of each point's neighbourhood, itself included: with ``tree`` its
+    ``k`` nearest points, without one the ``k`` points centred on it in scan order (clipped at
+    the ends of the scan). Used by :func:`estimate_normals`."""
+    m = points.shape[0]
+    k = min(int(k), m)
+    if tree is not None:
+        _, idx = tree.query(points, k=k)
+        return np.asarray(idx, dtype=np.intp).reshape(m, k)
+    offsets = np.arange(k) - (k - 1) // 2
+    start = np.clip(np.arange(m) - (k - 1) // 2, 0, m - k)
+    return start[:, None] + (offsets + (k - 1) // 2)[None, :]
+
+
+def estimate_normals(
+    points: FloatArray, neighbours: NDArray[np.intp], radius: float
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Unit normals ``(M, 2)`` of the surface through ``points (M, 2)`` by principal
+    components of each point's ``neighbours`` (an ``(M, k)`` index table, see
+    :func:`neighbour_table`) that lie within ``radius`` [m] of it, and a mask ``(M,)`` of the
+    points that had at least 3 such neighbours (the others get normal ``(0, 0)``).
+
+    For the scatter ``[[sxx, sxy], [sxy, syy]]`` of a neighbourhood, the direction of largest
+    spread (the tangent) is at ``φ = ½ atan2(2 sxy, sxx - syy)``; the normal is ``(-sin φ,
+    cos φ)``. Its sign is arbitrary, which the squared residuals do not see.
+    """
+    m = points.shape[0]
+    if m == 0:
+        return np.zeros((0, 2)), np.zeros(0, dtype=bool)
+    nb = points[neighbours]  # (M, k, 2)
+    rel = nb - points[:, None, :]
+    w = (np.einsum("ijk,ijk->ij", rel, rel) <= radius * radius).astype(np.float64)
+    count = w.sum(axis=1)
+    mean = np.einsum("ijk,ij->ik", rel, w) / np.maximum(count, 1.0)[:, None]
+    d = (rel - mean[:, None, :]) * w[:, :, None]
+    sxx = np.einsum("ij,ij->i", d[:, :, 0], d[:, :, 0])
+    sxy = np.einsum("ij,ij->i", d[:, :, 0], d[:, :, 1])
+    syy = np.einsum("ij,ij->i", d[:, :, 1], d[:, :, 1])
+    phi = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
+    ok = count >= 3
+    normals = np.column_stack([-np.sin(phi), np.cos(phi)]) * ok[:, None]
+    return normals, ok
+
+
+def line_jacobian(current: FloatArray, normals: FloatArray, theta: float) -> FloatArray:
+    """``J (m, 3)``: rows ``[n_x, n_y, n_iᵀ R'(θ) q_i]``, the derivative of the normal
+    distances with respect to the pose ``(t_x, t_y, θ)`` (see the module docstring)."""
+    c, s = np.cos(theta), np.sin(theta)
+    qx, qy = current[:, 0], current[:, 1]
+    nx, ny = normals[:, 0], normals[:, 1]
+    return np.column_stack([nx, ny, nx * (-s * qx - c * qy) + ny * (c * qx - s * qy)])
+
+
+def normalised_min_eigenvalue(jacobian: FloatArray, current: FloatArray) -> float:
+    """Smallest eigenvalue of the normalised Hessian ``Ĥ`` (module docstring): the rotation
+    column of ``jacobian (m, 3)`` divided by the RMS norm of ``current (m, 2)``, ``JᵀJ`` by
+    ``m``. Dimensionless; 0 for a direction of motion nothing constrains."""
+    m = jacobian.shape[0]
+    if m == 0:
+        return 0.0
+    length = float(np.sqrt(np.mean(np.einsum("ij,ij->i", current, current))))
+    scale = np.array([1.0, 1.0, 1.0 / max(length, 1e-9)])
+    jn = jacobian * scale
+    h = jn.T @ jn / m
+    return float(np.linalg.eigvalsh(h)[0])
+
+
+def require_constrained(
+    jacobian: FloatArray, current: FloatArray, min_eigenvalue: float, method: str
+) -> float:
+    """The normalised Hessian's smallest eigenvalue, or ``MatchError("degenerate")`` when it
+    is below ``min_eigenvalue``: the scans leave a direction of motion unconstrained."""
+    lam = normalised_min_eigenvalue(jacobian, current)
+    if lam < min_eigenvalue:
+        raise MatchError(
+            f"{method}: the geometry leaves a direction of motion unconstrained (smallest "
+            f"eigenvalue of the normalised Hessian {lam:.3g}, expected >= {min_eigenvalue:.3g}; "
+            "e.g. a featureless corridor)",
+            "degenerate",
+        )
+    return lam
+
+
+def _rotations(theta: float) -> tuple[FloatArray, FloatArray]:
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, s], [-s, c]]), np.array([[-s, c], [-c, -s]])  # (R, R') transposed
+
+
+def _sandwich(h: FloatArray, grad_z: FloatArray, sigma2: float) -> FloatArray:
+    """``σ² H⁻¹ (Gᵀ G) H⁻¹`` for ``H (3, 3)`` and ``G (Z, 3)`` (rows ``∂g/∂z_k``)."""
+    h_inv = np.linalg.solve(h, np.eye(3))
+    cov = sigma2 * (h_inv @ (grad_z.T @ grad_z) @ h_inv.T)
+    return 0.5 * (cov + cov.T)  # symmetric to rounding
+
+
+def point_to_line_covariance(
+    current: FloatArray,
+    ref_a: FloatArray,
+    ref_b: FloatArray,
+    index_a: NDArray[np.intp],
+    index_b: NDArray[np.intp],
+    n_reference: int,
+    pose: FloatArray,
+    kept: NDArray[np.bool_],
+) -> FloatArray:
+    """Covariance ``(3, 3)`` of the point-to-line pose by the implicit function theorem
+    (Censi, ICRA 2007) with range noise estimated from the residuals.
+
+    Inputs are the correspondences before trimming: current points ``q_i (m, 2)``, the
+    segment ends ``p_a = ref_a (m, 2)`` (nearest) and ``p_b = ref_b (m, 2)``, their indices in
+    the reference scan of ``n_reference`` points, the solution ``pose`` and the mask ``kept
+    (m,)`` of those the solution used. Each scan's sensor
+    is at its frame's origin and a reading ``z`` is a range: ``q_i = r_i u_i``,
+    ``p_j = ρ_j w_j`` with unit beam directions ``u, w``.
+
+    With ``y_i = R q_i + t``, ``d = p_b - p_a = L τ``, ``n = τ`` turned by +90° and the
+    position along the segment ``s_i = (y_i - p_a)·τ / L``, the error is ``e_i = nᵀ (y_i -
+    p_a)`` and its derivatives (using ``∂n/∂d = -τ nᵀ / L``) are
+
+        ∂e/∂r_i = nᵀ R u_i,   ∂e/∂ρ_a = -(1 - s) nᵀ w_a,   ∂e/∂ρ_b = -s nᵀ w_b,
+        ∂n/∂ρ_a = τ (nᵀ w_a) / L,   ∂n/∂ρ_b = -τ (nᵀ w_b) / L.
+
+    The solution satisfies ``g(x, z) = ∂J/∂x = 2 Σ e_i J_iᵀ = 0`` (``J_i`` the row of
+    :func:`line_jacobian`), so ``dx/dz = -H⁻¹ ∂g/∂z`` with ``H = ∂g/∂x = 2 Σ (J_iᵀ J_i + e_i
+    ∂²e_i/∂x²)`` and ``∂g/∂z = 2 Σ (J_iᵀ ∂e_i/∂z + e_i ∂J_iᵀ/∂z)``; for independent ranges of
+    variance ``σ²``, ``cov x = σ² H⁻¹ (∂g/∂z)(∂g/∂z)ᵀ H⁻¹``. ``σ²`` comes from the residuals:
+    ``Var e_i = σ² k_i`` with ``k_i = (nᵀRu_i)² + (1 - s)² (nᵀw_a)² + s² (nᵀw_b)²``, and
+    ``σ̂ = 1.4826 · median_i |e_i| / √k_i`` over *all* the correspondences given (the median
+    of ``|N(0, 1)|`` is 1/1.4826): robust to the outliers, and not shrunk by the trimming,
+    which removes the largest residuals. ``H`` and ``∂g/∂z`` sum over the kept ones only.
+    The correspondences are taken as fixed.
+    """
+    tx, ty, th = float(pose[0]), float(pose[1]), float(pose[2])
+    rot_t, drot_t = _rotations(th)
+    m = current.shape[0]
+    rq = current @ rot_t
+    y = rq + np.array([tx, ty])
+    drq = current @ drot_t  # R' q
+    d = ref_b - ref_a
+    seg_len = np.hypot(d[:, 0], d[:, 1])
+    tau = d / seg_len[:, None]
+    n = np.column_stack([-tau[:, 1], tau[:, 0]])
+    rel = y - ref_a
+    e = np.einsum("ij,ij->i", n, rel)
+    s_along = np.einsum("ij,ij->i", tau, rel) / seg_len
+    jac = np.column_stack([n, np.einsum("ij,ij->i", n, drq)])
+    wk = kept.astype(np.float64)  # rows of dropped pairs get weight 0 in H and ∂g/∂z
+    h = 2.0 * ((jac * wk[:, None]).T @ jac)
+    h[2, 2] += 2.0 * float((wk * e) @ -np.einsum("ij,ij->i", n, rq))  # ∂²e/∂θ² = -nᵀ R q
+    # Current ranges.
+    u = current / np.hypot(current[:, 0], current[:, 1])[:, None]
+    n_ru = np.einsum("ij,ij->i", n, u @ rot_t)
+    g_cur = 2.0 * n_ru[:, None] * jac
+    g_cur[:, 2] += 2.0 * e * np.einsum("ij,ij->i", n, u @ drot_t)
+    g_cur *= wk[:, None]
+    # Reference ranges of both segment ends, summed over the correspondences that share them.
+    g_ref = np.zeros((n_reference, 3))
+    coef = np.zeros(m)
+    for ends, index, weight, sign in (
+        (ref_a, index_a, 1.0 - s_along, 1.0),
+        (ref_b, index_b, s_along, -1.0),
+    ):
+        w = ends / np.hypot(ends[:, 0], ends[:, 1])[:, None]
+        n_w = np.einsum("ij,ij->i", n, w)
+        dn = sign * tau * (n_w / seg_len)[:, None]
+        g = -2.0 * (weight * n_w)[:, None] * jac
+        g[:, :2] += 2.0 * e[:, None] * dn
+        g[:, 2] += 2.0 * e * np.einsum("ij,ij->i", dn, drq)
+        np.add.at(g_ref, index, g * wk[:, None])
+        coef += (weight * n_w) ** 2
+    sigma = 1.4826 * float(np.median(np.abs(e) / np.sqrt(n_ru**2 + coef)))
+    return _sandwich(h, np.vstack([g_cur, g_ref]), sigma * sigma)
+
+
+def normal_distance_covariance(
+    jacobian: FloatArray, residuals: FloatArray, kept: NDArray[np.bool_]
+) -> FloatArray:
+    """``σ̂² H⁻¹`` of the normal-distance model (module docstring), for the point-to-point
+    matcher: ``H = Σ J_iᵀ J_i`` over the kept rows of ``jacobian (m, 3)`` and ``σ̂ = 1.4826 ·
+    median |e_i|`` over all ``residuals (m,)`` (robust, and not shrunk by the trimming)."""
+    jk = jacobian[kept]
+    sigma = 1.4826 * float(np.median(np.abs(residuals)))
+    h = jk.T @ jk
+    cov = sigma * sigma * np.linalg.solve(h, np.eye(3))
+    return 0.5 * (cov + cov.T)  # symmetric to rounding
