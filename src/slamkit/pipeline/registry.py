@@ -125,6 +125,14 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             requires=("motion",),
         ),
         EstimatorEntry(
+            "laser-odometry",
+            "laser odometry: wheel odometry as the prior, scan-to-keyframe point-to-line ICP; "
+            "the map from the keyframes",
+            "slamkit.localization.laser_odometry:LaserOdometry",
+            "slamkit.localization.laser_odometry:LaserOdometryConfig",
+            requires=("motion", "laser"),
+        ),
+        EstimatorEntry(
             "occupancy-mapping",
             "occupancy grid with known (true) poses: log-odds, α/β inverse laser model, "
             "Bresenham rays",

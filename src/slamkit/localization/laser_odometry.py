@@ -1,0 +1,233 @@
+"""Laser odometry: wheel odometry as the prior, scan matching as the measurement.
+
+The estimator keeps one *keyframe* — a scan, its points prepared for matching, and the pose
+``T_world_key`` it was taken from. Every new scan is registered to the keyframe starting from
+the previous scan's match and the motion the wheels report since,
+
+    T_key_cur⁰ = T_key_prev ⊕ between(o_prev, o_cur)     (o: the dead-reckoned odometry)
+
+and the match ``T_key_cur`` gives the pose ``T_world_cur = T_world_key ⊕ T_key_cur``.
+Matching against a keyframe rather than against the previous scan keeps the error from
+growing while the robot stands still or creeps (each match then covers a longer baseline
+but the same wall points); a new keyframe is taken once the robot has moved
+``keyframe_distance`` or turned ``keyframe_angle_deg`` from the current one, or when a match
+used too small a part of the scan.
+
+Laser and robot frames: scan points are moved into the robot frame with the laser's
+mounting (:attr:`~slamkit.datasets.LaserSpec.mounting` where the data set gives it, else the
+``mounting`` setting), so the trajectory is the robot's.
+
+A scan that cannot be matched (:class:`~slamkit.errors.MatchError`: too few points or
+correspondences, degenerate geometry) or whose match disagrees with the odometry by more
+than the gate (``max_correction_xy``, ``max_correction_deg``) keeps the odometry prior for
+that scan; both are counted in the diagnostics. The map is the occupancy grid of the
+keyframes at their estimated poses (:class:`~slamkit.mapping.occupancy.OccupancyMapper`),
+built as they are taken.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import ClassVar, Literal
+
+import numpy as np
+
+from slamkit._validation import FloatArray
+from slamkit.config import Section, finite_above, finite_at_least, fraction, setting
+from slamkit.datasets.stream import Dataset, LaserScan
+from slamkit.errors import ConvergenceError, InputError, MatchError
+from slamkit.estimation.contract import EstimatorOutput, PoseEstimate
+from slamkit.estimation.shell import EstimatorShell
+from slamkit.geometry.angles import wrap_angle_float
+from slamkit.geometry.pose2 import between, compose, transform_points
+from slamkit.mapping.inverse_model import InverseSensorModel
+from slamkit.mapping.occupancy.config import OccupancyMappingConfig
+from slamkit.mapping.occupancy.mapper import OccupancyMapper
+from slamkit.scanmatch.icp import IcpConfig, PreparedScan, icp, prepare_scan
+from slamkit.scanmatch.plicp import PlIcpConfig, plicp
+from slamkit.scanmatch.result import MatchResult, scan_points
+
+__all__ = ["LaserOdometry", "LaserOdometryConfig", "MapSettings"]
+
+
+@dataclass(frozen=True)
+class MapSettings(Section):
+    """The occupancy grid built from the keyframes."""
+
+    SECTION: ClassVar[str] = "map"
+
+    enabled: bool = True
+    resolution: float = setting(0.05, finite_above(0.0), "a finite number > 0")
+    """Side of a grid cell [m]."""
+    max_range: float | None = 30.0
+    """Readings beyond this [m] are not mapped (long rays through doors and windows fill a
+    grid with free space that a short-range view does not contradict); None: the laser's."""
+
+
+@dataclass(frozen=True)
+class LaserOdometryConfig(Section):
+    """Settings of :class:`LaserOdometry`. Metres, degrees where named."""
+
+    matcher: Literal["plicp", "icp"] = "plicp"
+    """Point-to-line ICP (Censi 2008) or point-to-point ICP."""
+    keyframe_distance: float = setting(0.5, finite_at_least(0.0), "a finite number >= 0")
+    """Take a new keyframe once the robot is this far from the current one [m]."""
+    keyframe_angle_deg: float = setting(15.0, finite_at_least(0.0), "a finite number >= 0")
+    """... or has turned this much [deg]."""
+    min_overlap: float = setting(0.6, fraction(), "a fraction in [0, 1]")
+    """... or a match paired less than this fraction of the scan's points with the keyframe."""
+    max_correction_xy: float = setting(0.5, finite_above(0.0), "a finite number > 0")
+    """Gate: a match that moves the pose farther than this from the odometry prior [m] is
+    refused (the prior is kept)."""
+    max_correction_deg: float = setting(20.0, finite_above(0.0), "a finite number > 0")
+    """Gate: ... or turns it more than this [deg]."""
+    min_range: float = setting(0.05, finite_at_least(0.0), "a finite number >= 0")
+    """Readings at or below this [m] are dropped (a laser's minimum range, dust, the robot)."""
+    max_range: float | None = None
+    """Readings at or beyond this [m] are dropped; None: the laser's max range."""
+    mounting: tuple[float, float, float] | None = None
+    """The laser's pose in the robot frame (x [m], y [m], yaw [rad]); None: the data set's
+    (:attr:`~slamkit.datasets.LaserSpec.mounting`, else the robot's origin)."""
+    plicp: PlIcpConfig = field(default_factory=PlIcpConfig)
+    icp: IcpConfig = field(default_factory=IcpConfig)
+    map: MapSettings = field(default_factory=MapSettings)
+
+
+@dataclass
+class _Keyframe:
+    pose: FloatArray  # T_world_key
+    reference: PreparedScan
+
+
+class LaserOdometry(EstimatorShell):
+    """Scan-to-keyframe laser odometry (registered as ``laser-odometry``); see the module
+    docstring. Needs a laser and a motion model (wheel odometry or controls)."""
+
+    name = "laser odometry"
+
+    def __init__(self, dataset: Dataset, config: LaserOdometryConfig, rng: np.random.Generator):
+        if dataset.laser is None:
+            raise InputError(f"laser odometry needs laser scans; {dataset.name!r} has none")
+        if dataset.motion is None:
+            raise InputError(f"laser odometry needs odometry; {dataset.name!r} has none")
+        super().__init__()
+        self._cfg = config
+        laser = dataset.laser
+        self._model = dataset.motion.model
+        self._angles = laser.beam_angles
+        self._max_range = laser.max_range if config.max_range is None else config.max_range
+        mounting = config.mounting
+        if mounting is None:
+            mounting = getattr(laser, "mounting", (0.0, 0.0, 0.0))
+        self._mounting = np.asarray(mounting, dtype=np.float64)
+        start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
+        self._pose: FloatArray = np.array(start, dtype=np.float64)
+        self._odometry: FloatArray = self._pose.copy()  # dead reckoning from the start
+        self._key: _Keyframe | None = None
+        self._counts: Counter[str] = Counter()
+        self._iterations = 0
+        self._mapper: OccupancyMapper | None = None
+        if config.map.enabled:
+            map_cfg = OccupancyMappingConfig(
+                resolution=config.map.resolution,
+                bounds="grow",
+                model=InverseSensorModel(max_range=config.map.max_range),
+            )
+            self._mapper = OccupancyMapper(laser, map_cfg, None)
+
+    # -- the Estimator protocol ---------------------------------------------------------
+
+    def on_control(self, u: FloatArray, dt: float) -> None:
+        # Between scans the wheels move the estimate: T ← T ⊕ (o_prev⁻¹ ⊕ o_now).
+        moved = np.asarray(self._model.apply(self._odometry, u, dt), dtype=np.float64)
+        if not np.isfinite(moved).all():
+            raise ConvergenceError(f"the control {u} over {dt} s moved the pose to {moved}")
+        self._pose = compose(self._pose, between(self._odometry, moved))
+        self._odometry = moved
+
+    def on_scan(self, event: LaserScan) -> None:
+        self._counts["scans"] += 1
+        cfg = self._cfg
+        points = scan_points(event.ranges, self._angles, self._max_range, min_range=cfg.min_range)
+        if any(self._mounting):
+            points = transform_points(self._mounting, points)
+        key = self._key
+        if key is None:
+            self._new_keyframe(points, event.ranges)
+            return
+        # The prior: the last match and the wheels' motion since, in the keyframe's frame.
+        prior = between(key.pose, self._pose)
+        result = self._match(key.reference, points, prior)
+        if result is None:
+            self._pose = compose(key.pose, prior)
+            overlap = 0.0
+        else:
+            self._pose = compose(key.pose, result.pose)
+            overlap = result.inlier_fraction
+        travelled = between(key.pose, self._pose)
+        if (
+            math.hypot(travelled[0], travelled[1]) >= cfg.keyframe_distance
+            or abs(travelled[2]) >= math.radians(cfg.keyframe_angle_deg)
+            or overlap < cfg.min_overlap
+        ):
+            self._new_keyframe(points, event.ranges)
+
+    def estimate(self) -> PoseEstimate:
+        return PoseEstimate(self._pose.copy())
+
+    def finish(self) -> EstimatorOutput:
+        c = self._counts
+        matched = c["matched"]
+        diagnostics = {
+            "scans": c["scans"],
+            "keyframes": c["keyframes"],
+            "matched": matched,
+            "unmatched": {k[len("failed:") :]: v for k, v in c.items() if k.startswith("failed:")},
+            "gated": c["gated"],
+            "mean_iterations": self._iterations / matched if matched else None,
+            "matcher": self._cfg.matcher,
+        }
+        grid = None
+        if self._mapper is not None and self._mapper.grid is not None:
+            grid = self._mapper.occupancy_grid()
+            diagnostics["mapping"] = self._mapper.stats.as_dict()
+        return EstimatorOutput(grid=grid, diagnostics=diagnostics)
+
+    # -- steps ----------------------------------------------------------------------------
+
+    def _match(
+        self, reference: PreparedScan, points: FloatArray, prior: FloatArray
+    ) -> MatchResult | None:
+        """The match of ``points`` to the keyframe from ``prior``, or None (counted) when the
+        matcher fails or the gate refuses it."""
+        cfg = self._cfg
+        try:
+            if cfg.matcher == "plicp":
+                result = plicp(reference, points, prior, cfg.plicp)
+            else:
+                result = icp(reference, points, prior, cfg.icp)
+        except MatchError as exc:
+            self._counts[f"failed:{exc.reason}"] += 1
+            return None
+        correction = between(prior, result.pose)
+        if math.hypot(correction[0], correction[1]) > cfg.max_correction_xy or abs(
+            wrap_angle_float(correction[2])
+        ) > math.radians(cfg.max_correction_deg):
+            self._counts["gated"] += 1
+            return None
+        self._counts["matched"] += 1
+        self._iterations += result.iterations
+        return result
+
+    def _new_keyframe(self, points: FloatArray, ranges: FloatArray) -> None:
+        try:
+            reference = prepare_scan(points)
+        except MatchError as exc:  # too few points to be a reference: keep the old one
+            self._counts[f"failed:{exc.reason}"] += 1
+            return
+        self._key = _Keyframe(self._pose.copy(), reference)
+        self._counts["keyframes"] += 1
+        if self._mapper is not None:
+            self._mapper.integrate(compose(self._pose, self._mounting), ranges)
