@@ -347,7 +347,7 @@ def parse_carmen_raw(path: str | Path, options: CarmenRawOptions | None = None) 
     for i in np.flatnonzero(~order):
         problems.report(
             numbers[int(i)],
-            f"{laser}: time stamp {times[i]!r} is not later than the scans before it",
+            f"{laser}: time stamp {float(times[i])!r} is not later than the scans before it",
         )
     keep = np.flatnonzero(order).tolist()
     scans = [scans[i] for i in keep]
@@ -359,7 +359,8 @@ def parse_carmen_raw(path: str | Path, options: CarmenRawOptions | None = None) 
     odom_order = increasing_mask(odom[:, 0])
     for i in np.flatnonzero(~odom_order):
         problems.report(
-            int(odom_at[i]), f"ODOM: time stamp {odom[i, 0]!r} is not later than the lines before"
+            int(odom_at[i]),
+            f"ODOM: time stamp {float(odom[i, 0])!r} is not later than the lines before",
         )
     odom = odom[odom_order]
     with_poses = laser in ("FLASER", "ROBOTLASER1")
@@ -541,8 +542,8 @@ def _odom_lines(
     if at.in_gap.any() and not opts.lenient:
         i = int(np.argmax(at.in_gap))
         raise DatasetFormatError(
-            f"{log.laser}: scan at t={log.times[i]!r} lies in a {at.gap[i]:.3f} s gap of the "
-            f"ODOM lines (max_odom_gap {opts.max_odom_gap} s; raise it or set lenient)",
+            f"{log.laser}: scan at t={float(log.times[i])!r} lies in a {at.gap[i]:.3f} s gap of "
+            f"the ODOM lines (max_odom_gap {opts.max_odom_gap} s; raise it or set lenient)",
             log.path,
             int(log.line_numbers[i]),
         )

@@ -254,7 +254,7 @@ def _clean_ranges(
             "invalid_readings",
             topic,
             index[rows],
-            f"beam {b}: range {raw[r, b]!r} is not a reading (expected >= 0, +inf or -inf)",
+            f"beam {b}: range {float(raw[r, b])!r} is not a reading (expected >= 0, +inf or -inf)",
         )
     out = np.where(invalid | far | near, max_range, raw)
     counts = {
