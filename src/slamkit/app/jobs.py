@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from slamkit.app.presets import resolve_preset
-from slamkit.datasets import load_dataset
+from slamkit.datasets.files import load_data
 from slamkit.eval.records import RunScores
 from slamkit.io import atomic_folder, write_json, write_tum
 from slamkit.pipeline import Progress, Result, get_estimator_entry, run
@@ -27,6 +27,8 @@ class RunRequest:
 
     estimator: str
     dataset: str
+    """A registered data set's name, or the path of a laser log
+    (:func:`slamkit.datasets.files.load_data`)."""
     out_dir: Path
     seed: int = 0
     estimator_config: Mapping[str, Any] = field(default_factory=dict)
@@ -70,7 +72,7 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         entry.name, request.dataset, request.estimator_config, request.preset
     )
     entry.make_config(config)  # fail on bad config before loading
-    dataset = load_dataset(
+    dataset = load_data(
         request.dataset,
         seed=request.seed,
         options=request.dataset_options,
@@ -93,7 +95,11 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         figures = run_figures(result, dataset, evaluation)
     resolved = {
         "estimator": {"name": entry.name, **result.config},
-        "dataset": {"name": dataset.name, **dataset.metadata.get("config", {})},
+        "dataset": {
+            "name": dataset.name,
+            **({"path": dataset.metadata["path"]} if "path" in dataset.metadata else {}),
+            **dataset.metadata.get("config", {}),
+        },
         "seed": request.seed,
         "preset": None if preset is None else preset.name,
     }

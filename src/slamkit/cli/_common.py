@@ -67,8 +67,8 @@ def split_config(
 ) -> tuple[dict[str, Any], dict[str, Any], int | None]:
     """Read a TOML/JSON configuration file into its ``[main_table]`` and ``[dataset]`` tables
     and an optional top-level integer ``seed``; any other top-level key is an error. A
-    ``name`` key in either table is informational (as written in ``config.json``) and
-    dropped."""
+    ``name`` key in either table, and a ``path`` key in ``[dataset]``, are informational (as
+    written in ``config.json``) and dropped."""
     if path is None:
         return {}, {}, None
     from slamkit.config import load_config_file
@@ -88,5 +88,6 @@ def split_config(
         table = raw.get(name, {})
         if not isinstance(table, dict):
             raise ConfigError(f"{path}: [{name}] must be a table of settings")
-        tables.append({k: v for k, v in table.items() if k != "name"})
+        dropped = {"name", "path"} if name == "dataset" else {"name"}
+        tables.append({k: v for k, v in table.items() if k not in dropped})
     return tables[0], tables[1], seed

@@ -138,7 +138,16 @@ def _run(
 @known_errors
 def run_command(
     estimator: Annotated[str, typer.Argument(help="Estimator name (see `slamkit estimators`).")],
-    data: Annotated[str, typer.Option("--data", "-d", help="Data set name.")] = "five-features",
+    data: Annotated[
+        str,
+        typer.Option(
+            "--data",
+            "-d",
+            help="Data set name (see `slamkit data list`), or the path of a laser log: ROS 1 "
+            ".bag, ROS 2 bag folder, .db3, .mcap, CARMEN .clf/.log/.log.gz (reader options in "
+            r"the config file's \[dataset] table).",
+        ),
+    ] = "five-features",
     config: Annotated[
         Path | None,
         # "\[" keeps rich markup from swallowing the table names in the help text.
@@ -165,7 +174,9 @@ def run_command(
     ] = "auto",
 ) -> None:
     """Run ESTIMATOR on a data set; write trajectory, metrics, config and plots."""
-    target = out if out is not None else Path("results") / f"{estimator}-{data}"
+    from slamkit.datasets.files import data_label
+
+    target = out if out is not None else Path("results") / f"{estimator}-{data_label(data)}"
     _run(
         estimator,
         data,

@@ -209,6 +209,30 @@ DATASETS: dict[str, DatasetEntry] = {
             files=("laser/corrected_carmen/freiburg-079-corrected.log.gz",),
         ),
         DatasetEntry(
+            "intel-raw",
+            "real",
+            "Intel Research Lab, raw log (ROS 1 bag): 13,631 scans × 180 beams, raw wheel "
+            "odometry at the scan stamps, 2984 reference relations as ground truth",
+            "slamkit.datasets.rosbag:load_intel_raw",
+            files=("laser/rosbags/intel.bag", "laser/relations/intel.relations"),
+        ),
+        DatasetEntry(
+            "aces-raw",
+            "real",
+            "ACES building, raw log (ROS 1 bag): 7374 scans × 180 beams (50 m), raw wheel "
+            "odometry at the scan stamps, 1279 reference relations as ground truth",
+            "slamkit.datasets.rosbag:load_aces_raw",
+            files=("laser/rosbags/aces.bag", "laser/relations/aces.relations"),
+        ),
+        DatasetEntry(
+            "fr079-raw",
+            "real",
+            "Freiburg building 079, raw log (ROS 1 bag): 4934 scans × 360 beams (0.5°), laser "
+            "4 cm ahead, raw wheel odometry at the scan stamps, 1685 reference relations",
+            "slamkit.datasets.rosbag:load_fr079_raw",
+            files=("laser/rosbags/fr079.bag", "laser/relations/fr079.relations"),
+        ),
+        DatasetEntry(
             "loop5",
             "real",
             "DP-SLAM loop5: 551 scans × 181 beams with raw odometry, no ground truth",

@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 from slamkit._validation import FloatArray, as_array, as_covariance, as_positive
 from slamkit.datasets.relations import Relations
 from slamkit.errors import InputError, NonFiniteError, ShapeError
+from slamkit.geometry.angles import wrap_angle
 from slamkit.geometry.pose2 import interpolate_poses
 from slamkit.maps import LandmarkMap, OccupancyGrid, SegmentMap
 from slamkit.models import (
@@ -239,17 +240,34 @@ def measured_detection_range(events: Sequence[Event], sensor: LandmarkSensorSpec
 
 @dataclass(frozen=True)
 class LaserSpec:
-    """A 2D laser scanner: beam angles ``(B,)`` in the robot frame, max range, noise."""
+    """A 2D laser scanner: beam angles ``(B,)`` [rad] in the laser's frame, max range [m],
+    range noise [m], and where the laser sits on the robot (``mounting``)."""
 
     beam_angles: FloatArray
     max_range: float
     range_sigma: float = 0.0
+    mounting: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """The laser's pose ``(x, y, yaw)`` in the robot frame [m, m, rad]: a beam at angle ``a``
+    reading ``r`` hits ``mounting ⊕ (r cos a, r sin a)`` in the robot frame. The default
+    (the laser at the robot's origin, facing ahead) makes the laser frame the robot frame;
+    readers of real logs take it from the log (a ROS bag's ``/tf_static``, a CARMEN laser
+    line's two poses). The yaw is wrapped to ``[-pi, pi)``."""
 
     def __post_init__(self) -> None:
         angles = as_array(self.beam_angles, "beam_angles", (None,))
         if angles.size == 0:
             raise ShapeError("beam_angles: expected at least one beam, got none")
         object.__setattr__(self, "beam_angles", angles)
+        try:
+            mx, my, myaw = (float(v) for v in self.mounting)
+        except (TypeError, ValueError) as exc:
+            raise InputError(
+                f"laser mounting: expected three numbers (x [m], y [m], yaw [rad]), "
+                f"got {self.mounting!r}"
+            ) from exc
+        if not all(math.isfinite(v) for v in (mx, my, myaw)):
+            raise NonFiniteError(f"laser mounting: expected finite numbers, got {(mx, my, myaw)}")
+        object.__setattr__(self, "mounting", (mx, my, float(wrap_angle(myaw))))
         object.__setattr__(self, "max_range", as_positive(self.max_range, "max_range"))
         object.__setattr__(
             self, "range_sigma", as_positive(self.range_sigma, "range_sigma", allow_zero=True)

@@ -1,0 +1,133 @@
+"""Data sets from a path: a user's own laser log, read by the reader its name calls for.
+
+:func:`load_file` picks the reader from the path:
+
+* ``*.bag``: a ROS 1 bag; a folder holding ``metadata.yaml``: a ROS 2 bag; ``*.db3`` or
+  ``*.mcap``: one ROS 2 storage file — all read by :func:`slamkit.datasets.rosbag.read_rosbag`;
+* ``*.clf``, ``*.log`` and gzipped ones (``*.gz``: ``.log.gz``, ``.clf.gz``, gzip recognised
+  by the content): a raw CARMEN log, read by
+  :func:`slamkit.datasets.carmen_raw.read_carmen_raw_log`.
+
+``options`` are the reader's options (:class:`~slamkit.datasets.rosbag.RosbagOptions`,
+:class:`~slamkit.datasets.carmen_raw.CarmenRawOptions`), from a config file's ``[dataset]``
+table. :func:`load_data` is what ``slamkit run --data`` calls: a registered name loads that
+data set, anything else is taken as a path. A path that is one of the registered raw bags
+under the data folder is read with that data set's default options (the registered name is
+in ``metadata["registered_as"]``), so ``--data …/aces.bag`` reads what ``--data aces-raw``
+reads, without its relations. ``metadata["path"]`` holds the absolute path read.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, Literal
+
+from slamkit.datasets.paths import find_data_root
+from slamkit.datasets.registry import DATASETS, load_dataset
+from slamkit.datasets.stream import Dataset
+from slamkit.errors import DataNotFoundError, DatasetFormatError, UnknownNameError
+
+__all__ = ["SUPPORTED_FORMATS", "data_label", "file_format", "load_data", "load_file"]
+
+SUPPORTED_FORMATS = (
+    "ROS 1 .bag, ROS 2 bag folder (with metadata.yaml), ROS 2 .db3 or .mcap file, "
+    "CARMEN .clf/.log (or gzipped: .clf.gz, .log.gz, .gz)"
+)
+"""The formats :func:`load_file` reads, for messages."""
+
+_ROS_SUFFIXES = (".bag", ".db3", ".mcap")
+_CARMEN_SUFFIXES = (".clf", ".log", ".gz")
+_LABEL_SUFFIXES = (".gz", ".bag", ".db3", ".mcap", ".clf", ".log")
+
+FileFormat = Literal["rosbag", "carmen"]
+
+
+def file_format(path: str | Path) -> FileFormat:
+    """Which reader reads ``path`` (see the module docstring); a missing path raises
+    :class:`~slamkit.errors.DataNotFoundError`, an unknown kind of file
+    :class:`~slamkit.errors.DatasetFormatError`, each in one line listing the formats."""
+    p = Path(path)
+    if not p.exists():
+        raise DataNotFoundError(f"{p}: not found (supported: {SUPPORTED_FORMATS})")
+    if p.is_dir():
+        if (p / "metadata.yaml").exists():
+            return "rosbag"
+        raise DatasetFormatError(
+            f"a folder without metadata.yaml is not a ROS 2 bag (supported: {SUPPORTED_FORMATS})",
+            p,
+        )
+    suffix = p.suffix.lower()
+    if suffix in _ROS_SUFFIXES:
+        return "rosbag"
+    if suffix in _CARMEN_SUFFIXES:
+        return "carmen"
+    raise DatasetFormatError(
+        f"unknown kind of file {suffix or '(no suffix)'!r} (supported: {SUPPORTED_FORMATS})", p
+    )
+
+
+def load_file(
+    path: str | Path, options: Mapping[str, Any] | None = None, *, name: str | None = None
+) -> Dataset:
+    """Read the laser log at ``path`` with the reader its kind calls for (see the module
+    docstring); ``options`` go to that reader (unknown keys: ConfigError)."""
+    p = Path(path).expanduser()
+    kind = file_format(p)
+    if kind == "rosbag":
+        from slamkit.datasets.rosbag import read_rosbag
+
+        dataset = read_rosbag(p, options, name=name)
+    else:
+        from slamkit.datasets.carmen_raw import read_carmen_raw_log
+
+        dataset = read_carmen_raw_log(p, options, name=name)
+    dataset.metadata["path"] = str(p.resolve())
+    return dataset
+
+
+def load_data(
+    spec: str,
+    *,
+    seed: int = 0,
+    options: Mapping[str, Any] | None = None,
+    data_root: str | Path | None = None,
+) -> Dataset:
+    """A registered data set by name (:func:`~slamkit.datasets.load_dataset`), else the
+    laser log at the path ``spec`` (:func:`load_file`; see the module docstring for the
+    registered bags). A name that is neither registered nor looks like a path raises
+    :class:`~slamkit.errors.UnknownNameError` listing the names."""
+    if spec in DATASETS:
+        return load_dataset(spec, seed=seed, options=options, data_root=data_root)
+    p = Path(spec).expanduser()
+    looks_like_path = os.sep in spec or "/" in spec or p.suffix.lower() in _LABEL_SUFFIXES
+    if not (looks_like_path or p.exists()):
+        raise UnknownNameError("dataset", spec, sorted(DATASETS))
+    from slamkit.datasets.rosbag import registered_bag_defaults
+
+    merged = dict(options or {})
+    registered = registered_bag_defaults(p, find_data_root(data_root)) if p.exists() else None
+    if registered is not None:
+        merged = {**registered[1], **merged}
+    dataset = load_file(p, merged)
+    if registered is not None:
+        dataset.metadata["registered_as"] = registered[0]
+    return dataset
+
+
+def data_label(spec: str) -> str:
+    """A short label of a ``--data`` value for folder names: a registered name as it is, a
+    path as its file name without the log suffixes (``…/aces.bag`` → ``aces``,
+    ``intel.log.gz`` → ``intel``)."""
+    if spec in DATASETS:
+        return spec
+    name = Path(spec.rstrip("/\\")).name or spec
+    stripped = True
+    while stripped:
+        stripped = False
+        for suffix in _LABEL_SUFFIXES:
+            if name.lower().endswith(suffix) and len(name) > len(suffix):
+                name = name[: -len(suffix)]
+                stripped = True
+    return name

@@ -1,0 +1,505 @@
+"""ROS bags of 2D laser scans and wheel odometry → :class:`~slamkit.datasets.Dataset`.
+
+Read without a ROS install through the ``rosbags`` package (``pip install 'slamkit[laser]'``),
+whose :class:`rosbags.highlevel.AnyReader` opens
+
+* a ROS 1 bag (``*.bag``, any compression),
+* a ROS 2 bag: its folder (with ``metadata.yaml``), or one of its storage files on its own —
+  ``*.db3`` (SQLite) or ``*.mcap``. rosbags 0.11 reads a standalone ``.mcap`` file without a
+  ``metadata.yaml`` (the message definitions are in the file); a standalone ``.db3`` from an
+  old recorder may lack them, then the ROS 2 message definitions of rosbags' latest type store
+  are used.
+
+Only the scan and odometry topics are deserialised (plus ``/tf_static``, and ``/tf`` when the
+laser's mounting is not static).
+
+Conversion (all in one pass over arrays once the messages are read):
+
+* ``sensor_msgs/msg/LaserScan`` on ``scan_topic`` → one :class:`LaserScan` per message at its
+  header stamp (``sec + nanosec·1e-9``, float64). Beam ``i`` points at
+  ``angle_min + i·angle_increment`` in the laser's frame; ``angle_max`` must be the last
+  beam's angle to half an increment, and every scan must have the first scan's geometry.
+  Ranges ``>= range_max`` or ``+inf`` are no return, and so are ranges below ``range_min`` or
+  ``-inf`` (REP 117: too close): stored as exactly ``max_range``, slamkit's convention. A NaN
+  or a negative finite range is an error (lenient: that beam becomes no return, counted).
+* ``nav_msgs/msg/Odometry`` on ``odom_topic`` → the robot's pose ``(x, y, yaw)`` in the
+  odometry frame (yaw from the quaternion), interpolated to each scan stamp under the rules of
+  :mod:`slamkit.datasets.raw_odometry` → one :class:`Odometry` event per scan, just before it.
+* The laser's mounting on the robot: the transform from the odometry's child frame (or
+  ``base_frame``) to the scan's ``frame_id``, chained through ``/tf_static`` (else the first
+  10 s of ``/tf``) → :attr:`LaserSpec.mounting` ``(x, y, yaw)``. A tilted mounting (roll or
+  pitch) is refused; none found → the laser at the robot's origin (said in the metadata).
+
+Errors: a missing topic, a topic of another message type, a bag that cannot be read
+(truncated, corrupt, unknown storage), bad geometry, NaN/negative ranges, stamps out of
+order, a scan inside an odometry gap → :class:`~slamkit.errors.DatasetFormatError` naming the
+bag, and the topic and message index (0-based, in bag order) where one is at fault. With
+``lenient=True`` the bad messages are dropped (bad beams marked no return) and counted in
+``metadata``.
+
+The Freiburg benchmark's three raw logs are registered here as ``intel-raw``, ``aces-raw`` and
+``fr079-raw``, with the benchmark's reference relations as ground truth.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slamkit._validation import FloatArray
+from slamkit.config import config_from_mapping, config_to_dict
+from slamkit.datasets.paths import data_root as resolve_data_root
+from slamkit.datasets.paths import require_file
+from slamkit.datasets.raw_odometry import (
+    DEFAULT_MAX_ODOM_GAP,
+    RAW_ODOMETRY_SIGMA_ROT_DEG,
+    RAW_ODOMETRY_SIGMA_TRANS,
+    check_gap_option,
+    increasing_mask,
+    odometry_at_scans,
+    raw_laser_dataset,
+    raw_odometry_cov,
+    repeat_mask,
+)
+from slamkit.datasets.relations import Relations, read_relations
+from slamkit.datasets.rosbag_read import BagContents, read_bag
+from slamkit.datasets.stream import Dataset, LaserSpec
+from slamkit.errors import ConfigError, DatasetFormatError
+
+__all__ = [
+    "FREIBURG_BAGS",
+    "RosbagOptions",
+    "load_aces_raw",
+    "load_fr079_raw",
+    "load_intel_raw",
+    "read_rosbag",
+    "registered_bag_defaults",
+]
+
+LENIENT_SHOWN = 20
+"""Problems listed (topic, index, reason) in the metadata of a lenient read."""
+
+
+@dataclass(frozen=True)
+class FreiburgBag:
+    """A registered raw log: its bag and relations files under the data root, and the
+    options it is read with by default."""
+
+    bag: str
+    relations: str
+    defaults: Mapping[str, Any] = field(default_factory=dict)
+
+
+FREIBURG_BAGS: dict[str, FreiburgBag] = {
+    # The Intel logger stalls: 2033 scans lie in odometry gaps > 0.5 s, the longest 3.1 s
+    # (the scans stall with it); ACES has one scan in a 2.95 s gap.
+    "intel-raw": FreiburgBag(
+        "laser/rosbags/intel.bag", "laser/relations/intel.relations", {"max_odom_gap": 3.5}
+    ),
+    "aces-raw": FreiburgBag(
+        "laser/rosbags/aces.bag", "laser/relations/aces.relations", {"max_odom_gap": 3.5}
+    ),
+    "fr079-raw": FreiburgBag("laser/rosbags/fr079.bag", "laser/relations/fr079.relations"),
+}
+"""Registered name → the files of the Freiburg benchmark's raw logs and their defaults."""
+
+
+def _check_nonneg(value: float, name: str) -> None:
+    if not (math.isfinite(value) and value >= 0):
+        raise ConfigError(f"{name}: expected a finite number >= 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class RosbagOptions:
+    """How to read a ROS bag of laser scans and odometry. Units: metres, seconds, radians
+    unless the name says degrees."""
+
+    scan_topic: str = "/scan"
+    """Topic of the ``sensor_msgs/msg/LaserScan`` messages."""
+    odom_topic: str = "/odom"
+    """Topic of the ``nav_msgs/msg/Odometry`` messages (the robot's raw odometry)."""
+    max_odom_gap: float = DEFAULT_MAX_ODOM_GAP
+    """A scan between two odometry messages further apart than this [s] is an error
+    (lenient: dropped); ``inf``: no limit."""
+    max_range: float | None = None
+    """The no-return range stored in the LaserSpec [m]; None: the first scan's
+    ``range_max``. Readings at or beyond it (or their message's ``range_max``) are no
+    return."""
+    mounting: tuple[float, float, float] | None = None
+    """The laser's pose ``(x, y, yaw)`` on the robot [m, m, rad]; None: from the bag's tf."""
+    base_frame: str | None = None
+    """The robot's frame for the mounting; None: the odometry's ``child_frame_id``."""
+    stamps: Literal["header", "bag"] = "header"
+    """Time of a message: its header stamp, or the time it was recorded in the bag."""
+    range_sigma: float = 0.01
+    """Nominal range noise stored in the LaserSpec [m] (the bag does not say)."""
+    odometry_sigma_trans: float = RAW_ODOMETRY_SIGMA_TRANS
+    """Nominal per-step translation noise of the odometry [m] (for the MotionSpec)."""
+    odometry_sigma_rot_deg: float = RAW_ODOMETRY_SIGMA_ROT_DEG
+    """Nominal per-step rotation noise of the odometry [deg] (for the MotionSpec)."""
+    lenient: bool = False
+    """Drop bad messages (mark bad beams no return) and count them instead of raising."""
+
+    def __post_init__(self) -> None:
+        for name in ("scan_topic", "odom_topic"):
+            if not getattr(self, name):
+                raise ConfigError(f"{name}: expected a topic name, got an empty string")
+        check_gap_option(self.max_odom_gap)
+        mr = self.max_range
+        if mr is not None and not (math.isfinite(mr) and mr > 0):
+            raise ConfigError(f"max_range: expected a number > 0 or nothing, got {mr!r}")
+        m = self.mounting
+        if m is not None and (len(m) != 3 or not all(math.isfinite(v) for v in m)):
+            raise ConfigError(f"mounting: expected three finite numbers (x, y, yaw), got {m!r}")
+        if self.stamps not in ("header", "bag"):
+            raise ConfigError(f"stamps: expected 'header' or 'bag', got {self.stamps!r}")
+        for name in ("range_sigma", "odometry_sigma_trans", "odometry_sigma_rot_deg"):
+            _check_nonneg(getattr(self, name), name)
+
+
+class _Problems:
+    """Bad messages: raise at the first, or (lenient) count them by kind."""
+
+    def __init__(self, path: Path, lenient: bool) -> None:
+        self.path = path
+        self.lenient = lenient
+        self.counts: dict[str, int] = {}
+        self.first: list[dict[str, Any]] = []
+
+    def report(self, kind: str, topic: str, indices: NDArray[np.int64], why: str) -> None:
+        """Messages ``indices`` of ``topic`` are bad (``why`` of the first); raise unless
+        lenient."""
+        if indices.size == 0:
+            return
+        where = f"{topic} message {int(indices[0])}"
+        if not self.lenient:
+            raise DatasetFormatError(f"{where}: {why}", self.path)
+        self.counts[kind] = self.counts.get(kind, 0) + int(indices.size)
+        if len(self.first) < LENIENT_SHOWN:
+            self.first.append({"topic": topic, "message": int(indices[0]), "reason": why})
+
+
+def _stamps(sec: NDArray[np.int64], nsec: NDArray[np.int64]) -> FloatArray:
+    """Stamps [s] as float64 ``sec + nanosec·1e-9`` (the relations files' values exactly)."""
+    return sec.astype(np.float64) + nsec.astype(np.float64) * 1e-9
+
+
+def _check_geometry(bag: BagContents, topic: str, problems: _Problems) -> NDArray[np.bool_]:
+    """Scans with the first scan's geometry and a consistent ``angle_max``."""
+    s = bag.scans
+    n = s.beam_counts
+    ok = np.ones(n.size, dtype=bool)
+    n0, amin0, inc0 = int(n[0]), float(s.angle_min[0]), float(s.angle_increment[0])
+    finite = np.isfinite(s.angle_min) & np.isfinite(s.angle_increment) & np.isfinite(s.angle_max)
+    bad = np.flatnonzero(~finite | (n < 1) | ((n > 1) & (s.angle_increment == 0)))
+    problems.report("geometry", topic, bad, "angle_min/angle_increment not usable")
+    ok[bad] = False
+    last = s.angle_min + (n - 1) * s.angle_increment
+    tol = np.maximum(np.abs(s.angle_increment) / 2.0, 1e-9)
+    bad = np.flatnonzero(ok & (np.abs(last - s.angle_max) > tol))
+    if bad.size:
+        i = int(bad[0])
+        why = (
+            f"{int(n[i])} beams from angle_min {s.angle_min[i]:.9g} by {s.angle_increment[i]:.9g}"
+            f" end at {last[i]:.9g} rad, but angle_max is {s.angle_max[i]:.9g} (more than half "
+            "an increment off)"
+        )
+        problems.report("geometry", topic, bad, why)
+    ok[bad] = False
+    changed = (n != n0) | (np.abs(s.angle_min - amin0) > 1e-6)
+    changed |= np.abs(s.angle_increment - inc0) * np.maximum(n - 1, 0) > 1e-6
+    bad = np.flatnonzero(ok & changed)
+    problems.report(
+        "geometry",
+        topic,
+        bad,
+        f"beam geometry differs from the first scan's ({n0} beams from {amin0:.9g} rad by "
+        f"{inc0:.9g})",
+    )
+    ok[bad] = False
+    limits = np.isfinite(s.range_max) & (s.range_max > 0) & np.isfinite(s.range_min)
+    limits &= (s.range_min >= 0) & (s.range_min < s.range_max)
+    bad = np.flatnonzero(ok & ~limits)
+    problems.report("geometry", topic, bad, "range_min/range_max: expected 0 <= min < max")
+    ok[bad] = False
+    return ok
+
+
+def _clean_ranges(
+    raw: FloatArray,
+    range_min: FloatArray,
+    range_max: FloatArray,
+    max_range: float,
+    index: NDArray[np.int64],
+    topic: str,
+    problems: _Problems,
+) -> tuple[FloatArray, dict[str, int]]:
+    """Ranges ``(N, B)`` with every no return (at/over range_max or +inf, under range_min or
+    -inf) and (lenient) every bad reading (NaN, negative) set to ``max_range``."""
+    with np.errstate(invalid="ignore"):
+        invalid = np.isnan(raw) | (np.isfinite(raw) & (raw < 0.0))
+        far = raw >= np.minimum(range_max, max_range)[:, None]
+        near = ~invalid & (raw < range_min[:, None])
+    rows = np.flatnonzero(invalid.any(axis=1))
+    if rows.size:
+        r = int(rows[0])
+        b = int(np.argmax(invalid[r]))
+        problems.report(
+            "invalid_readings",
+            topic,
+            index[rows],
+            f"beam {b}: range {float(raw[r, b])!r} is not a reading (expected >= 0, +inf or -inf)",
+        )
+    out = np.where(invalid | far | near, max_range, raw)
+    counts = {
+        "no_return_far": int(np.count_nonzero(far & ~invalid)),
+        "no_return_near": int(np.count_nonzero(near)),
+        "invalid_readings": int(np.count_nonzero(invalid)),
+    }
+    return out, counts
+
+
+def _odometry(
+    bag: BagContents, opts: RosbagOptions, problems: _Problems
+) -> tuple[FloatArray, FloatArray, int]:
+    """Odometry stamps ``(M,)`` and poses ``(M, 3)``, checked; and the repeats dropped."""
+    o = bag.odometry
+    topic = opts.odom_topic
+    t = o.bag_times if opts.stamps == "bag" else _stamps(o.sec, o.nsec)
+    q = o.orientation  # (M, 4) x y z w
+    norm = np.linalg.norm(q, axis=1)
+    ok = np.isfinite(o.position).all(axis=1) & np.isfinite(norm) & (norm > 1e-9)
+    problems.report(
+        "bad_odometry", topic, np.flatnonzero(~ok), "pose not finite or quaternion of norm 0"
+    )
+    qx, qy, qz, qw = (q[:, k] / np.where(ok, norm, 1.0) for k in range(4))
+    # yaw of a unit quaternion: atan2(2 (w z + x y), 1 - 2 (y² + z²))
+    yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    poses = np.column_stack([o.position[:, 0], o.position[:, 1], yaw])
+    idx = np.flatnonzero(ok)
+    t, poses = t[idx], poses[idx]
+    repeats = repeat_mask(t, poses)
+    idx, t, poses = idx[~repeats], t[~repeats], poses[~repeats]
+    order = increasing_mask(t)
+    problems.report(
+        "odometry_out_of_order",
+        topic,
+        idx[~order],
+        "stamp not later than the messages before it (out of order)",
+    )
+    return t[order], poses[order], int(np.count_nonzero(repeats))
+
+
+def _convert(
+    bag: BagContents, opts: RosbagOptions, path: Path, name: str, relations: Relations | None
+) -> Dataset:
+    problems = _Problems(path, opts.lenient)
+    s = bag.scans
+    topic = opts.scan_topic
+    if s.beam_counts.size == 0:
+        raise DatasetFormatError(f"no messages on {topic}", path)
+    if bag.odometry.sec.size == 0:
+        raise DatasetFormatError(f"no messages on {opts.odom_topic}", path)
+    ok = _check_geometry(bag, topic, problems)
+    index = np.flatnonzero(ok)
+    n_beams = int(s.beam_counts[index[0]]) if index.size else 0
+    if index.size == 0:
+        raise DatasetFormatError(f"no usable scans on {topic}", path)
+    raw = np.vstack([s.ranges[i] for i in index.tolist()]).astype(np.float64)
+    t_all = s.bag_times if opts.stamps == "bag" else _stamps(s.sec, s.nsec)
+    t = t_all[index]
+    order = increasing_mask(t)
+    if not order.all():
+        problems.report(
+            "scans_out_of_order",
+            topic,
+            index[~order],
+            f"stamp {t[~order][0]:.9f} not later than the scans before it (out of order)",
+        )
+    index, t, raw = index[order], t[order], raw[order]
+    max_range = opts.max_range if opts.max_range is not None else float(s.range_max[index[0]])
+    ranges, reading_counts = _clean_ranges(
+        raw, s.range_min[index], s.range_max[index], max_range, index, topic, problems
+    )
+    odom_t, odom_poses, repeats = _odometry(bag, opts, problems)
+    at = odometry_at_scans(t, odom_t, odom_poses, opts.max_odom_gap)
+    if at.in_gap.any():
+        i = int(np.argmax(at.in_gap))
+        problems.report(
+            "odometry_gap",
+            topic,
+            index[at.in_gap],
+            f"scan at t={t[i]:.9f} lies in a {at.gap[i]:.3f} s gap of {opts.odom_topic} "
+            f"(max_odom_gap {opts.max_odom_gap} s; raise it or set lenient)",
+        )
+    keep = at.keep
+    if not keep.any():
+        raise DatasetFormatError(
+            f"no scan on {topic} lies within the odometry on {opts.odom_topic} "
+            f"({odom_t[0]:.3f}..{odom_t[-1]:.3f} s)",
+            path,
+        )
+    angles = s.angle_min[index[0]] + np.arange(n_beams) * s.angle_increment[index[0]]
+    mounting, mounting_from = _mounting(bag, opts, path)
+    laser = LaserSpec(angles, max_range, opts.range_sigma, mounting=mounting)
+    fmt = "rosbag1" if bag.ros1 else ("mcap" if path.suffix == ".mcap" else "rosbag2")
+    n_kept = int(keep.sum())
+    description = (
+        f"{'ROS 1' if bag.ros1 else 'ROS 2'} bag {path.name}: {n_kept} scans × {n_beams} beams "
+        f"({topic}), raw odometry ({opts.odom_topic})"
+    )
+    metadata: dict[str, Any] = {
+        "kind": "real",
+        "format": fmt,
+        "file": path.name,
+        "config": config_to_dict(opts),
+        "scans": n_kept,
+        "scan_messages": int(s.beam_counts.size),
+        "odometry_messages": int(bag.odometry.sec.size),
+        "odometry_repeats_dropped": repeats,
+        "beams": n_beams,
+        "max_range": max_range,
+        "laser_frame": bag.scan_frame,
+        "mounting": list(laser.mounting),
+        "mounting_from": mounting_from,
+        "dropped": at.dropped,
+        "readings": reading_counts,
+        "lenient": {"counts": dict(problems.counts), "first": list(problems.first)},
+        "topics": dict(bag.topics),
+    }
+    return raw_laser_dataset(
+        name=name,
+        times=t[keep],
+        odometry=at.poses,
+        ranges=ranges[keep],
+        laser=laser,
+        motion_cov=raw_odometry_cov(opts.odometry_sigma_trans, opts.odometry_sigma_rot_deg),
+        description=description,
+        metadata=metadata,
+        relations=relations,
+    )
+
+
+def _mounting(
+    bag: BagContents, opts: RosbagOptions, path: Path
+) -> tuple[tuple[float, float, float], str]:
+    if opts.mounting is not None:
+        x, y, yaw = opts.mounting
+        return (x, y, yaw), "option mounting"
+    base = (opts.base_frame or bag.odom_child_frame or "base_link").strip("/")
+    laser = bag.scan_frame.strip("/")
+    if base == laser or not laser:
+        return (0.0, 0.0, 0.0), "the scans are in the robot's frame"
+    chain = bag.transform(base, laser)
+    if chain is None:
+        return (0.0, 0.0, 0.0), f"no tf from {base!r} to {laser!r}: laser at the robot origin"
+    (x, y, yaw), tilt, source = chain
+    if tilt > 1e-3:
+        raise DatasetFormatError(
+            f"the laser frame {laser!r} is tilted {math.degrees(tilt):.2f}° (roll/pitch) "
+            f"from {base!r}; tilted or upside-down lasers are not supported (give mounting)",
+            path,
+        )
+    return (x, y, yaw), f"{source}: {base} → {laser}"
+
+
+def _options(options: RosbagOptions | Mapping[str, Any] | None, what: str) -> RosbagOptions:
+    if isinstance(options, RosbagOptions):
+        return options
+    return config_from_mapping(RosbagOptions, options, what)
+
+
+def read_rosbag(
+    path: str | Path,
+    options: RosbagOptions | Mapping[str, Any] | None = None,
+    *,
+    name: str | None = None,
+    relations: Relations | None = None,
+) -> Dataset:
+    """Read a ROS 1 bag, a ROS 2 bag folder, or a ``.db3``/``.mcap`` file into a
+    :class:`Dataset` with raw odometry (see the module docstring). ``relations`` become the
+    ground truth."""
+    opts = _options(options, "rosbag options")
+    p = Path(path)
+    bag = read_bag(p, opts.scan_topic, opts.odom_topic)
+    return _convert(bag, opts, p, name or p.name, relations)
+
+
+# --------------------------------------------------------------------------------------------
+# registry loaders: (options, *, seed, data_root) -> Dataset
+# --------------------------------------------------------------------------------------------
+
+_DESCRIPTIONS = {
+    "intel-raw": "Intel Research Lab",
+    "aces-raw": "ACES building",
+    "fr079-raw": "Freiburg building 079",
+}
+
+
+def _freiburg(name: str, options: Mapping[str, Any], data_root: Path | None) -> Dataset:
+    entry = FREIBURG_BAGS[name]
+    root = resolve_data_root(data_root)
+    opts = _options({**entry.defaults, **dict(options)}, name)
+    relations = read_relations(require_file(entry.relations, root))
+    ds = read_rosbag(require_file(entry.bag, root), opts, name=name, relations=relations)
+    summary = (
+        f"{_DESCRIPTIONS[name]}, raw log: {ds.metadata['scans']} scans × "
+        f"{ds.metadata['beams']} beams, raw odometry, {len(relations)} reference relations"
+    )
+    return Dataset(
+        name=ds.name,
+        events=ds.events,
+        motion=ds.motion,
+        laser=ds.laser,
+        initial_pose=ds.initial_pose,
+        initial_cov=ds.initial_cov,
+        truth=ds.truth,
+        description=summary,
+        metadata={**ds.metadata, "relations_file": Path(entry.relations).name},
+    )
+
+
+def load_intel_raw(
+    options: Mapping[str, Any], *, seed: int, data_root: Path | None = None
+) -> Dataset:
+    """Intel Research Lab raw log (ROS 1 bag): 13,631 scans of 180 beams, raw odometry,
+    2984 relations."""
+    return _freiburg("intel-raw", options, data_root)
+
+
+def load_aces_raw(
+    options: Mapping[str, Any], *, seed: int, data_root: Path | None = None
+) -> Dataset:
+    """ACES building raw log (ROS 1 bag): 7374 scans of 180 beams (50 m), raw odometry,
+    1279 relations."""
+    return _freiburg("aces-raw", options, data_root)
+
+
+def load_fr079_raw(
+    options: Mapping[str, Any], *, seed: int, data_root: Path | None = None
+) -> Dataset:
+    """Freiburg 079 raw log (ROS 1 bag): 4934 scans of 360 beams, raw odometry, laser 4 cm
+    ahead of the robot, 1685 relations."""
+    return _freiburg("fr079-raw", options, data_root)
+
+
+def registered_bag_defaults(path: Path, root: Path | None) -> tuple[str, Mapping[str, Any]] | None:
+    """The registered name and default options of ``path`` when it is one of the registered
+    bags under ``root`` (so that ``--data PATH`` of a registered bag reads it as registered)."""
+    if root is None:
+        return None
+    try:
+        target = path.resolve()
+    except OSError:
+        return None
+    for name, entry in FREIBURG_BAGS.items():
+        candidate = root / entry.bag
+        if candidate.exists() and candidate.resolve() == target:
+            return name, entry.defaults
+    return None
