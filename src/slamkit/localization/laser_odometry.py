@@ -35,7 +35,13 @@ from typing import ClassVar, Literal
 import numpy as np
 
 from slamkit._validation import FloatArray
-from slamkit.config import Section, finite_above, finite_at_least, fraction, setting
+from slamkit.config import (
+    Section,
+    finite_above,
+    finite_at_least,
+    fraction,
+    setting,
+)
 from slamkit.datasets.stream import Dataset, LaserScan
 from slamkit.errors import ConvergenceError, InputError, MatchError
 from slamkit.estimation.contract import EstimatorOutput, PoseEstimate
@@ -46,7 +52,9 @@ from slamkit.mapping.inverse_model import InverseSensorModel
 from slamkit.mapping.occupancy.config import OccupancyMappingConfig
 from slamkit.mapping.occupancy.mapper import OccupancyMapper
 from slamkit.scanmatch.icp import IcpConfig, PreparedScan, icp, prepare_scan
+from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
 from slamkit.scanmatch.plicp import PlIcpConfig, plicp
+from slamkit.scanmatch.point_map import PointMap
 from slamkit.scanmatch.result import MatchResult, scan_points
 
 __all__ = ["LaserOdometry", "LaserOdometryConfig", "MapSettings"]
@@ -70,8 +78,17 @@ class MapSettings(Section):
 class LaserOdometryConfig(Section):
     """Settings of :class:`LaserOdometry`. Metres, degrees where named."""
 
+    reference: Literal["keyframe", "map"] = "map"
+    """What a scan is registered to: the last keyframe (point-to-line or point-to-point ICP,
+    ``matcher``), or the map of the keyframes' points within ``map_radius`` of the robot
+    (point-to-normal ICP, :mod:`slamkit.scanmatch.normal_icp`, over a
+    :class:`~slamkit.scanmatch.point_map.PointMap`)."""
     matcher: Literal["plicp", "icp"] = "plicp"
-    """Point-to-line ICP (Censi 2008) or point-to-point ICP."""
+    """Keyframe reference: point-to-line ICP (Censi 2008) or point-to-point ICP."""
+    map_radius: float = setting(20.0, finite_above(0.0), "a finite number > 0")
+    """Map reference: the map points within this distance of the robot take part [m]."""
+    voxel: float = setting(0.05, finite_above(0.0), "a finite number > 0")
+    """Map reference: one point per square cell of this side [m] (the first one in)."""
     keyframe_distance: float = setting(0.5, finite_at_least(0.0), "a finite number >= 0")
     """Take a new keyframe once the robot is this far from the current one [m]."""
     keyframe_angle_deg: float = setting(15.0, finite_at_least(0.0), "a finite number >= 0")
@@ -91,6 +108,7 @@ class LaserOdometryConfig(Section):
     """The laser's pose in the robot frame (x [m], y [m], yaw [rad]); None: the data set's
     (:attr:`~slamkit.datasets.LaserSpec.mounting`, else the robot's origin)."""
     plicp: PlIcpConfig = field(default_factory=PlIcpConfig)
+    normal_icp: NormalIcpConfig = field(default_factory=NormalIcpConfig)
     icp: IcpConfig = field(default_factory=IcpConfig)
     map: MapSettings = field(default_factory=MapSettings)
 
@@ -120,12 +138,14 @@ class LaserOdometry(EstimatorShell):
         self._max_range = laser.max_range if config.max_range is None else config.max_range
         mounting = config.mounting
         if mounting is None:
-            mounting = getattr(laser, "mounting", (0.0, 0.0, 0.0))
+            mounting = laser.mounting
         self._mounting = np.asarray(mounting, dtype=np.float64)
         start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
         self._pose: FloatArray = np.array(start, dtype=np.float64)
         self._odometry: FloatArray = self._pose.copy()  # dead reckoning from the start
         self._key: _Keyframe | None = None
+        self._points = PointMap(config.voxel) if config.reference == "map" else None
+        self._local: NormalCloud | None = None  # the map around the last keyframe
         self._counts: Counter[str] = Counter()
         self._iterations = 0
         self._mapper: OccupancyMapper | None = None
@@ -157,14 +177,15 @@ class LaserOdometry(EstimatorShell):
         if key is None:
             self._new_keyframe(points, event.ranges)
             return
-        # The prior: the last match and the wheels' motion since, in the keyframe's frame.
-        prior = between(key.pose, self._pose)
-        result = self._match(key.reference, points, prior)
-        if result is None:
-            self._pose = compose(key.pose, prior)
-            overlap = 0.0
-        else:
-            self._pose = compose(key.pose, result.pose)
+        # The reference's frame: the keyframe's pose, or the world for the local map. The
+        # prior: the last match and the wheels' motion since, in that frame.
+        frame = key.pose if self._local is None else np.zeros(3)
+        reference = key.reference if self._local is None else self._local
+        prior = between(frame, self._pose)
+        result = self._match(reference, points, prior)
+        overlap = 0.0
+        if result is not None:
+            self._pose = compose(frame, result.pose)
             overlap = result.inlier_fraction
         travelled = between(key.pose, self._pose)
         if (
@@ -187,7 +208,8 @@ class LaserOdometry(EstimatorShell):
             "unmatched": {k[len("failed:") :]: v for k, v in c.items() if k.startswith("failed:")},
             "gated": c["gated"],
             "mean_iterations": self._iterations / matched if matched else None,
-            "matcher": self._cfg.matcher,
+            "reference": self._cfg.reference,
+            "matcher": "normal-icp" if self._local is not None else self._cfg.matcher,
         }
         grid = None
         if self._mapper is not None and self._mapper.grid is not None:
@@ -198,13 +220,15 @@ class LaserOdometry(EstimatorShell):
     # -- steps ----------------------------------------------------------------------------
 
     def _match(
-        self, reference: PreparedScan, points: FloatArray, prior: FloatArray
+        self, reference: PreparedScan | NormalCloud, points: FloatArray, prior: FloatArray
     ) -> MatchResult | None:
         """The match of ``points`` to the keyframe from ``prior``, or None (counted) when the
         matcher fails or the gate refuses it."""
         cfg = self._cfg
         try:
-            if cfg.matcher == "plicp":
+            if isinstance(reference, NormalCloud):
+                result = normal_icp(reference, points, prior, cfg.normal_icp)
+            elif cfg.matcher == "plicp":
                 result = plicp(reference, points, prior, cfg.plicp)
             else:
                 result = icp(reference, points, prior, cfg.icp)
@@ -229,5 +253,8 @@ class LaserOdometry(EstimatorShell):
             return
         self._key = _Keyframe(self._pose.copy(), reference)
         self._counts["keyframes"] += 1
+        if self._points is not None:
+            self._points.insert(self._pose, points)
+            self._local = self._points.near(self._pose[:2], self._cfg.map_radius)
         if self._mapper is not None:
             self._mapper.integrate(compose(self._pose, self._mounting), ranges)

@@ -1,0 +1,185 @@
+"""Point-to-normal ICP against an unordered point cloud (a local map of several scans).
+
+Point-to-line ICP (:mod:`slamkit.scanmatch.plicp`) pairs a point with the segment between
+two neighbouring *beams* of one reference scan, so it needs a reference in scan order. A
+local map merged from several scans has no scan order; its surface is known instead through
+normals estimated once per map point from its nearest neighbours (principal components,
+:func:`~slamkit.scanmatch.covariance.estimate_normals`). The error of a current point
+``q_i`` paired with map point ``p_j`` of normal ``n_j`` is its distance to the tangent line
+there,
+
+    e_i(x) = n_jᵀ (R(θ) q_i + t − p_j),       x = (t_x, t_y, θ),
+
+and one Gauss-Newton step solves ``(Σ w_i J_iᵀ J_i) δ = −Σ w_i J_i e_i`` with ``J_i =
+[n_x, n_y, n_jᵀ R'(θ) q_i]`` (:func:`~slamkit.scanmatch.covariance.line_jacobian`). The
+weights are Huber's, ``w = min(1, k σ̂ / |e|)`` with ``σ̂`` the robust scale ``1.4826 ·
+median |e|``, which lets a few wrong pairs (a door opened, a person walking by) pull with a
+bounded force instead of a squared one. Pairs farther apart than
+``max_correspondence_distance`` are not made; the correspondences are searched again after
+every step (the normals stay those of the map).
+
+The covariance is ``σ̂² H⁻¹`` of the last step (the normal-distance model, as for
+point-to-point ICP); a map whose Hessian leaves a direction unconstrained raises
+``MatchError("degenerate")``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.spatial import cKDTree
+
+from slamkit._validation import FloatArray, as_array
+from slamkit.errors import ConfigError, MatchError
+from slamkit.scanmatch.covariance import line_jacobian, require_constrained
+from slamkit.scanmatch.result import MatchResult, require_points
+
+__all__ = ["NormalCloud", "NormalIcpConfig", "normal_icp"]
+
+
+@dataclass(frozen=True, eq=False)
+class NormalCloud:
+    """Reference points ``(M, 2)`` with unit normals ``(M, 2)`` and a KD-tree over the
+    points (build with :meth:`build`). The arrays are treated as read-only."""
+
+    points: FloatArray
+    normals: FloatArray
+    tree: cKDTree
+
+    @classmethod
+    def build(cls, points: ArrayLike, normals: ArrayLike) -> NormalCloud:
+        pts = as_array(points, "reference points", (None, 2))
+        nrm = as_array(normals, "reference normals", (pts.shape[0], 2))
+        return cls(pts, nrm, cKDTree(pts, leafsize=8))
+
+
+@dataclass(frozen=True)
+class NormalIcpConfig:
+    """Settings of :func:`normal_icp`.
+
+    * ``max_iterations``: Gauss-Newton steps before ``MatchError("no_convergence")`` (30);
+    * ``max_correspondence_distance`` [m]: farther pairs are not made (0.5);
+    * ``huber_k``: the Huber threshold in robust standard deviations (1.5);
+    * ``min_correspondences``, ``min_points``: fewer raise ``MatchError`` (10, 10);
+    * ``translation_tolerance`` [m], ``rotation_tolerance`` [rad]: stop when a step is
+      smaller than both (1e-4, 1e-4);
+    * ``min_eigenvalue``: the degeneracy threshold of
+      :func:`~slamkit.scanmatch.covariance.require_constrained` (0.01).
+    """
+
+    max_iterations: int = 30
+    max_correspondence_distance: float = 0.5
+    huber_k: float = 1.5
+    min_correspondences: int = 10
+    min_points: int = 10
+    translation_tolerance: float = 1e-4
+    rotation_tolerance: float = 1e-4
+    min_eigenvalue: float = 0.01
+
+    def __post_init__(self) -> None:
+        for name in ("max_iterations", "min_correspondences", "min_points"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and not isinstance(v, bool) and v >= 1):
+                raise ConfigError(f"NormalIcpConfig.{name}: expected an integer >= 1, got {v!r}")
+        for name in (
+            "max_correspondence_distance",
+            "huber_k",
+            "translation_tolerance",
+            "rotation_tolerance",
+        ):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                raise ConfigError(
+                    f"NormalIcpConfig.{name}: expected a finite number > 0, got {v!r}"
+                )
+        if not (math.isfinite(self.min_eigenvalue) and self.min_eigenvalue >= 0):
+            raise ConfigError(
+                "NormalIcpConfig.min_eigenvalue: expected a number >= 0, got "
+                f"{self.min_eigenvalue!r}"
+            )
+
+
+def normal_icp(
+    reference: NormalCloud,
+    current: ArrayLike,
+    initial: ArrayLike = (0.0, 0.0, 0.0),
+    config: NormalIcpConfig | None = None,
+) -> MatchResult:
+    """Register ``current (K, 2)`` points (sensor frame, metres) to the map ``reference`` (a
+    :class:`NormalCloud`, e.g. :meth:`slamkit.scanmatch.point_map.PointMap.near`) from
+    ``initial = T_ref_cur``.
+
+    Returns a :class:`~slamkit.scanmatch.MatchResult` (``method="normal-icp"``; ``score`` and
+    ``inlier_fraction``: the fraction of current points paired at the end). Raises
+    ``MatchError`` (``"too_few_points"``, ``"too_few_correspondences"``, ``"degenerate"``,
+    ``"no_convergence"``), ``ShapeError``/``NonFiniteError`` for malformed arrays.
+    """
+    cfg = NormalIcpConfig() if config is None else config
+    q = require_points(as_array(current, "current points", (None, 2)), cfg.min_points, "current")
+    x0 = as_array(initial, "initial pose", (3,))
+    P, normals = reference.points, reference.normals
+    m_ref = P.shape[0]
+    tx, ty, th = float(x0[0]), float(x0[1]), float(x0[2])
+    converged = False
+    it = 0
+    jac = np.zeros((0, 3))
+    qk = np.zeros((0, 2))
+    w = np.zeros(0)
+    sigma = 0.0
+    n_pairs = 0
+    for it in range(1, cfg.max_iterations + 1):
+        c, s = math.cos(th), math.sin(th)
+        moved = q @ np.array([[c, s], [-s, c]])
+        moved += (tx, ty)
+        _, j = reference.tree.query(
+            moved, k=1, distance_upper_bound=cfg.max_correspondence_distance
+        )
+        ok = j < m_ref
+        n_pairs = int(np.count_nonzero(ok))
+        if n_pairs < cfg.min_correspondences:
+            raise MatchError(
+                f"normal-icp: {n_pairs} correspondences within "
+                f"{cfg.max_correspondence_distance} m at iteration {it}; at least "
+                f"{cfg.min_correspondences} are needed",
+                "too_few_correspondences",
+            )
+        jk, qk = j[ok], q[ok]
+        nk = normals[jk]
+        e = np.einsum("ij,ij->i", nk, moved[ok] - P[jk])
+        jac = line_jacobian(qk, nk, th)
+        if it == 1:
+            require_constrained(jac, qk, cfg.min_eigenvalue, "normal-icp")
+        sigma = max(1.4826 * float(np.median(np.abs(e))), 1e-9)
+        w = np.minimum(1.0, cfg.huber_k * sigma / np.maximum(np.abs(e), 1e-300))
+        jw = jac * w[:, None]
+        h = jw.T @ jac
+        g = jw.T @ e
+        try:
+            delta = -np.linalg.solve(h, g)
+        except np.linalg.LinAlgError:
+            raise MatchError("normal-icp: singular normal equations", "degenerate") from None
+        tx += float(delta[0])
+        ty += float(delta[1])
+        th += float(delta[2])
+        if (
+            math.hypot(float(delta[0]), float(delta[1])) < cfg.translation_tolerance
+            and abs(float(delta[2])) < cfg.rotation_tolerance
+        ):
+            converged = True
+            break
+    if not converged:
+        raise MatchError(
+            f"normal-icp: no convergence within {cfg.max_iterations} iterations",
+            "no_convergence",
+        )
+    require_constrained(jac, qk, cfg.min_eigenvalue, "normal-icp")
+    jw = jac * w[:, None]
+    h = jw.T @ jac
+    cov = sigma * sigma * np.linalg.solve(h, np.eye(3))
+    cov = 0.5 * (cov + cov.T)
+    frac = n_pairs / q.shape[0]
+    pose = np.array([tx, ty, math.remainder(th, 2.0 * math.pi)])
+    return MatchResult(pose, cov, frac, frac, it, "normal-icp")

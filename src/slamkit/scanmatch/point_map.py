@@ -1,0 +1,86 @@
+"""A map of scan points with normals, one point per voxel, for scan-to-map matching.
+
+Scans are inserted at their estimated poses; each point keeps the normal of the surface it
+lies on, estimated in its own scan from its neighbours in beam order (principal components,
+:func:`~slamkit.scanmatch.covariance.estimate_normals`), where the sampling is densest and the
+surface is seen from one side. A voxel (a square cell of side ``voxel``) keeps the *first*
+point that fell into it: when the robot comes back to a place, its new scans are registered
+to the points laid down on the first visit instead of replacing them, so the drift of the
+way round does not enter the map there. :meth:`PointMap.near` gives the points around a
+pose as a :class:`~slamkit.scanmatch.normal_icp.NormalCloud`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from slamkit._validation import FloatArray, as_array, as_positive
+from slamkit.geometry.pose2 import transform_points
+from slamkit.scanmatch.covariance import estimate_normals, neighbour_table
+from slamkit.scanmatch.normal_icp import NormalCloud
+
+__all__ = ["PointMap"]
+
+#: Points in a scan's neighbourhood for its normals (beam order), and their reach [m].
+NORMAL_NEIGHBOURS = 7
+NORMAL_RADIUS = 0.3
+
+
+class PointMap:
+    """Scan points with normals in the world frame, one per ``voxel``-sided cell [m]."""
+
+    def __init__(self, voxel: float) -> None:
+        self.voxel = as_positive(voxel, "voxel")
+        self._keys = np.zeros(0, dtype=np.int64)  # sorted voxel keys
+        self._points: list[FloatArray] = []
+        self._normals: list[FloatArray] = []
+        self._cache: tuple[FloatArray, FloatArray] | None = None
+
+    def __len__(self) -> int:
+        return int(self._keys.size)
+
+    def insert(self, pose: ArrayLike, points: ArrayLike) -> int:
+        """Insert a scan's ``points (K, 2)`` (sensor frame, beam order) taken from ``pose``;
+        returns how many went into empty voxels (points without a normal are left out)."""
+        p = as_array(points, "points", (None, 2))
+        if p.shape[0] < 3:
+            return 0
+        normals, ok = estimate_normals(
+            p, neighbour_table(p, None, NORMAL_NEIGHBOURS), NORMAL_RADIUS
+        )
+        T = as_array(pose, "pose", (3,))
+        world = transform_points(T, p[ok])
+        c, s = np.cos(T[2]), np.sin(T[2])
+        n = normals[ok] @ np.array([[c, s], [-s, c]])  # rotated into the world frame
+        cells = np.floor(world / self.voxel).astype(np.int64)
+        # One int64 key per voxel: the column index in the low 32 bits, the row above.
+        keys = (cells[:, 0] << 32) ^ (cells[:, 1] & 0xFFFFFFFF)
+        _, first = np.unique(keys, return_index=True)  # one per voxel in this scan
+        idx = np.sort(first)
+        idx = idx[~np.isin(keys[idx], self._keys, assume_unique=True)]
+        if idx.size == 0:
+            return 0
+        self._keys = np.union1d(self._keys, keys[idx])
+        self._points.append(world[idx])
+        self._normals.append(n[idx])
+        self._cache = None
+        return int(idx.size)
+
+    def arrays(self) -> tuple[FloatArray, FloatArray]:
+        """All points ``(M, 2)`` and their normals ``(M, 2)``, in insertion order."""
+        if self._cache is None:
+            if not self._points:
+                self._cache = (np.zeros((0, 2)), np.zeros((0, 2)))
+            else:
+                self._cache = (np.concatenate(self._points), np.concatenate(self._normals))
+                self._points, self._normals = [self._cache[0]], [self._cache[1]]
+        return self._cache
+
+    def near(self, center: ArrayLike, radius: float) -> NormalCloud:
+        """The points within ``radius`` [m] of ``center (2,)`` (and their normals)."""
+        c = as_array(center, "center", (2,))
+        points, normals = self.arrays()
+        d = points - c
+        keep = np.einsum("ij,ij->i", d, d) <= radius * radius
+        return NormalCloud.build(points[keep], normals[keep])
