@@ -16,7 +16,9 @@ weights are Huber's, ``w = min(1, k σ̂ / |e|)`` with ``σ̂`` the robust scale
 median |e|``, which lets a few wrong pairs (a door opened, a person walking by) pull with a
 bounded force instead of a squared one. Pairs farther apart than
 ``max_correspondence_distance`` are not made; the correspondences are searched again after
-every step (the normals stay those of the map).
+every step (the normals stay those of the map). It stops when a step is below the
+tolerances or when the correspondences repeat an earlier iterate's (the steps from there
+would cycle between the same few sets).
 
 The covariance is ``σ̂² H⁻¹`` of the last step (the normal-distance model, as for
 point-to-point ICP); a map whose Hessian leaves a direction unconstrained raises
@@ -124,6 +126,7 @@ def normal_icp(
     m_ref = P.shape[0]
     tx, ty, th = float(x0[0]), float(x0[1]), float(x0[2])
     converged = False
+    seen: set[bytes] = set()  # every correspondence set met so far
     it = 0
     jac = np.zeros((0, 3))
     qk = np.zeros((0, 2))
@@ -146,6 +149,11 @@ def normal_icp(
                 f"{cfg.min_correspondences} are needed",
                 "too_few_correspondences",
             )
+        stamp = np.where(ok, j, -1).tobytes()
+        if stamp in seen:  # the pairs of an earlier iterate: the steps would cycle
+            converged = True
+            break
+        seen.add(stamp)
         jk, qk = j[ok], q[ok]
         nk = normals[jk]
         e = np.einsum("ij,ij->i", nk, moved[ok] - P[jk])
