@@ -1,5 +1,5 @@
-"""The error model shared by the ICP matchers: reference normals, the Gauss-Newton Hessian of
-the point-to-line error, the pose covariance and the degeneracy test.
+"""The error model shared by the ICP matchers: reference normals, the Jacobian of the normal
+distances, the pose covariances and the degeneracy test.
 
 **The final least-squares problem.** At the solution ``x = (t_x, t_y, θ)`` every kept
 correspondence ``i`` pairs a current point ``q_i`` (current sensor frame) with a reference
@@ -9,21 +9,24 @@ normal distance ``e_i(x) = n_iᵀ (R(θ) q_i + t - p_i)``, and its Jacobian is
     J_i = ∂e_i/∂x = [n_x, n_y, n_iᵀ R'(θ) q_i],   R'(θ) q = (-sin θ q_x - cos θ q_y,
                                                           cos θ q_x - sin θ q_y).
 
-The Hessian of ``½ Σ e_i²`` is ``H = Σ J_iᵀ J_i`` (Gauss-Newton, exact at the optimum for
-linear residuals).
+The Gauss-Newton Hessian of ``½ Σ e_i²`` is ``H = Σ J_iᵀ J_i``.
 
-**Covariance** (Hessian method, *not* Censi's ICRA 2007 closed form, which also propagates
-the noise of every reading through ``∂²J/∂z∂x``): if every residual carries independent noise
-of variance ``σ²``, the least-squares estimate has covariance ``σ² H⁻¹``; ``σ²`` is estimated
-from the residuals themselves, ``σ̂² = Σ e_i² / (m - 3)``. The residual already holds the noise
-of both scans (a current reading and the reference surface it lands on), so ``σ̂²`` is the
-combined variance. Correlations between residuals (neighbouring readings share a reference
-segment) and the choice of correspondences are ignored, which is why a test checks the
-estimate against the scatter of Monte-Carlo results.
+**Covariance.** Two estimates, both with the range noise ``σ`` estimated robustly from the
+residuals of all correspondences within range (``1.4826 × median``; the trimming would shrink
+a mean-square estimate, since it removes the largest residuals):
 
-The point-to-point matcher also uses this normal-distance model: its own Hessian ``Σ [I,
-R' q_i]ᵀ[I, R' q_i]`` treats the correspondences as fixed points and so reports a wall as
-constraining the motion *along* it, which it does not.
+* point-to-line (:func:`point_to_line_covariance`): Censi's closed form (ICRA 2007) — the
+  implicit function theorem on ``∂J/∂x = 0`` propagates the noise of every range of *both*
+  scans, including its effect on the reference lines' normals, which are only two noisy
+  points apart;
+* point-to-point (:func:`normal_distance_covariance`): ``σ̂² H⁻¹`` of the normal-distance
+  model above, with the normals of the reference surface. The point-to-point Hessian itself,
+  ``Σ [I, R' q_i]ᵀ[I, R' q_i]``, treats the paired points as fixed and so reports a wall as
+  constraining motion *along* it, which it does not. Neither holds the bias of point-to-point
+  matching (the two scans sample a wall at different places).
+
+The correspondences are taken as fixed in both, which is why tests check them against the
+scatter of Monte-Carlo results.
 
 **Degeneracy.** ``H`` mixes metres and radians, so the rotation column is divided by a length
 ``L`` (the RMS distance of the current points from the sensor) and ``H`` by the number of
@@ -51,7 +54,41 @@ __all__ = [
     "normalised_min_eigenvalue",
     "point_to_line_covariance",
     "require_constrained",
+    "scan_order_normals",
 ]
+
+
+def scan_order_normals(
+    points: FloatArray, window: int, max_spacing: float
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Unit normals ``(M, 2)`` of a scan (``points (M, 2)`` in scan order) by principal
+    components of the ``window`` points centred on each (odd, clipped at the ends of the
+    scan), and a mask ``(M,)`` of the points whose window has no spacing above
+    ``max_spacing`` [m] (no range discontinuity inside; the others get ``(0, 0)``).
+
+    Window sums of ``x, y, x², xy, y²`` come from prefix sums, so the cost is a few array
+    passes whatever the window; the scatter and the normal are as in :func:`estimate_normals`.
+    Coordinates are taken relative to the scan's centroid to keep the sums well conditioned.
+    """
+    m = points.shape[0]
+    k = min(int(window) | 1, m if m % 2 else m - 1)
+    if m < 3 or k < 3:
+        return np.zeros((m, 2)), np.zeros(m, dtype=bool)
+    rel = points - points.mean(axis=0)
+    x, y = rel[:, 0], rel[:, 1]
+    stacked = np.column_stack([x, y, x * x, x * y, y * y])
+    prefix = np.vstack([np.zeros((1, 5)), np.cumsum(stacked, axis=0)])
+    start = np.clip(np.arange(m) - k // 2, 0, m - k)
+    sums = (prefix[start + k] - prefix[start]) / k
+    sxx = sums[:, 2] - sums[:, 0] ** 2
+    sxy = sums[:, 3] - sums[:, 0] * sums[:, 1]
+    syy = sums[:, 4] - sums[:, 1] ** 2
+    phi = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
+    gaps = np.hypot(np.diff(x), np.diff(y))
+    too_far = np.concatenate([[0], np.cumsum(gaps > max_spacing)])
+    ok = (too_far[start + k - 1] - too_far[start]) == 0
+    normals = np.column_stack([-np.sin(phi), np.cos(phi)]) * ok[:, None]
+    return normals, ok
 
 
 def neighbour_table(points: FloatArray, tree: cKDTree | None, k: int) -> NDArray[np.intp]:
@@ -222,7 +259,9 @@ def point_to_line_covariance(
         g = -2.0 * (weight * n_w)[:, None] * jac
         g[:, :2] += 2.0 * e[:, None] * dn
         g[:, 2] += 2.0 * e * np.einsum("ij,ij->i", dn, drq)
-        np.add.at(g_ref, index, g * wk[:, None])
+        g *= wk[:, None]
+        for col in range(3):  # Σ over the correspondences that share a reference point
+            g_ref[:, col] += np.bincount(index, g[:, col], minlength=n_reference)
         coef += (weight * n_w) ** 2
     sigma = 1.4826 * float(np.median(np.abs(e) / np.sqrt(n_ru**2 + coef)))
     return _sandwich(h, np.vstack([g_cur, g_ref]), sigma * sigma)

@@ -227,7 +227,8 @@ def plicp(
 
     Returns a :class:`~slamkit.scanmatch.MatchResult` (``method="plicp"``; ``score`` and
     ``inlier_fraction`` are the fraction of current points kept at the end; the covariance is
-    ``σ̂² H⁻¹`` of the final point-to-line problem, :mod:`slamkit.scanmatch.covariance`).
+    Censi's implicit-function estimate for the final point-to-line problem, the range noise
+    estimated from the residuals: :func:`slamkit.scanmatch.covariance.point_to_line_covariance`).
     Raises ``MatchError`` with reason ``"too_few_points"``, ``"too_few_correspondences"``,
     ``"degenerate"`` or ``"no_convergence"``; ``ShapeError``/``NonFiniteError`` for
     malformed arrays.
