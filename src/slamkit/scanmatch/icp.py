@@ -134,7 +134,8 @@ class IcpConfig:
       estimate by less than both (defaults 1e-4 m, 1e-4 rad);
     * ``min_eigenvalue``: raise ``MatchError("degenerate")`` when the smallest eigenvalue of the
       normalised normal-distance Hessian (:mod:`slamkit.scanmatch.covariance`; dimensionless,
-      at most 2) is below this, both at the initial guess and at the solution (default 0.01).
+      at most 2) is below this at the solution, or below half of it at the initial guess (a
+      corridor is caught before the estimate drifts along it) (default 0.01).
     """
 
     max_iterations: int = 100
@@ -245,7 +246,7 @@ def icp(
         if it == 1:
             has = keep & ref.has_normal[np.where(keep, j, 0)]
             jac = line_jacobian(q[has], ref.normals[j[has]], th)
-            require_constrained(jac, q[has], cfg.min_eigenvalue, "icp")
+            require_constrained(jac, q[has], 0.5 * cfg.min_eigenvalue, "icp")
         stamp = jk.tobytes()
         if stamp in seen:
             converged = True  # pairs met before: the steps would repeat (a cycle)

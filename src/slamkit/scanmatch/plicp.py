@@ -299,7 +299,7 @@ def plicp(
         if it == 1:
             has = ref.has_normal[np.minimum(j1, m_ref - 1)] & keep
             jac = line_jacobian(q[has], ref.normals[j1[has]], th)
-            require_constrained(jac, q[has], cfg.min_eigenvalue, "plicp")
+            require_constrained(jac, q[has], 0.5 * cfg.min_eigenvalue, "plicp")
         stamp = j1.tobytes() + use_next.tobytes() + keep.tobytes()
         if stamp in seen:
             converged = True  # pairs met before: the steps would repeat (a cycle)
