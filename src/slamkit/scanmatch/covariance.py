@@ -179,10 +179,11 @@ def _rotations(theta: float) -> tuple[FloatArray, FloatArray]:
     return np.array([[c, s], [-s, c]]), np.array([[-s, c], [-c, -s]])  # (R, R') transposed
 
 
-def _sandwich(h: FloatArray, grad_z: FloatArray, sigma2: float) -> FloatArray:
-    """``σ² H⁻¹ (Gᵀ G) H⁻¹`` for ``H (3, 3)`` and ``G (Z, 3)`` (rows ``∂g/∂z_k``)."""
-    h_inv = np.linalg.solve(h, np.eye(3))
-    cov = sigma2 * (h_inv @ (grad_z.T @ grad_z) @ h_inv.T)
+def _sandwich(h: FloatArray, gram: FloatArray, sigma2: float) -> FloatArray:
+    """``σ² H⁻¹ (Gᵀ G) H⁻¹`` for ``H (3, 3)`` and ``gram = Gᵀ G (3, 3)`` (``G`` with rows
+    ``∂g/∂z_k``)."""
+    h_inv = np.linalg.inv(h)  # 3×3, non-singular after the degeneracy test
+    cov = sigma2 * (h_inv @ gram @ h_inv.T)
     return 0.5 * (cov + cov.T)  # symmetric to rounding
 
 
@@ -225,46 +226,47 @@ def point_to_line_covariance(
     """
     tx, ty, th = float(pose[0]), float(pose[1]), float(pose[2])
     rot_t, drot_t = _rotations(th)
-    m = current.shape[0]
-    rq = current @ rot_t
-    y = rq + np.array([tx, ty])
-    drq = current @ drot_t  # R' q
+    both_rot = np.hstack([rot_t, drot_t])  # one product gives R q and R' q
+    rq_drq = current @ both_rot
+    rq, drq = rq_drq[:, :2], rq_drq[:, 2:]
     d = ref_b - ref_a
     seg_len = np.hypot(d[:, 0], d[:, 1])
     tau = d / seg_len[:, None]
-    n = np.column_stack([-tau[:, 1], tau[:, 0]])
-    rel = y - ref_a
+    n = tau @ np.array([[0.0, 1.0], [-1.0, 0.0]])  # τ turned by +90°
+    rel = rq + np.array([tx, ty]) - ref_a
     e = np.einsum("ij,ij->i", n, rel)
     s_along = np.einsum("ij,ij->i", tau, rel) / seg_len
-    jac = np.column_stack([n, np.einsum("ij,ij->i", n, drq)])
-    wk = kept.astype(np.float64)  # rows of dropped pairs get weight 0 in H and ∂g/∂z
-    h = 2.0 * ((jac * wk[:, None]).T @ jac)
-    h[2, 2] += 2.0 * float((wk * e) @ -np.einsum("ij,ij->i", n, rq))  # ∂²e/∂θ² = -nᵀ R q
-    # Current ranges.
+    n_drq = np.einsum("ij,ij->i", n, drq)
+    tau_drq = np.einsum("ij,ij->i", tau, drq)
+    jac = np.column_stack([n, n_drq])
+    # Current ranges: ∂e/∂r = nᵀ R u, ∂J/∂r = [0, 0, nᵀ R' u].
     u = current / np.hypot(current[:, 0], current[:, 1])[:, None]
-    n_ru = np.einsum("ij,ij->i", n, u @ rot_t)
+    ru_dru = u @ both_rot
+    n_ru = np.einsum("ij,ij->i", n, ru_dru[:, :2])
+    n_dru = np.einsum("ij,ij->i", n, ru_dru[:, 2:])
+    # Reference ranges of both segment ends at once (axis 0: a, b).
+    ends = np.stack([ref_a, ref_b])
+    n_w = np.einsum("ij,kij->ki", n, ends) / np.hypot(ends[..., 0], ends[..., 1])
+    de = np.stack([1.0 - s_along, s_along]) * n_w  # -∂e/∂ρ
+    dn = np.array([[1.0], [-1.0]]) * n_w / seg_len  # ∂n/∂ρ = dn · τ
+    sigma = 1.4826 * float(np.median(np.abs(e) / np.sqrt(n_ru**2 + (de**2).sum(axis=0))))
+    # Only the kept pairs enter H and ∂g/∂z.
+    jac, e, n_ru, n_dru, rq = jac[kept], e[kept], n_ru[kept], n_dru[kept], rq[kept]
+    tau, n, tau_drq, de, dn = tau[kept], n[kept], tau_drq[kept], de[:, kept], dn[:, kept]
+    h = 2.0 * (jac.T @ jac)
+    h[2, 2] -= 2.0 * float(e @ np.einsum("ij,ij->i", n, rq))  # ∂²e/∂θ² = -nᵀ R q
     g_cur = 2.0 * n_ru[:, None] * jac
-    g_cur[:, 2] += 2.0 * e * np.einsum("ij,ij->i", n, u @ drot_t)
-    g_cur *= wk[:, None]
-    # Reference ranges of both segment ends, summed over the correspondences that share them.
-    g_ref = np.zeros((n_reference, 3))
-    coef = np.zeros(m)
-    for ends, index, weight, sign in (
-        (ref_a, index_a, 1.0 - s_along, 1.0),
-        (ref_b, index_b, s_along, -1.0),
-    ):
-        w = ends / np.hypot(ends[:, 0], ends[:, 1])[:, None]
-        n_w = np.einsum("ij,ij->i", n, w)
-        dn = sign * tau * (n_w / seg_len)[:, None]
-        g = -2.0 * (weight * n_w)[:, None] * jac
-        g[:, :2] += 2.0 * e[:, None] * dn
-        g[:, 2] += 2.0 * e * np.einsum("ij,ij->i", dn, drq)
-        g *= wk[:, None]
-        for col in range(3):  # Σ over the correspondences that share a reference point
-            g_ref[:, col] += np.bincount(index, g[:, col], minlength=n_reference)
-        coef += (weight * n_w) ** 2
-    sigma = 1.4826 * float(np.median(np.abs(e) / np.sqrt(n_ru**2 + coef)))
-    return _sandwich(h, np.vstack([g_cur, g_ref]), sigma * sigma)
+    g_cur[:, 2] += 2.0 * e * n_dru
+    g_end = -2.0 * de[:, :, None] * jac[None]  # (2, m, 3)
+    e_dn = 2.0 * e * dn
+    g_end[:, :, :2] += e_dn[:, :, None] * tau[None]
+    g_end[:, :, 2] += e_dn * tau_drq
+    index = np.concatenate([index_a[kept], index_b[kept]])
+    flat = g_end.reshape(-1, 3)
+    g_ref = np.column_stack(
+        [np.bincount(index, flat[:, c], minlength=n_reference) for c in range(3)]
+    )  # Σ over the correspondences that share a reference point
+    return _sandwich(h, g_cur.T @ g_cur + g_ref.T @ g_ref, sigma * sigma)
 
 
 def normal_distance_covariance(

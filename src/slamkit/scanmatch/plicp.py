@@ -255,6 +255,8 @@ def plicp(
     table[1:m_ref, 4:6][joined] = ref.segment_normals[joined]
     table[: m_ref - 1, 6:8][joined] = ref.segment_normals[joined]
     table[:m_ref, 8:10] = P
+    twice = np.array([[1.0, 0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 1.0]])  # q' -> (q', q')
+    pair_sum = np.array([[1.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.0, 1.0]])
     tx, ty, th = float(x0[0]), float(x0[1]), float(x0[2])
     seen: set[bytes] = set()  # every correspondence set met so far
     converged = False
@@ -267,11 +269,13 @@ def plicp(
         moved = q @ np.array([[c, s], [-s, c]])  # rows R q_i
         moved += (tx, ty)
         _, j1 = ref.tree.query(moved, k=1, distance_upper_bound=cfg.max_correspondence_distance)
-        rows = table[j1]
-        d = rows[:, 0:4].reshape(n_cur, 2, 2) - moved[:, None, :]
-        d2 = np.einsum("ijk,ijk->ij", d, d)  # squared distances to the prev, next point
-        use_next = d2[:, 1] < d2[:, 0]
-        valid = d2.min(axis=1) < far  # j1 found and joined to a neighbour
+        rows = table.take(j1, axis=0)
+        d = rows[:, 0:4] - moved @ twice  # (prev - q', next - q')
+        d *= d
+        d2 = d @ pair_sum  # squared distances to the prev, next point
+        d_prev, d_next = d2[:, 0], d2[:, 1]
+        use_next = d_next < d_prev
+        valid = np.minimum(d_prev, d_next) < far  # j1 found and joined to a neighbour
         a = rows[:, 8:10]
         normals = np.where(use_next[:, None], rows[:, 6:8], rows[:, 4:6])
         err = np.abs(np.einsum("ij,ij->i", normals, moved - a))
