@@ -1,5 +1,5 @@
-"""The error model shared by the ICP matchers: reference normals, the Gauss-Newton Hessian of
-the point-to-line error, the pose covariance and the degeneracy test.
+"""The error model shared by the ICP matchers: reference normals, the Jacobian of the normal
+distances, the pose covariances and the degeneracy test.
 
 **The final least-squares problem.** At the solution ``x = (t_x, t_y, θ)`` every kept
 correspondence ``i`` pairs a current point ``q_i`` (current sensor frame) with a reference
@@ -9,21 +9,24 @@ normal distance ``e_i(x) = n_iᵀ (R(θ) q_i + t - p_i)``, and its Jacobian is
     J_i = ∂e_i/∂x = [n_x, n_y, n_iᵀ R'(θ) q_i],   R'(θ) q = (-sin θ q_x - cos θ q_y,
                                                           cos θ q_x - sin θ q_y).
 
-The Hessian of ``½ Σ e_i²`` is ``H = Σ J_iᵀ J_i`` (Gauss-Newton, exact at the optimum for
-linear residuals).
+The Gauss-Newton Hessian of ``½ Σ e_i²`` is ``H = Σ J_iᵀ J_i``.
 
-**Covariance** (Hessian method, *not* Censi's ICRA 2007 closed form, which also propagates
-the noise of every reading through ``∂²J/∂z∂x``): if every residual carries independent noise
-of variance ``σ²``, the least-squares estimate has covariance ``σ² H⁻¹``; ``σ²`` is estimated
-from the residuals themselves, ``σ̂² = Σ e_i² / (m - 3)``. The residual already holds the noise
-of both scans (a current reading and the reference surface it lands on), so ``σ̂²`` is the
-combined variance. Correlations between residuals (neighbouring readings share a reference
-segment) and the choice of correspondences are ignored, which is why a test checks the
-estimate against the scatter of Monte-Carlo results.
+**Covariance.** Two estimates, both with the range noise ``σ`` estimated robustly from the
+residuals of all correspondences within range (``1.4826 × median``; the trimming would shrink
+a mean-square estimate, since it removes the largest residuals):
 
-The point-to-point matcher also uses this normal-distance model: its own Hessian ``Σ [I,
-R' q_i]ᵀ[I, R' q_i]`` treats the correspondences as fixed points and so reports a wall as
-constraining the motion *along* it, which it does not.
+* point-to-line (:func:`point_to_line_covariance`): Censi's closed form (ICRA 2007) — the
+  implicit function theorem on ``∂J/∂x = 0`` propagates the noise of every range of *both*
+  scans, including its effect on the reference lines' normals, which are only two noisy
+  points apart;
+* point-to-point (:func:`normal_distance_covariance`): ``σ̂² H⁻¹`` of the normal-distance
+  model above, with the normals of the reference surface. The point-to-point Hessian itself,
+  ``Σ [I, R' q_i]ᵀ[I, R' q_i]``, treats the paired points as fixed and so reports a wall as
+  constraining motion *along* it, which it does not. Neither holds the bias of point-to-point
+  matching (the two scans sample a wall at different places).
+
+The correspondences are taken as fixed in both, which is why tests check them against the
+scatter of Monte-Carlo results.
 
 **Degeneracy.** ``H`` mixes metres and radians, so the rotation column is divided by a length
 ``L`` (the RMS distance of the current points from the sensor) and ``H`` by the number of
@@ -51,7 +54,41 @@ __all__ = [
     "normalised_min_eigenvalue",
     "point_to_line_covariance",
     "require_constrained",
+    "scan_order_normals",
 ]
+
+
+def scan_order_normals(
+    points: FloatArray, window: int, max_spacing: float
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Unit normals ``(M, 2)`` of a scan (``points (M, 2)`` in scan order) by principal
+    components of the ``window`` points centred on each (odd, clipped at the ends of the
+    scan), and a mask ``(M,)`` of the points whose window has no spacing above
+    ``max_spacing`` [m] (no range discontinuity inside; the others get ``(0, 0)``).
+
+    Window sums of ``x, y, x², xy, y²`` come from prefix sums, so the cost is a few array
+    passes whatever the window; the scatter and the normal are as in :func:`estimate_normals`.
+    Coordinates are taken relative to the scan's centroid to keep the sums well conditioned.
+    """
+    m = points.shape[0]
+    k = min(int(window) | 1, m if m % 2 else m - 1)
+    if m < 3 or k < 3:
+        return np.zeros((m, 2)), np.zeros(m, dtype=bool)
+    rel = points - points.mean(axis=0)
+    x, y = rel[:, 0], rel[:, 1]
+    stacked = np.column_stack([x, y, x * x, x * y, y * y])
+    prefix = np.vstack([np.zeros((1, 5)), np.cumsum(stacked, axis=0)])
+    start = np.clip(np.arange(m) - k // 2, 0, m - k)
+    sums = (prefix[start + k] - prefix[start]) / k
+    sxx = sums[:, 2] - sums[:, 0] ** 2
+    sxy = sums[:, 3] - sums[:, 0] * sums[:, 1]
+    syy = sums[:, 4] - sums[:, 1] ** 2
+    phi = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
+    gaps = np.hypot(np.diff(x), np.diff(y))
+    too_far = np.concatenate([[0], np.cumsum(gaps > max_spacing)])
+    ok = (too_far[start + k - 1] - too_far[start]) == 0
+    normals = np.column_stack([-np.sin(phi), np.cos(phi)]) * ok[:, None]
+    return normals, ok
 
 
 def neighbour_table(points: FloatArray, tree: cKDTree | None, k: int) -> NDArray[np.intp]:
@@ -142,10 +179,11 @@ def _rotations(theta: float) -> tuple[FloatArray, FloatArray]:
     return np.array([[c, s], [-s, c]]), np.array([[-s, c], [-c, -s]])  # (R, R') transposed
 
 
-def _sandwich(h: FloatArray, grad_z: FloatArray, sigma2: float) -> FloatArray:
-    """``σ² H⁻¹ (Gᵀ G) H⁻¹`` for ``H (3, 3)`` and ``G (Z, 3)`` (rows ``∂g/∂z_k``)."""
-    h_inv = np.linalg.solve(h, np.eye(3))
-    cov = sigma2 * (h_inv @ (grad_z.T @ grad_z) @ h_inv.T)
+def _sandwich(h: FloatArray, gram: FloatArray, sigma2: float) -> FloatArray:
+    """``σ² H⁻¹ (Gᵀ G) H⁻¹`` for ``H (3, 3)`` and ``gram = Gᵀ G (3, 3)`` (``G`` with rows
+    ``∂g/∂z_k``)."""
+    h_inv = np.linalg.inv(h)  # 3×3, non-singular after the degeneracy test
+    cov = sigma2 * (h_inv @ gram @ h_inv.T)
     return 0.5 * (cov + cov.T)  # symmetric to rounding
 
 
@@ -188,44 +226,47 @@ def point_to_line_covariance(
     """
     tx, ty, th = float(pose[0]), float(pose[1]), float(pose[2])
     rot_t, drot_t = _rotations(th)
-    m = current.shape[0]
-    rq = current @ rot_t
-    y = rq + np.array([tx, ty])
-    drq = current @ drot_t  # R' q
+    both_rot = np.hstack([rot_t, drot_t])  # one product gives R q and R' q
+    rq_drq = current @ both_rot
+    rq, drq = rq_drq[:, :2], rq_drq[:, 2:]
     d = ref_b - ref_a
     seg_len = np.hypot(d[:, 0], d[:, 1])
     tau = d / seg_len[:, None]
-    n = np.column_stack([-tau[:, 1], tau[:, 0]])
-    rel = y - ref_a
+    n = tau @ np.array([[0.0, 1.0], [-1.0, 0.0]])  # τ turned by +90°
+    rel = rq + np.array([tx, ty]) - ref_a
     e = np.einsum("ij,ij->i", n, rel)
     s_along = np.einsum("ij,ij->i", tau, rel) / seg_len
-    jac = np.column_stack([n, np.einsum("ij,ij->i", n, drq)])
-    wk = kept.astype(np.float64)  # rows of dropped pairs get weight 0 in H and ∂g/∂z
-    h = 2.0 * ((jac * wk[:, None]).T @ jac)
-    h[2, 2] += 2.0 * float((wk * e) @ -np.einsum("ij,ij->i", n, rq))  # ∂²e/∂θ² = -nᵀ R q
-    # Current ranges.
+    n_drq = np.einsum("ij,ij->i", n, drq)
+    tau_drq = np.einsum("ij,ij->i", tau, drq)
+    jac = np.column_stack([n, n_drq])
+    # Current ranges: ∂e/∂r = nᵀ R u, ∂J/∂r = [0, 0, nᵀ R' u].
     u = current / np.hypot(current[:, 0], current[:, 1])[:, None]
-    n_ru = np.einsum("ij,ij->i", n, u @ rot_t)
+    ru_dru = u @ both_rot
+    n_ru = np.einsum("ij,ij->i", n, ru_dru[:, :2])
+    n_dru = np.einsum("ij,ij->i", n, ru_dru[:, 2:])
+    # Reference ranges of both segment ends at once (axis 0: a, b).
+    ends = np.stack([ref_a, ref_b])
+    n_w = np.einsum("ij,kij->ki", n, ends) / np.hypot(ends[..., 0], ends[..., 1])
+    de = np.stack([1.0 - s_along, s_along]) * n_w  # -∂e/∂ρ
+    dn = np.array([[1.0], [-1.0]]) * n_w / seg_len  # ∂n/∂ρ = dn · τ
+    sigma = 1.4826 * float(np.median(np.abs(e) / np.sqrt(n_ru**2 + (de**2).sum(axis=0))))
+    # Only the kept pairs enter H and ∂g/∂z.
+    jac, e, n_ru, n_dru, rq = jac[kept], e[kept], n_ru[kept], n_dru[kept], rq[kept]
+    tau, n, tau_drq, de, dn = tau[kept], n[kept], tau_drq[kept], de[:, kept], dn[:, kept]
+    h = 2.0 * (jac.T @ jac)
+    h[2, 2] -= 2.0 * float(e @ np.einsum("ij,ij->i", n, rq))  # ∂²e/∂θ² = -nᵀ R q
     g_cur = 2.0 * n_ru[:, None] * jac
-    g_cur[:, 2] += 2.0 * e * np.einsum("ij,ij->i", n, u @ drot_t)
-    g_cur *= wk[:, None]
-    # Reference ranges of both segment ends, summed over the correspondences that share them.
-    g_ref = np.zeros((n_reference, 3))
-    coef = np.zeros(m)
-    for ends, index, weight, sign in (
-        (ref_a, index_a, 1.0 - s_along, 1.0),
-        (ref_b, index_b, s_along, -1.0),
-    ):
-        w = ends / np.hypot(ends[:, 0], ends[:, 1])[:, None]
-        n_w = np.einsum("ij,ij->i", n, w)
-        dn = sign * tau * (n_w / seg_len)[:, None]
-        g = -2.0 * (weight * n_w)[:, None] * jac
-        g[:, :2] += 2.0 * e[:, None] * dn
-        g[:, 2] += 2.0 * e * np.einsum("ij,ij->i", dn, drq)
-        np.add.at(g_ref, index, g * wk[:, None])
-        coef += (weight * n_w) ** 2
-    sigma = 1.4826 * float(np.median(np.abs(e) / np.sqrt(n_ru**2 + coef)))
-    return _sandwich(h, np.vstack([g_cur, g_ref]), sigma * sigma)
+    g_cur[:, 2] += 2.0 * e * n_dru
+    g_end = -2.0 * de[:, :, None] * jac[None]  # (2, m, 3)
+    e_dn = 2.0 * e * dn
+    g_end[:, :, :2] += e_dn[:, :, None] * tau[None]
+    g_end[:, :, 2] += e_dn * tau_drq
+    index = np.concatenate([index_a[kept], index_b[kept]])
+    flat = g_end.reshape(-1, 3)
+    g_ref = np.column_stack(
+        [np.bincount(index, flat[:, c], minlength=n_reference) for c in range(3)]
+    )  # Σ over the correspondences that share a reference point
+    return _sandwich(h, g_cur.T @ g_cur + g_ref.T @ g_ref, sigma * sigma)
 
 
 def normal_distance_covariance(

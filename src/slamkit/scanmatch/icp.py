@@ -37,6 +37,7 @@ from slamkit.scanmatch.covariance import (
     neighbour_table,
     normal_distance_covariance,
     require_constrained,
+    scan_order_normals,
 )
 from slamkit.scanmatch.result import MatchResult, require_points
 
@@ -87,9 +88,10 @@ def prepare_scan(
     normal_radius: float = 0.5,
 ) -> PreparedScan:
     """A :class:`PreparedScan` of reference ``points (M, 2)`` [m] (copied): the KD-tree, the
-    scan-order gaps and segment normals, and point normals from ``normal_neighbours`` points
-    within ``normal_radius`` [m] — the points centred on each in scan order when ``ordered``
-    (a scan), else its nearest neighbours (any point cloud). Fewer than 3 points raise
+    scan-order gaps and segment normals, and point normals by principal components of
+    ``normal_neighbours`` points: when ``ordered`` (a scan) the points centred on each in scan
+    order, no consecutive two more than ``normal_radius`` [m] apart; else (any point cloud)
+    its nearest neighbours within ``normal_radius``. Fewer than 3 points raise
     ``MatchError("too_few_points")``."""
     pts = require_points(
         as_array(points, "reference points", (None, 2)), MIN_REFERENCE_POINTS, "reference"
@@ -100,8 +102,11 @@ def prepare_scan(
         raise ConfigError(f"normal_radius: expected a finite number > 0 [m], got {normal_radius!r}")
     pts.flags.writeable = False
     tree = cKDTree(pts, leafsize=8)
-    table = neighbour_table(pts, None if ordered else tree, int(normal_neighbours))
-    normals, ok = estimate_normals(pts, table, float(normal_radius))
+    if ordered:
+        normals, ok = scan_order_normals(pts, int(normal_neighbours), float(normal_radius))
+    else:
+        table = neighbour_table(pts, tree, int(normal_neighbours))
+        normals, ok = estimate_normals(pts, table, float(normal_radius))
     tangent = np.diff(pts, axis=0)
     gaps = np.hypot(tangent[:, 0], tangent[:, 1])
     inv = np.divide(1.0, gaps, out=np.zeros_like(gaps), where=gaps > 0.0)
@@ -129,7 +134,8 @@ class IcpConfig:
       estimate by less than both (defaults 1e-4 m, 1e-4 rad);
     * ``min_eigenvalue``: raise ``MatchError("degenerate")`` when the smallest eigenvalue of the
       normalised normal-distance Hessian (:mod:`slamkit.scanmatch.covariance`; dimensionless,
-      at most 2) is below this, both at the initial guess and at the solution (default 0.01).
+      at most 2) is below this at the solution, or below half of it at the initial guess (a
+      corridor is caught before the estimate drifts along it) (default 0.01).
     """
 
     max_iterations: int = 100
@@ -240,7 +246,7 @@ def icp(
         if it == 1:
             has = keep & ref.has_normal[np.where(keep, j, 0)]
             jac = line_jacobian(q[has], ref.normals[j[has]], th)
-            require_constrained(jac, q[has], cfg.min_eigenvalue, "icp")
+            require_constrained(jac, q[has], 0.5 * cfg.min_eigenvalue, "icp")
         stamp = jk.tobytes()
         if stamp in seen:
             converged = True  # pairs met before: the steps would repeat (a cycle)

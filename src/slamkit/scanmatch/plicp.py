@@ -227,7 +227,8 @@ def plicp(
 
     Returns a :class:`~slamkit.scanmatch.MatchResult` (``method="plicp"``; ``score`` and
     ``inlier_fraction`` are the fraction of current points kept at the end; the covariance is
-    ``σ̂² H⁻¹`` of the final point-to-line problem, :mod:`slamkit.scanmatch.covariance`).
+    Censi's implicit-function estimate for the final point-to-line problem, the range noise
+    estimated from the residuals: :func:`slamkit.scanmatch.covariance.point_to_line_covariance`).
     Raises ``MatchError`` with reason ``"too_few_points"``, ``"too_few_correspondences"``,
     ``"degenerate"`` or ``"no_convergence"``; ``ShapeError``/``NonFiniteError`` for
     malformed arrays.
@@ -254,6 +255,8 @@ def plicp(
     table[1:m_ref, 4:6][joined] = ref.segment_normals[joined]
     table[: m_ref - 1, 6:8][joined] = ref.segment_normals[joined]
     table[:m_ref, 8:10] = P
+    twice = np.array([[1.0, 0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 1.0]])  # q' -> (q', q')
+    pair_sum = np.array([[1.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.0, 1.0]])
     tx, ty, th = float(x0[0]), float(x0[1]), float(x0[2])
     seen: set[bytes] = set()  # every correspondence set met so far
     converged = False
@@ -266,11 +269,13 @@ def plicp(
         moved = q @ np.array([[c, s], [-s, c]])  # rows R q_i
         moved += (tx, ty)
         _, j1 = ref.tree.query(moved, k=1, distance_upper_bound=cfg.max_correspondence_distance)
-        rows = table[j1]
-        d = rows[:, 0:4].reshape(n_cur, 2, 2) - moved[:, None, :]
-        d2 = np.einsum("ijk,ijk->ij", d, d)  # squared distances to the prev, next point
-        use_next = d2[:, 1] < d2[:, 0]
-        valid = d2.min(axis=1) < far  # j1 found and joined to a neighbour
+        rows = table.take(j1, axis=0)
+        d = rows[:, 0:4] - moved @ twice  # (prev - q', next - q')
+        d *= d
+        d2 = d @ pair_sum  # squared distances to the prev, next point
+        d_prev, d_next = d2[:, 0], d2[:, 1]
+        use_next = d_next < d_prev
+        valid = np.minimum(d_prev, d_next) < far  # j1 found and joined to a neighbour
         a = rows[:, 8:10]
         normals = np.where(use_next[:, None], rows[:, 6:8], rows[:, 4:6])
         err = np.abs(np.einsum("ij,ij->i", normals, moved - a))
@@ -298,7 +303,7 @@ def plicp(
         if it == 1:
             has = ref.has_normal[np.minimum(j1, m_ref - 1)] & keep
             jac = line_jacobian(q[has], ref.normals[j1[has]], th)
-            require_constrained(jac, q[has], cfg.min_eigenvalue, "plicp")
+            require_constrained(jac, q[has], 0.5 * cfg.min_eigenvalue, "plicp")
         stamp = j1.tobytes() + use_next.tobytes() + keep.tobytes()
         if stamp in seen:
             converged = True  # pairs met before: the steps would repeat (a cycle)
