@@ -57,7 +57,10 @@ from slamkit.scanmatch.plicp import PlIcpConfig, plicp
 from slamkit.scanmatch.point_map import PointMap
 from slamkit.scanmatch.result import MatchResult, scan_points
 
-__all__ = ["LaserOdometry", "LaserOdometryConfig", "MapSettings"]
+__all__ = ["PRIOR_FLOOR", "LaserOdometry", "LaserOdometryConfig", "MapSettings"]
+
+PRIOR_FLOOR = np.diag([1e-6, 1e-6, 1e-8])
+"""Added to the prior covariance before it is inverted [m², m², rad²]: 1 mm and 0.1 mrad."""
 
 
 @dataclass(frozen=True)
@@ -104,6 +107,13 @@ class LaserOdometryConfig(Section):
     """Readings at or below this [m] are dropped (a laser's minimum range, dust, the robot)."""
     max_range: float | None = None
     """Readings at or beyond this [m] are dropped; None: the laser's max range."""
+    odometry_prior: bool = True
+    """Map reference: match with the odometry's prediction as a prior (its covariance
+    propagated from the data set's control noise since the last match), so that where the
+    map leaves a direction unconstrained (a corridor) the prediction holds it; False: the
+    match alone, and degenerate matches are refused (the prediction is kept)."""
+    motion_cov_scale: float = setting(1.0, finite_above(0.0), "a finite number > 0")
+    """Multiplies the data set's control-noise covariance in that prior."""
     mounting: tuple[float, float, float] | None = None
     """The laser's pose in the robot frame (x [m], y [m], yaw [rad]); None: the data set's
     (:attr:`~slamkit.datasets.LaserSpec.mounting`, else the robot's origin)."""
@@ -142,7 +152,8 @@ class LaserOdometry(EstimatorShell):
         self._mounting = np.asarray(mounting, dtype=np.float64)
         start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
         self._pose: FloatArray = np.array(start, dtype=np.float64)
-        self._odometry: FloatArray = self._pose.copy()  # dead reckoning from the start
+        self._cov: FloatArray = np.zeros((3, 3))  # of the pose relative to the map
+        self._Q = config.motion_cov_scale * dataset.motion.noise_cov
         self._key: _Keyframe | None = None
         self._points = PointMap(config.voxel) if config.reference == "map" else None
         self._local: NormalCloud | None = None  # the map around the last keyframe
@@ -160,12 +171,14 @@ class LaserOdometry(EstimatorShell):
     # -- the Estimator protocol ---------------------------------------------------------
 
     def on_control(self, u: FloatArray, dt: float) -> None:
-        # Between scans the wheels move the estimate: T ← T ⊕ (o_prev⁻¹ ⊕ o_now).
-        moved = np.asarray(self._model.apply(self._odometry, u, dt), dtype=np.float64)
+        # Between scans the wheels move the estimate, x ← g(x, u), and its uncertainty
+        # relative to the map, Σ ← G Σ Gᵀ + V Q Vᵀ (the prior of the next match).
+        moved = np.asarray(self._model.apply(self._pose, u, dt), dtype=np.float64)
         if not np.isfinite(moved).all():
             raise ConvergenceError(f"the control {u} over {dt} s moved the pose to {moved}")
-        self._pose = compose(self._pose, between(self._odometry, moved))
-        self._odometry = moved
+        G, V = self._model.jacobians(self._pose, u, dt)
+        self._cov = G @ self._cov @ G.T + V @ self._Q @ V.T
+        self._pose = moved
 
     def on_scan(self, event: LaserScan) -> None:
         self._counts["scans"] += 1
@@ -187,6 +200,8 @@ class LaserOdometry(EstimatorShell):
         if result is not None:
             self._pose = compose(frame, result.pose)
             overlap = result.inlier_fraction
+            if self._local is not None:
+                self._cov = result.cov
         travelled = between(key.pose, self._pose)
         if (
             math.hypot(travelled[0], travelled[1]) >= cfg.keyframe_distance
@@ -227,7 +242,12 @@ class LaserOdometry(EstimatorShell):
         cfg = self._cfg
         try:
             if isinstance(reference, NormalCloud):
-                result = normal_icp(reference, points, prior, cfg.normal_icp)
+                info = None
+                if cfg.odometry_prior:  # (Σ + a floor)⁻¹: a pose that has not moved is
+                    info = np.linalg.inv(self._cov + PRIOR_FLOOR)  # still known only so well
+                result = normal_icp(
+                    reference, points, prior, cfg.normal_icp, prior_information=info
+                )
             elif cfg.matcher == "plicp":
                 result = plicp(reference, points, prior, cfg.plicp)
             else:

@@ -35,7 +35,7 @@ from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
 from slamkit._validation import FloatArray, as_array
-from slamkit.errors import ConfigError, MatchError
+from slamkit.errors import ConfigError, CovarianceError, MatchError
 from slamkit.scanmatch.covariance import line_jacobian, require_constrained
 from slamkit.scanmatch.result import MatchResult, require_points
 
@@ -69,7 +69,11 @@ class NormalIcpConfig:
     * ``translation_tolerance`` [m], ``rotation_tolerance`` [rad]: stop when a step is
       smaller than both (1e-4, 1e-4);
     * ``min_eigenvalue``: the degeneracy threshold of
-      :func:`~slamkit.scanmatch.covariance.require_constrained` (0.01).
+      :func:`~slamkit.scanmatch.covariance.require_constrained` (0.01; not applied with a
+      prior);
+    * ``noise_floor`` [m]: the least robust residual scale ``σ̂`` (0.005): a map point laid
+      down from a scan with its own noise is never exactly on the surface, and without a
+      floor a near-perfect fit would claim an information without bound.
     """
 
     max_iterations: int = 30
@@ -80,6 +84,7 @@ class NormalIcpConfig:
     translation_tolerance: float = 1e-4
     rotation_tolerance: float = 1e-4
     min_eigenvalue: float = 0.01
+    noise_floor: float = 0.005
 
     def __post_init__(self) -> None:
         for name in ("max_iterations", "min_correspondences", "min_points"):
@@ -87,6 +92,7 @@ class NormalIcpConfig:
             if not (isinstance(v, int) and not isinstance(v, bool) and v >= 1):
                 raise ConfigError(f"NormalIcpConfig.{name}: expected an integer >= 1, got {v!r}")
         for name in (
+            "noise_floor",
             "max_correspondence_distance",
             "huber_k",
             "translation_tolerance",
@@ -109,6 +115,8 @@ def normal_icp(
     current: ArrayLike,
     initial: ArrayLike = (0.0, 0.0, 0.0),
     config: NormalIcpConfig | None = None,
+    *,
+    prior_information: ArrayLike | None = None,
 ) -> MatchResult:
     """Register ``current (K, 2)`` points (sensor frame, metres) to the map ``reference`` (a
     :class:`NormalCloud`, e.g. :meth:`slamkit.scanmatch.point_map.PointMap.near`) from
@@ -118,10 +126,23 @@ def normal_icp(
     ``inlier_fraction``: the fraction of current points paired at the end). Raises
     ``MatchError`` (``"too_few_points"``, ``"too_few_correspondences"``, ``"degenerate"``,
     ``"no_convergence"``), ``ShapeError``/``NonFiniteError`` for malformed arrays.
+
+    ``prior_information (3, 3)``: the information (inverse covariance) of ``initial`` as a
+    prior on the pose, e.g. from odometry. The steps then minimise the posterior
+    ``Σ w e² / σ̂² + (x − x₀)ᵀ Λ (x − x₀)``, so a direction the map leaves unconstrained (a
+    corridor) keeps the prior instead of sliding, no match is refused as degenerate, and
+    the covariance returned is the posterior's ``(H/σ̂² + Λ)⁻¹``.
     """
     cfg = NormalIcpConfig() if config is None else config
     q = require_points(as_array(current, "current points", (None, 2)), cfg.min_points, "current")
     x0 = as_array(initial, "initial pose", (3,))
+    lam = None
+    if prior_information is not None:
+        lam = as_array(prior_information, "prior information", (3, 3))
+        if not np.allclose(lam, lam.T) or np.linalg.eigvalsh(0.5 * (lam + lam.T))[0] < 0:
+            raise CovarianceError(
+                "prior information: expected a symmetric positive semi-definite 3x3 matrix"
+            )
     P, normals = reference.points, reference.normals
     m_ref = P.shape[0]
     tx, ty, th = float(x0[0]), float(x0[1]), float(x0[2])
@@ -158,13 +179,17 @@ def normal_icp(
         nk = normals[jk]
         e = np.einsum("ij,ij->i", nk, moved[ok] - P[jk])
         jac = line_jacobian(qk, nk, th)
-        if it == 1:
+        if it == 1 and lam is None:
             require_constrained(jac, qk, cfg.min_eigenvalue, "normal-icp")
-        sigma = max(1.4826 * float(np.median(np.abs(e))), 1e-9)
+        sigma = max(1.4826 * float(np.median(np.abs(e))), cfg.noise_floor)
         w = np.minimum(1.0, cfg.huber_k * sigma / np.maximum(np.abs(e), 1e-300))
         jw = jac * w[:, None]
         h = jw.T @ jac
         g = jw.T @ e
+        if lam is not None:  # the prior, in the same units: divide the data term by σ̂²
+            dx = np.array([tx - x0[0], ty - x0[1], math.remainder(th - x0[2], 2.0 * math.pi)])
+            h = h / (sigma * sigma) + lam
+            g = g / (sigma * sigma) + lam @ dx
         try:
             delta = -np.linalg.solve(h, g)
         except np.linalg.LinAlgError:
@@ -183,10 +208,12 @@ def normal_icp(
             f"normal-icp: no convergence within {cfg.max_iterations} iterations",
             "no_convergence",
         )
-    require_constrained(jac, qk, cfg.min_eigenvalue, "normal-icp")
     jw = jac * w[:, None]
-    h = jw.T @ jac
-    cov = sigma * sigma * np.linalg.solve(h, np.eye(3))
+    if lam is None:
+        require_constrained(jac, qk, cfg.min_eigenvalue, "normal-icp")
+        cov = sigma * sigma * np.linalg.solve(jw.T @ jac, np.eye(3))
+    else:
+        cov = np.linalg.solve((jw.T @ jac) / (sigma * sigma) + lam, np.eye(3))
     cov = 0.5 * (cov + cov.T)
     frac = n_pairs / q.shape[0]
     pose = np.array([tx, ty, math.remainder(th, 2.0 * math.pi)])
