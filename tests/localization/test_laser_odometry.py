@@ -65,3 +65,31 @@ def test_needs_a_laser_and_odometry_and_validates_its_settings() -> None:
         LaserOdometryConfig, {"plicp": {"max_gap": 0.3}, "map": {"resolution": 0.1}}
     )
     assert cfg.plicp.max_gap == 0.3 and cfg.map.resolution == 0.1
+
+
+@pytest.mark.realdata
+@pytest.mark.slow
+def test_aces_relations_beat_the_raw_odometry_and_the_published_scan_matcher(data_root) -> None:
+    """The raw ACES log (7,374 scans): laser odometry with the default settings against the
+    benchmark's 1,279 relations. Measured: 0.106 ± 0.345 m and 0.5 ± 0.8° over all relations,
+    where the raw odometry scores 0.55 ± 2.68 m and the published scan matcher 0.173 ± 0.614 m
+    (Kümmerle et al. 2009). Relations of 3 s or less: 4.0 cm against the odometry's 3.3 cm —
+    matching against the map of the first visit pulls a scan back onto it when the robot
+    returns, a jump that the long relations gain from and the short ones pay for (a graph
+    with loop closures removes the need)."""
+    pytest.importorskip("rosbags", reason="the laser extra (rosbags) is not installed")
+    from slamkit.eval.relations import relation_errors, select_relations
+
+    if not (data_root / "laser/rosbags/aces.bag").exists():
+        pytest.skip(f"laser/rosbags/aces.bag not under {data_root}")
+    data = load_dataset("aces-raw", data_root=data_root)
+    result = run("laser-odometry", data, seed=0)
+    rel = data.truth.relations
+    every = relation_errors(result.times, result.poses, rel)
+    short = relation_errors(result.times, result.poses, select_relations(rel, max_duration=3.0))
+    assert every.covered_fraction == 1.0
+    assert every.translation_mean < 0.173 and every.rotation_mean_deg < 1.0
+    assert short.translation_mean < 0.05
+    odometry = run("dead-reckoning", data, seed=0)
+    odo = relation_errors(odometry.times, odometry.poses, rel)
+    assert every.translation_mean < 0.3 * odo.translation_mean
