@@ -110,7 +110,7 @@ def test_run_table_metrics_and_plot_carry_the_relations(tmp_path, monkeypatch):
     from slamkit.datasets import Relations
     from slamkit.geometry.pose2 import between
 
-    load = jobs.load_dataset
+    load = jobs.load_data
 
     def with_relations(*args, **kwargs):
         ds = load(*args, **kwargs)
@@ -119,7 +119,7 @@ def test_run_table_metrics_and_plot_carry_the_relations(tmp_path, monkeypatch):
         rel = Relations(t[i], t[i + 20], between(x[i], x[i + 20]))
         return replace(ds, truth=replace(ds.truth, relations=rel))
 
-    monkeypatch.setattr(jobs, "load_dataset", with_relations)
+    monkeypatch.setattr(jobs, "load_data", with_relations)
     out = tmp_path / "dr"
     res = runner.invoke(
         app, ["run", "dead-reckoning", "--data", "five-features", "--seed", "3", "--out", str(out)]
