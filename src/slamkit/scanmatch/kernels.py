@@ -54,11 +54,13 @@ __all__ = [
     "TOO_FEW",
     "enabled",
     "ieee_remainder",
+    "min_eigenvalue_sym3",
     "nearest_points",
     "plicp_loop",
     "point_to_line_cov",
     "root_of_multiplier",
     "scan_tables",
+    "select_kth",
     "use_numpy",
     "writable",
 ]
@@ -250,6 +252,129 @@ def scan_tables(
 
 
 @_jit
+def select_kth(a: FloatArray, k: int) -> float:
+    """The ``k``-th smallest entry of ``a`` (0-based; ``np.sort(a)[k]``), by quickselect
+    (Hoare partitions around a median of three): ``a`` is permuted so that ``a[:k] <= a[k] <=
+    a[k + 1:]``. Expected time linear, no sort needed for an order statistic."""
+    lo, hi = 0, a.shape[0] - 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if a[mid] < a[lo]:
+            a[mid], a[lo] = a[lo], a[mid]
+        if a[hi] < a[lo]:
+            a[hi], a[lo] = a[lo], a[hi]
+        if a[hi] < a[mid]:
+            a[hi], a[mid] = a[mid], a[hi]
+        pivot = a[mid]
+        i, j = lo, hi
+        while i <= j:
+            while a[i] < pivot:
+                i += 1
+            while a[j] > pivot:
+                j -= 1
+            if i <= j:
+                a[i], a[j] = a[j], a[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break  # a[j + 1 : i] all equal the pivot
+    return a[k]
+
+
+@_jit
+def _sift_down(keys: FloatArray, idx: np.ndarray, root: int, end: int) -> None:
+    while True:
+        child = 2 * root + 1
+        if child >= end:
+            return
+        if child + 1 < end and keys[idx[child + 1]] > keys[idx[child]]:
+            child += 1
+        if keys[idx[child]] <= keys[idx[root]]:
+            return
+        idx[root], idx[child] = idx[child], idx[root]
+        root = child
+
+
+@_jit
+def _argsort(keys: FloatArray) -> np.ndarray:
+    """Indices that sort ``keys`` (ties in any order). A scan's bearings are sorted already,
+    or a rotation of sorted ones (a full turn starting anywhere): found in one pass; anything
+    else is heap-sorted."""
+    m = keys.shape[0]
+    descents, at = 0, 0
+    for j in range(1, m):
+        if keys[j] < keys[j - 1]:
+            descents += 1
+            at = j
+    idx = np.empty(m, dtype=np.int64)
+    if descents == 0 or (descents == 1 and keys[m - 1] <= keys[0]):
+        for k in range(m):
+            idx[k] = (at + k) % m
+        return idx
+    for k in range(m):
+        idx[k] = k
+    for root in range(m // 2 - 1, -1, -1):
+        _sift_down(keys, idx, root, m)
+    for end in range(m - 1, 0, -1):
+        idx[0], idx[end] = idx[end], idx[0]
+        _sift_down(keys, idx, 0, end)
+    return idx
+
+
+@_jit
+def _count_below(ascending: FloatArray, value: float) -> int:
+    """How many entries of ``ascending`` are below ``value`` (bisection;
+    ``np.searchsorted(ascending, value, side="left")``)."""
+    lo, hi = 0, ascending.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if ascending[mid] < value:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@_jit
+def min_eigenvalue_sym3(h: FloatArray) -> float:
+    """The smallest eigenvalue of a symmetric ``h (3, 3)`` by cyclic Jacobi rotations (each
+    zeroes one off-diagonal entry; convergence is quadratic, a few sweeps), accurate to
+    rounding of ``|h|`` like ``np.linalg.eigvalsh(h)[0]``."""
+    a = h.copy()
+    scale = 0.0
+    for r in range(3):
+        for c in range(3):
+            scale += a[r, c] * a[r, c]
+    for _ in range(30):
+        off = a[0, 1] ** 2 + a[0, 2] ** 2 + a[1, 2] ** 2
+        if off <= 1e-34 * scale:
+            break
+        for p, q in ((0, 1), (0, 2), (1, 2)):
+            apq = a[p, q]
+            if apq == 0.0:
+                continue
+            theta = (a[q, q] - a[p, p]) / (2.0 * apq)
+            if abs(theta) > 1e150:
+                t = 0.5 / theta
+            else:
+                t = math.copysign(1.0, theta) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+            c = 1.0 / math.sqrt(t * t + 1.0)
+            s = t * c
+            a[p, p] -= t * apq
+            a[q, q] += t * apq
+            a[p, q] = a[q, p] = 0.0
+            r = 3 - p - q  # the third index
+            arp, arq = a[r, p], a[r, q]
+            a[r, p] = a[p, r] = c * arp - s * arq
+            a[r, q] = a[q, r] = s * arp + c * arq
+    return min(a[0, 0], a[1, 1], a[2, 2])
+
+
+@_jit
 def _pseudo_bearing(x: float, y: float) -> float:
     """A cheap strictly increasing function of ``atan2(y, x)``, in ``(-2, 2]`` (0 at the
     origin): ``±(1 - x / (|x| + |y|))`` with the sign of ``y``. Sorting by it is sorting by
@@ -270,7 +395,7 @@ def _bearing_index(points: FloatArray) -> tuple[np.ndarray, FloatArray, FloatArr
     ang = np.empty(m)
     for j in range(m):
         ang[j] = _pseudo_bearing(points[j, 0], points[j, 1])
-    order = np.argsort(ang, kind="mergesort")
+    order = _argsort(ang)
     key = ang[order]
     table = np.empty((m, 4))
     for k in range(m):
@@ -315,7 +440,7 @@ def _nearest(
     best_d = math.sqrt(best_d2)
     rq = math.sqrt(x * x + y * y)
     margin = 1e-9 * (1.0 + rq)  # rounding of the bound, far above it, far below any spacing
-    start = np.searchsorted(key, _pseudo_bearing(x, y))
+    start = _count_below(key, _pseudo_bearing(x, y))
     for side in range(2):  # up: increasing bearings from φ_q; down: decreasing
         for step in range(m):
             k = start + step if side == 0 else start - 1 - step
@@ -331,7 +456,7 @@ def _nearest(
             dy = y - table[k, 1]
             d2 = dx * dx + dy * dy
             j = order[k]
-            if d2 < best_d2 or (d2 == best_d2 and j < best_j):
+            if d2 < best_d2 or (d2 == best_d2 and j < best_j < m):  # strict at the bound
                 best_d2, best_j = d2, j
                 best_d = math.sqrt(d2)
     return best_j
@@ -370,18 +495,20 @@ def nearest_points(points: FloatArray, queries: FloatArray, max_distance: float)
 def _min_eigenvalue(
     q: FloatArray,
     normals: FloatArray,
+    has_normal: np.ndarray,
     j1: np.ndarray,
-    use: np.ndarray,
+    keep: np.ndarray,
     theta: float,
 ) -> float:
     """Twin of ``normalised_min_eigenvalue(line_jacobian(q[use], normals[j1[use]], θ),
-    q[use])`` (:mod:`slamkit.scanmatch.covariance`)."""
+    q[use])`` (:mod:`slamkit.scanmatch.covariance`) for ``use = keep & has_normal[j1]``
+    (a kept pair has ``j1 < M``)."""
     c, s = np.cos(theta), np.sin(theta)
     h = np.zeros((3, 3))
     sq = 0.0
     count = 0
     for i in range(q.shape[0]):
-        if not use[i]:
+        if not (keep[i] and has_normal[j1[i]]):
             continue
         qx, qy = q[i, 0], q[i, 1]
         nx, ny = normals[j1[i], 0], normals[j1[i], 1]
@@ -402,7 +529,7 @@ def _min_eigenvalue(
     h[2, 2] *= inv_len * inv_len
     h[1, 0], h[2, 0], h[2, 1] = h[0, 1], h[0, 2], h[1, 2]
     h /= count
-    return float(np.linalg.eigvalsh(h)[0])
+    return min_eigenvalue_sym3(h)
 
 
 @_jit
@@ -442,6 +569,7 @@ def plicp_loop(
     valid = np.zeros(n, dtype=np.bool_)
     keep = np.zeros(n, dtype=np.bool_)
     err = np.empty(n)
+    work = np.empty(n)
     nrm = np.zeros((n, 2))
     n_keep = 0
     history = np.empty((max_iterations, n), dtype=np.int64)
@@ -487,15 +615,20 @@ def plicp_loop(
                 nrm[i, 0] = 0.0
                 nrm[i, 1] = 0.0
                 err[i] = np.inf
-        # Trimming by order statistics of one sorted copy (as the NumPy twin).
+        # Trimming by order statistics (the NumPy twin reads them from a sorted copy): the
+        # median of the valid errors (the invalid ones are +inf, above all), the adaptive
+        # limit, then the trim fraction of those within it.
         thr = -1.0
         if n_valid:
-            ranked = np.sort(err)
-            limit = max(outlier_multiplier * ranked[(n_valid - 1) // 2], outlier_floor)
-            n_lim = np.searchsorted(ranked, limit, side="right")
+            for i in range(n):
+                work[i] = err[i]
+            limit = max(outlier_multiplier * select_kth(work, (n_valid - 1) // 2), outlier_floor)
+            n_lim = 0
+            for i in range(n):
+                n_lim += err[i] <= limit
             n_t = math.ceil(trim_fraction * n_lim)
             if n_t:
-                thr = ranked[n_t - 1]
+                thr = select_kth(work, n_t - 1)
         n_keep = 0
         for i in range(n):
             keep[i] = err[i] <= thr
@@ -503,7 +636,7 @@ def plicp_loop(
         if n_keep < min_correspondences:
             return TOO_FEW, it, n_keep, np.array([tx, ty, th]), cov, 0.0
         if it == 1:
-            lam = _min_eigenvalue(q, normals, j1, keep & has_normal[np.minimum(j1, m - 1)], th)
+            lam = _min_eigenvalue(q, normals, has_normal, j1, keep, th)
             if lam < 0.5 * min_eigenvalue:
                 return DEGENERATE_START, it, n_keep, np.array([tx, ty, th]), cov, lam
         # A correspondence set met before: the steps would repeat (a cycle).
@@ -583,7 +716,7 @@ def plicp_loop(
         return NO_CONVERGENCE, it, n_keep, np.array([tx, ty, th]), cov, 0.0
     th = ieee_remainder(th, _TWO_PI)
     pose = np.array([tx, ty, th])
-    lam = _min_eigenvalue(q, normals, j1, keep & has_normal[np.minimum(j1, m - 1)], th)
+    lam = _min_eigenvalue(q, normals, has_normal, j1, keep, th)
     if lam < min_eigenvalue:
         return DEGENERATE_END, it, n_keep, pose, cov, lam
     # The covariance over the pairs with a segment (the segment ends j1 and j2 = j1 ± 1).
@@ -683,7 +816,16 @@ def point_to_line_cov(
             g_ref[idx, 0] += -2.0 * de * jac0 + e_dn * taux
             g_ref[idx, 1] += -2.0 * de * jac1 + e_dn * tauy
             g_ref[idx, 2] += -2.0 * de * jac2 + e_dn * tau_drq
-    sigma = 1.4826 * np.median(ratio)
+    mid = m // 2
+    upper = select_kth(ratio, mid)  # the median: the middle one, or the mean of the middle two
+    if m % 2:
+        median = upper
+    else:
+        lower = ratio[0]
+        for i in range(1, mid):
+            lower = max(lower, ratio[i])  # after the selection, ratio[:mid] <= upper
+        median = 0.5 * (lower + upper)
+    sigma = 1.4826 * median
     for j in range(n_reference):
         g0, g1, g2 = g_ref[j, 0], g_ref[j, 1], g_ref[j, 2]
         gram[0, 0] += g0 * g0
@@ -698,6 +840,23 @@ def point_to_line_cov(
         for b in range(a):
             h[a, b] = h[b, a]
             gram[a, b] = gram[b, a]
-    h_inv = np.linalg.inv(h)
-    cov = sigma * sigma * (h_inv @ gram @ h_inv.T)
-    return 0.5 * (cov + cov.T)
+    # H⁻¹ = adj(H) / det H (3×3, symmetric, non-singular after the degeneracy test).
+    inv = np.empty((3, 3))
+    inv[0, 0] = h[1, 1] * h[2, 2] - h[1, 2] * h[2, 1]
+    inv[0, 1] = h[0, 2] * h[2, 1] - h[0, 1] * h[2, 2]
+    inv[0, 2] = h[0, 1] * h[1, 2] - h[0, 2] * h[1, 1]
+    inv[1, 1] = h[0, 0] * h[2, 2] - h[0, 2] * h[2, 0]
+    inv[1, 2] = h[0, 2] * h[1, 0] - h[0, 0] * h[1, 2]
+    inv[2, 2] = h[0, 0] * h[1, 1] - h[0, 1] * h[1, 0]
+    inv[1, 0], inv[2, 0], inv[2, 1] = inv[0, 1], inv[0, 2], inv[1, 2]
+    det = h[0, 0] * inv[0, 0] + h[0, 1] * inv[1, 0] + h[0, 2] * inv[2, 0]
+    cov = np.empty((3, 3))
+    s2 = sigma * sigma / (det * det)
+    for a in range(3):  # σ² H⁻¹ G H⁻ᵀ, symmetric to rounding
+        for b in range(a, 3):
+            acc = 0.0
+            for k in range(3):
+                for l in range(3):
+                    acc += inv[a, k] * gram[k, l] * inv[b, l]
+            cov[a, b] = cov[b, a] = s2 * acc
+    return cov
