@@ -346,9 +346,9 @@ def min_eigenvalue_sym3(h: FloatArray) -> float:
     rounding of ``|h|`` like ``np.linalg.eigvalsh(h)[0]``."""
     a = h.copy()
     scale = 0.0
-    for r in range(3):
-        for c in range(3):
-            scale += a[r, c] * a[r, c]
+    for row in range(3):
+        for col in range(3):
+            scale += a[row, col] * a[row, col]
     for _ in range(30):
         off = a[0, 1] ** 2 + a[0, 2] ** 2 + a[1, 2] ** 2
         if off <= 1e-34 * scale:
