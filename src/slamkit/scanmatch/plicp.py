@@ -5,7 +5,8 @@ metric", ICRA 2008.
 :func:`~slamkit.scanmatch.scan_points` returns them): consecutive points are neighbours on a
 surface unless they are farther apart than ``max_gap`` (a range discontinuity: an edge, a door,
 dropped beams). Each current point, mapped by the estimate ``T`` into the reference frame as
-``q'_i``, takes its nearest reference point ``j1`` (KD-tree) and the closer of ``j1 - 1`` and
+``q'_i``, takes its nearest reference point ``j1`` (a KD-tree query; compiled, the exact
+search by bearing of :mod:`slamkit.scanmatch.kernels`) and the closer of ``j1 - 1`` and
 ``j1 + 1`` among those joined to ``j1`` by a segment no longer than ``max_gap``; ``j2``. Its
 error is the distance from ``q'_i`` to the line through ``p_j1`` and ``p_j2``,
 ``e_i = n_iᵀ (q'_i - p_j1)`` with ``n_i`` the unit normal of the segment. Pairs farther than
