@@ -18,7 +18,11 @@ Methods, all starting from the points of the two scans (trees, normals and any o
 are timed):
 
 * ``plicp``, ``icp``: :func:`slamkit.scanmatch.plicp`, :func:`slamkit.scanmatch.icp` with
-  their default configs (1 m correspondence distance);
+  their default configs (1 m correspondence distance); ``plicp`` runs the compiled kernels of
+  :mod:`slamkit.scanmatch.kernels` when numba is installed;
+* ``plicp-numpy``: the same PLICP with the kernels switched off
+  (:func:`slamkit.scanmatch.kernels.use_numpy`): the NumPy path, cKDTree queries, the same
+  answers to rounding;
 * ``numpy-icp``: point-to-point ICP written here in plain NumPy, brute-force nearest
   neighbours (a full distance matrix per iteration), the same trimming (best 90% within 1 m)
   and stopping rule (step below 1e-4 m and 1e-4 rad, at most 100 iterations);
@@ -32,7 +36,11 @@ are timed):
 Published anchor (not run here): Censi's C implementation of PLICP (CSM) reports 8.7 ms per
 180-beam match at 7.5 iterations on average (ICRA 2008).
 
-Run: ``OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/bench_scanmatch.py``.
+The compiled kernels are loaded (or compiled) by one warm-up match before any timing; the
+time of a cold compile is measured separately, in a child process with an empty numba cache.
+
+Run: ``OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 NUMBA_NUM_THREADS=1 python
+benchmarks/bench_scanmatch.py``.
 """
 
 from __future__ import annotations
@@ -40,6 +48,10 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import subprocess
+import sys
+import tempfile
+import textwrap
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -51,7 +63,7 @@ from slamkit.datasets import find_data_root, load_dataset
 from slamkit.datasets.stream import LaserScan
 from slamkit.errors import DataNotFoundError, MatchError
 from slamkit.geometry.pose2 import between, compose
-from slamkit.scanmatch import icp, plicp, scan_points
+from slamkit.scanmatch import icp, kernels, plicp, scan_points
 from slamkit.sim import random_scan_pairs, rooms_world
 
 try:  # Open3D is an optional peer: the benchmark runs without it
@@ -172,9 +184,15 @@ def open3d_p2plane(ref: np.ndarray, cur: np.ndarray, init: Pose) -> Pose:
 # --- the runs --------------------------------------------------------------------------------
 
 
+def plicp_numpy(ref: np.ndarray, cur: np.ndarray, init: Pose) -> Pose:
+    with kernels.use_numpy():
+        return plicp(ref, cur, init).pose
+
+
 def _methods() -> dict[str, Matcher]:
     methods: dict[str, Matcher] = {
         "plicp": lambda r, c, x: plicp(r, c, x).pose,
+        "plicp-numpy": plicp_numpy,
         "icp": lambda r, c, x: icp(r, c, x).pose,
         "numpy-icp": numpy_icp,
     }
@@ -224,12 +242,20 @@ def _run_all(
 def _iterations(pairs: list[Pair], inits: np.ndarray) -> dict[str, float]:
     out = {}
     for name, fn in (("plicp", plicp), ("icp", icp)):
+        # plicp-numpy takes the same iterations (the paths agree to rounding; a test checks)
         its = []
         for pair, init in zip(pairs, inits, strict=True):
             with contextlib.suppress(MatchError):
                 its.append(fn(pair.reference, pair.current, init).iterations)
         out[name] = float(np.mean(its)) if its else float("nan")
+    out["plicp-numpy"] = out["plicp"]
     return out
+
+
+def _version(package: str) -> str:
+    from importlib.metadata import version
+
+    return version(package)
 
 
 def _sim_pairs(n: int, seed: int) -> list[Pair]:
@@ -291,7 +317,7 @@ def _evaluate(
                 f"| {med_t:.2f} | {med_r:.3f} | {1e3 * t:.3f} "
                 f"| {its.get(name, float('nan')):.1f} |"
             )
-        for peer in ("icp", "numpy-icp", "open3d-p2p", "open3d-p2plane"):
+        for peer in ("plicp-numpy", "icp", "numpy-icp", "open3d-p2p", "open3d-p2plane"):
             if peer in times:
                 records.append(
                     Record(
@@ -306,7 +332,50 @@ def _evaluate(
     return rows, records, times_at_main
 
 
+_COMPILE_SCRIPT = textwrap.dedent(
+    """
+    import time
+    import numpy as np
+    from slamkit.scanmatch import kernels, plicp
+    a = np.linspace(-np.pi / 2, np.pi / 2, 180)
+    ref = np.column_stack([4.0 * np.cos(a), 3.0 + 0.5 * np.sin(3 * a)])
+    start = time.perf_counter()
+    plicp(ref, ref, (0.05, -0.03, 0.02))
+    print(kernels.enabled(), time.perf_counter() - start)
+    """
+)
+
+
+def _compile_seconds() -> tuple[float, float]:
+    """Seconds of the first match in a fresh process: with an empty numba cache (a cold
+    compile of every kernel) and then with the cache it wrote (loading only)."""
+    times = []
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        for _ in range(2):
+            out = subprocess.run(
+                [sys.executable, "-c", _COMPILE_SCRIPT],
+                capture_output=True,
+                text=True,
+                env=env,
+                check=True,
+            ).stdout.split()
+            times.append(float(out[1]) if out[0] == "True" else float("nan"))
+    return times[0], times[1]
+
+
+def _warm_up() -> float:
+    """Load (or compile) the kernels with one match, before anything is timed."""
+    pair = _sim_pairs(1, 99)[0]
+    start = time.perf_counter()
+    with contextlib.suppress(MatchError):
+        plicp(pair.reference, pair.current, pair.truth)
+    return time.perf_counter() - start
+
+
 def main(n_sim: int = 50, real_step: int = 2, repeats: int = 7, seed: int = 0) -> str:
+    cold, cached = _compile_seconds() if kernels.AVAILABLE else (float("nan"), float("nan"))
+    warm_up = _warm_up()
     load_before = os.getloadavg()[0]
     header = [
         "| pairs | initial offset | method | success | refused | returned wrong "
@@ -331,7 +400,20 @@ def main(n_sim: int = 50, real_step: int = 2, repeats: int = 7, seed: int = 0) -
         for name in sim_times
         if name != "plicp"
     )
-    env = {k: os.environ.get(k, "unset") for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+    env = {
+        k: os.environ.get(k, "unset")
+        for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")
+    }
+    if kernels.AVAILABLE:
+        numba_note = (
+            f"numba {_version('numba')}: plicp runs the compiled kernels, plicp-numpy the NumPy "
+            f"path. Compiling every kernel in a fresh process with an empty cache took "
+            f"{cold:.1f} s, loading them from the cache {cached:.2f} s (the first match of a "
+            f"process); the warm-up match of this run took {warm_up:.2f} s; none of it is in "
+            "the times above."
+        )
+    else:
+        numba_note = "numba absent: plicp and plicp-numpy both run the NumPy path."
     notes = "\n".join(
         [
             "Scan-to-scan matching, 180-beam scans. Success: no MatchError and within "
@@ -349,6 +431,7 @@ def main(n_sim: int = 50, real_step: int = 2, repeats: int = 7, seed: int = 0) -
             *rows,
             "",
             f"Simulated pairs at 0.3 m / 10° offset, time per match relative to plicp: {ratios}.",
+            numba_note,
             f"Real data: {real_note}.",
             "Published anchor, not run here: Censi's C implementation of PLICP (CSM), "
             "8.7 ms per 180-beam match at 7.5 iterations (ICRA 2008, on the hardware of the "

@@ -9,7 +9,7 @@ import pytest
 from slamkit.errors import ConfigError, MatchError, NonFiniteError, ShapeError
 from slamkit.geometry.angles import wrap_angle
 from slamkit.geometry.pose2 import between, compose, inverse_transform_points
-from slamkit.scanmatch import IcpConfig, icp, prepare_scan
+from slamkit.scanmatch import IcpConfig, icp, kernels, prepare_scan
 from slamkit.scanmatch.covariance import estimate_normals, neighbour_table
 from slamkit.scanmatch.icp import point_to_point_step
 from slamkit.sim import corridor_world, random_scan_pairs, rooms_world, simulated_scan_pair
@@ -98,6 +98,30 @@ def test_a_prepared_reference_gives_the_same_result_and_is_read_only():
     agree = np.abs(np.einsum("ij,ij->i", unordered.normals[::-1], ref.normals))
     assert np.median(agree) > 0.999
     assert np.mean(agree > 0.99) > 0.8
+
+
+def test_the_kd_tree_of_a_prepared_scan_is_built_once_and_finds_the_nearest_points():
+    pair = _pairs(1, seed=5)[0]
+    for ref in (prepare_scan(pair.reference), prepare_scan(pair.reference, ordered=False)):
+        assert ref.tree is ref.tree  # built on first use (or by the unordered normals), kept
+        queries = pair.reference[::7] + 0.01
+        dist, j = ref.tree.query(queries)
+        brute = np.linalg.norm(queries[:, None, :] - pair.reference[None], axis=2)
+        np.testing.assert_array_equal(j, np.argmin(brute, axis=1))
+        np.testing.assert_allclose(dist, brute.min(axis=1), rtol=1e-12)
+
+
+def test_prepared_scan_tables_are_the_same_with_and_without_the_kernels():
+    pair = _pairs(1, seed=6)[0]
+    a = prepare_scan(pair.reference)
+    with kernels.use_numpy():
+        b = prepare_scan(pair.reference)
+    np.testing.assert_array_equal(a.has_normal, b.has_normal)
+    for field in ("normals", "gaps", "segment_normals"):
+        np.testing.assert_allclose(getattr(a, field), getattr(b, field), rtol=0, atol=1e-12)
+    # ... and point-to-point ICP, which never uses the kernels, gives the same pose on both.
+    init = compose(pair.T_ref_cur, OFFSET)
+    np.testing.assert_allclose(icp(a, pair.current, init).pose, icp(b, pair.current, init).pose)
 
 
 def test_corridor_is_degenerate():

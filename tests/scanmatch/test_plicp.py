@@ -1,15 +1,25 @@
 """Point-to-line ICP: the closed-form step, recovery of known motions on simulated scans of
-the rooms world, the typed failures, and the covariance against Monte-Carlo scatter."""
+the rooms world, the typed failures, the covariance against Monte-Carlo scatter, and the
+compiled kernels (numba) against the NumPy path."""
 
 from __future__ import annotations
 
+import contextlib
+import json
+import math
+import os
+import subprocess
+import sys
+import textwrap
+
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from slamkit.errors import ConfigError, MatchError, NonFiniteError, ShapeError
 from slamkit.geometry.angles import wrap_angle
 from slamkit.geometry.pose2 import between, compose, inverse_transform_points
-from slamkit.scanmatch import PlIcpConfig, icp, plicp, prepare_scan
+from slamkit.scanmatch import PlIcpConfig, icp, kernels, plicp, prepare_scan
 from slamkit.scanmatch.plicp import lagrange_quartic, largest_real_root, point_to_line_step
 from slamkit.sim import corridor_world, random_scan_pairs, rooms_world, simulated_scan_pair
 
@@ -227,3 +237,233 @@ def test_covariance_matches_monte_carlo_scatter():
     assert 1.5 < nees.mean() < 6.0
     ratio = E.std(axis=0) / np.sqrt(np.diagonal(C.mean(axis=0)))
     assert np.all((ratio > 0.5) & (ratio < 2.0))
+
+
+# --- the compiled kernels (numba) against the NumPy path ---------------------------------------
+
+needs_numba = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
+
+
+def _both_paths(reference, current, init, config=None):
+    """``plicp`` through the kernels and through NumPy: per path the result or the reason."""
+    out = []
+    for numpy_only in (False, True):
+        with kernels.use_numpy() if numpy_only else contextlib.nullcontext():
+            assert kernels.enabled() is not numpy_only
+            try:
+                out.append(plicp(reference, current, init, config))
+            except MatchError as exc:
+                out.append(exc.reason)
+    return out
+
+
+def _assert_same(compiled, numpy_result):
+    if isinstance(numpy_result, str):
+        assert compiled == numpy_result
+        return
+    assert not isinstance(compiled, str), compiled
+    assert compiled.iterations == numpy_result.iterations
+    assert compiled.inlier_fraction == numpy_result.inlier_fraction
+    np.testing.assert_allclose(compiled.pose, numpy_result.pose, rtol=0, atol=1e-9)
+    scale = np.abs(numpy_result.cov).max()
+    np.testing.assert_allclose(compiled.cov, numpy_result.cov, rtol=0, atol=1e-9 * scale)
+
+
+@needs_numba
+def test_compiled_and_numpy_paths_agree_on_simulated_pairs():
+    """40 pairs from random offsets up to ~0.5 m / 20°, and the failures (corridor, far
+    guess, iteration limit): the same reasons, iterations and inlier fractions, poses to
+    1e-9 m/rad and covariances to 1e-9 of their largest entry."""
+    rng = np.random.default_rng(10)
+    n_ok = 0
+    for pair in _pairs(40, seed=11):
+        offset = np.r_[rng.normal(0.0, 0.25, 2), rng.normal(0.0, 0.15)]
+        compiled, numpy_result = _both_paths(
+            pair.reference, pair.current, compose(pair.T_ref_cur, offset)
+        )
+        _assert_same(compiled, numpy_result)
+        n_ok += not isinstance(compiled, str)
+    assert n_ok >= 30
+    corridor = simulated_scan_pair(
+        corridor_world(), [0, 0, 0.1], [0.3, 0.05, 0.15], BEAMS, 20.0, 0.01,
+        np.random.default_rng(0),
+    )  # fmt: skip
+    pair = _pairs(1, seed=12)[0]
+    cases = [
+        (corridor.reference, corridor.current, corridor.T_ref_cur, None, "degenerate"),
+        (pair.reference, pair.current, compose(pair.T_ref_cur, [50.0, 0.0, 0.0]), None,
+         "too_few_correspondences"),
+        (pair.reference, pair.current, compose(pair.T_ref_cur, OFFSET),
+         PlIcpConfig(max_iterations=2), "no_convergence"),
+    ]  # fmt: skip
+    for ref, cur, init, cfg, reason in cases:
+        assert _both_paths(ref, cur, init, cfg) == [reason, reason]
+
+
+@needs_numba
+@pytest.mark.realdata
+def test_compiled_and_numpy_paths_agree_on_intel_pairs(data_root):
+    from slamkit.datasets import load_dataset
+    from slamkit.datasets.stream import LaserScan
+    from slamkit.scanmatch import scan_points
+
+    data = load_dataset("intel")
+    scans = [ev for ev in data.events if isinstance(ev, LaserScan)]
+    truth = data.truth.poses
+    rng = np.random.default_rng(13)
+    for k in range(0, len(scans) - 1, 15):
+        ref, cur = (
+            scan_points(s.ranges, data.laser.beam_angles, data.laser.max_range)
+            for s in scans[k : k + 2]
+        )
+        offset = np.r_[rng.normal(0.0, 0.2, 2), rng.normal(0.0, 0.1)]
+        init = compose(between(truth[k], truth[k + 1]), offset)
+        _assert_same(*_both_paths(ref, cur, init))
+
+
+@needs_numba
+def test_nearest_points_are_the_kd_tree_answer():
+    """The bearing walk returns exactly the KD-tree's nearest point, or M beyond the
+    distance bound, for scans, for unordered clouds all around the origin, for points on one
+    ray and for queries at and near the origin."""
+    rng = np.random.default_rng(14)
+    pair = _pairs(1, seed=15)[0]
+    ring = rng.uniform(0.5, 8.0, (300, 1)) * np.column_stack(
+        [np.cos(a := rng.uniform(-np.pi, np.pi, 300)), np.sin(a)]
+    )
+    ray = np.column_stack([np.linspace(0.0, 5.0, 40), np.zeros(40)])  # one bearing, and 0
+    turn = np.linspace(1.7, 1.7 + 2 * np.pi, 360, endpoint=False)  # a full turn from 97°
+    full_scan = (4.0 + np.sin(3 * turn))[:, None] * np.column_stack([np.cos(turn), np.sin(turn)])
+    clouds = [pair.reference, ring, rng.uniform(-3, 3, (200, 2)), ray, full_scan]
+    for points in clouds:
+        queries = np.vstack(
+            [
+                points + rng.normal(0.0, 0.05, points.shape),
+                rng.uniform(-6, 6, (300, 2)),
+                rng.normal(0.0, 0.2, (50, 2)),
+                np.zeros((1, 2)),
+            ]
+        )
+        for bound in (0.1, 1.0, 100.0):
+            _, expected = cKDTree(points).query(queries, distance_upper_bound=bound)
+            np.testing.assert_array_equal(kernels.nearest_points(points, queries, bound), expected)
+
+
+@needs_numba
+def test_nearest_points_hand_computed_ties_and_bound():
+    points = np.array([[1.0, 0.0], [3.0, 0.0], [0.0, 2.0]])
+    queries = np.array([[2.0, 0.0], [0.0, 0.0], [0.0, 1.6], [10.0, 10.0]])
+    # (2, 0) is 1 from points 0 and 1: the smaller index wins; (0, 0) is 1 from point 0 and
+    # 2 from point 2; (0, 1.6) is 0.4 from point 2; (10, 10) is out of range.
+    np.testing.assert_array_equal(kernels.nearest_points(points, queries, 1.5), [0, 0, 2, 3])
+    # Exactly at the bound is out of range, as for the KD-tree.
+    np.testing.assert_array_equal(kernels.nearest_points(points, queries, 1.0), [3, 3, 2, 3])
+    _, expected = cKDTree(points).query(queries, distance_upper_bound=1.0)
+    np.testing.assert_array_equal(expected, [3, 3, 2, 3])
+
+
+@needs_numba
+def test_scan_tables_equal_the_numpy_tables():
+    from slamkit.scanmatch.covariance import scan_order_normals
+
+    for pair in _pairs(5, seed=16):
+        pts = pair.reference
+        normals, ok, gaps, seg = kernels.scan_tables(pts, 7, 0.5)
+        normals_np, ok_np = scan_order_normals(pts, 7, 0.5)
+        np.testing.assert_array_equal(ok, ok_np)
+        np.testing.assert_allclose(normals, normals_np, rtol=0, atol=1e-9)
+        tangent = np.diff(pts, axis=0)
+        np.testing.assert_allclose(gaps, np.hypot(tangent[:, 0], tangent[:, 1]), rtol=1e-15)
+        np.testing.assert_allclose(
+            seg, np.column_stack([-tangent[:, 1], tangent[:, 0]]) / gaps[:, None], atol=1e-15
+        )
+
+
+@needs_numba
+def test_select_kth_is_the_sorted_entry():
+    rng = np.random.default_rng(20)
+    for n in (1, 2, 3, 10, 181):
+        for values in (rng.normal(size=n), rng.integers(0, 4, n).astype(float)):  # with ties
+            values = np.where(rng.random(n) < 0.1, np.inf, values)  # as invalid errors
+            for k in range(n):
+                work = values.copy()
+                assert kernels.select_kth(work, k) == np.sort(values)[k]
+                np.testing.assert_array_equal(np.sort(work), np.sort(values))  # a permutation
+
+
+@needs_numba
+def test_min_eigenvalue_sym3_is_eigvalsh():
+    rng = np.random.default_rng(21)
+    for _ in range(300):
+        a = rng.normal(size=(3, 3)) * rng.uniform(1e-3, 1e3, 3)
+        h = a @ a.T if rng.random() < 0.7 else a + a.T  # also indefinite
+        expected = np.linalg.eigvalsh(h)[0]
+        assert kernels.min_eigenvalue_sym3(h) == pytest.approx(
+            expected, rel=0, abs=1e-13 * np.abs(h).max()
+        )
+    assert kernels.min_eigenvalue_sym3(np.diag([2.0, 0.5, 1.0])) == 0.5
+    corridor = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # y unconstrained
+    assert kernels.min_eigenvalue_sym3(corridor) == 0.0
+
+
+@needs_numba
+def test_ieee_remainder_is_math_remainder():
+    rng = np.random.default_rng(17)
+    xs = np.r_[rng.uniform(-50, 50, 500), 3.0, 5.0, -3.0, 7.0, 1.0, 0.0, -0.0, 2 * np.pi]
+    for y in (2.0 * np.pi, 2.0):
+        for x in xs:
+            assert kernels.ieee_remainder(float(x), y) == math.remainder(float(x), y)
+    assert kernels.ieee_remainder(3.0, 2.0) == -1.0  # half-way: to the even multiple, 2
+    assert kernels.ieee_remainder(5.0, 2.0) == 1.0
+
+
+@needs_numba
+def test_root_of_multiplier_is_largest_real_root():
+    rng = np.random.default_rng(18)
+    for _ in range(200):
+        a = rng.normal(size=(2, 2))
+        S = a @ a.T * rng.uniform(0.1, 1e3) + rng.normal() * np.eye(2)
+        h = rng.normal(size=2) * rng.uniform(0.1, 1e3)
+        args = (S[0, 0], S[0, 1], S[1, 1], h[0], h[1])
+        assert kernels.root_of_multiplier(*args) == pytest.approx(
+            largest_real_root(*args), rel=1e-12, abs=1e-12 * np.abs(S).max()
+        )
+
+
+def test_use_numpy_switches_the_path_and_restores_it():
+    before = kernels.enabled()
+    assert before is kernels.AVAILABLE
+    with pytest.raises(RuntimeError), kernels.use_numpy():
+        assert kernels.enabled() is False
+        raise RuntimeError
+    assert kernels.enabled() is before
+
+
+def test_without_numba_the_numpy_path_gives_the_same_numbers():
+    """A fresh interpreter where ``import numba`` fails: the module selects NumPy at import
+    and PLICP returns the same pose and covariance as in this process."""
+    pair = _pairs(1, seed=19)[0]
+    init = compose(pair.T_ref_cur, OFFSET)
+    here = plicp(pair.reference, pair.current, init)
+    script = textwrap.dedent(
+        f"""
+        import json, sys
+        import numpy as np
+        sys.modules["numba"] = None  # import numba now raises ImportError
+        from slamkit.scanmatch import kernels, plicp
+        ref = np.array({pair.reference.tolist()!r})
+        cur = np.array({pair.current.tolist()!r})
+        r = plicp(ref, cur, {init.tolist()!r})
+        print(json.dumps([kernels.AVAILABLE, kernels.enabled(), r.pose.tolist(),
+                          r.cov.tolist(), r.iterations]))
+        """
+    )
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, env=env, check=True
+    )
+    available, enabled, pose, cov, iterations = json.loads(done.stdout)
+    assert available is False and enabled is False
+    assert iterations == here.iterations
+    np.testing.assert_allclose(pose, here.pose, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(cov, here.cov, rtol=0, atol=1e-9 * np.abs(here.cov).max())

@@ -45,8 +45,10 @@ from scipy.spatial import cKDTree
 
 from slamkit._validation import FloatArray
 from slamkit.errors import MatchError
+from slamkit.scanmatch import kernels
 
 __all__ = [
+    "degenerate_error",
     "estimate_normals",
     "line_jacobian",
     "neighbour_table",
@@ -165,13 +167,19 @@ def require_constrained(
     is below ``min_eigenvalue``: the scans leave a direction of motion unconstrained."""
     lam = normalised_min_eigenvalue(jacobian, current)
     if lam < min_eigenvalue:
-        raise MatchError(
-            f"{method}: the geometry leaves a direction of motion unconstrained (smallest "
-            f"eigenvalue of the normalised Hessian {lam:.3g}, expected >= {min_eigenvalue:.3g}; "
-            "e.g. a featureless corridor)",
-            "degenerate",
-        )
+        raise degenerate_error(lam, min_eigenvalue, method)
     return lam
+
+
+def degenerate_error(eigenvalue: float, min_eigenvalue: float, method: str) -> MatchError:
+    """The ``MatchError("degenerate")`` for a normalised Hessian whose smallest eigenvalue
+    ``eigenvalue`` is below ``min_eigenvalue``, naming the matcher ``method``."""
+    return MatchError(
+        f"{method}: the geometry leaves a direction of motion unconstrained (smallest "
+        f"eigenvalue of the normalised Hessian {eigenvalue:.3g}, expected >= "
+        f"{min_eigenvalue:.3g}; e.g. a featureless corridor)",
+        "degenerate",
+    )
 
 
 def _rotations(theta: float) -> tuple[FloatArray, FloatArray]:
@@ -222,8 +230,13 @@ def point_to_line_covariance(
     ``σ̂ = 1.4826 · median_i |e_i| / √k_i`` over *all* the correspondences given (the median
     of ``|N(0, 1)|`` is 1/1.4826): robust to the outliers, and not shrunk by the trimming,
     which removes the largest residuals. ``H`` and ``∂g/∂z`` sum over the kept ones only.
-    The correspondences are taken as fixed.
+    The correspondences are taken as fixed. With numba installed this runs compiled
+    (:func:`slamkit.scanmatch.kernels.point_to_line_cov`, the same numbers to rounding).
     """
+    if kernels.enabled():
+        return kernels.point_to_line_cov(
+            current, ref_a, ref_b, index_a, index_b, n_reference, pose, kept
+        )
     tx, ty, th = float(pose[0]), float(pose[1]), float(pose[2])
     rot_t, drot_t = _rotations(th)
     both_rot = np.hstack([rot_t, drot_t])  # one product gives R q and R' q

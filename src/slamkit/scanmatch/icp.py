@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -31,6 +32,7 @@ from scipy.spatial import cKDTree
 
 from slamkit._validation import FloatArray, as_array
 from slamkit.errors import ConfigError, MatchError
+from slamkit.scanmatch import kernels
 from slamkit.scanmatch.covariance import (
     estimate_normals,
     line_jacobian,
@@ -60,7 +62,8 @@ class PreparedScan:
 
     * ``points (M, 2)``: the reference points [m], read-only; for point-to-line ICP they must
       be in scan (beam) order, as :func:`~slamkit.scanmatch.scan_points` returns them;
-    * ``tree``: a :class:`scipy.spatial.cKDTree` over ``points``;
+    * ``tree``: a :class:`scipy.spatial.cKDTree` over ``points``, built on first use (the
+      compiled point-to-line ICP of :mod:`slamkit.scanmatch.kernels` does not need one);
     * ``normals (M, 2)``: unit surface normals by principal components of each point's
       neighbourhood (``(0, 0)`` where ``has_normal`` is false), for the degeneracy test and
       the point-to-point covariance;
@@ -73,11 +76,15 @@ class PreparedScan:
     """
 
     points: FloatArray
-    tree: cKDTree
     normals: FloatArray
     has_normal: NDArray[np.bool_]
     gaps: FloatArray
     segment_normals: FloatArray
+
+    @cached_property
+    def tree(self) -> cKDTree:
+        """The KD-tree over ``points`` (built on the first access, then kept)."""
+        return cKDTree(self.points, leafsize=8)
 
 
 def prepare_scan(
@@ -87,12 +94,14 @@ def prepare_scan(
     normal_neighbours: int = 7,
     normal_radius: float = 0.5,
 ) -> PreparedScan:
-    """A :class:`PreparedScan` of reference ``points (M, 2)`` [m] (copied): the KD-tree, the
-    scan-order gaps and segment normals, and point normals by principal components of
+    """A :class:`PreparedScan` of reference ``points (M, 2)`` [m] (copied): the scan-order
+    gaps and segment normals, and point normals by principal components of
     ``normal_neighbours`` points: when ``ordered`` (a scan) the points centred on each in scan
     order, no consecutive two more than ``normal_radius`` [m] apart; else (any point cloud)
-    its nearest neighbours within ``normal_radius``. Fewer than 3 points raise
-    ``MatchError("too_few_points")``."""
+    its nearest neighbours within ``normal_radius`` (found with the KD-tree, which is then
+    kept; for a scan it is built on first use). Fewer than 3 points raise
+    ``MatchError("too_few_points")``. With numba the tables of a scan are computed by
+    :func:`slamkit.scanmatch.kernels.scan_tables`, the same numbers to rounding."""
     pts = require_points(
         as_array(points, "reference points", (None, 2)), MIN_REFERENCE_POINTS, "reference"
     ).copy()
@@ -101,19 +110,28 @@ def prepare_scan(
     if not (math.isfinite(normal_radius) and normal_radius > 0):
         raise ConfigError(f"normal_radius: expected a finite number > 0 [m], got {normal_radius!r}")
     pts.flags.writeable = False
-    tree = cKDTree(pts, leafsize=8)
-    if ordered:
-        normals, ok = scan_order_normals(pts, int(normal_neighbours), float(normal_radius))
+    tree = None
+    if ordered and kernels.enabled():
+        normals, ok, gaps, seg_normals = kernels.scan_tables(
+            pts, int(normal_neighbours), float(normal_radius)
+        )
     else:
-        table = neighbour_table(pts, tree, int(normal_neighbours))
-        normals, ok = estimate_normals(pts, table, float(normal_radius))
-    tangent = np.diff(pts, axis=0)
-    gaps = np.hypot(tangent[:, 0], tangent[:, 1])
-    inv = np.divide(1.0, gaps, out=np.zeros_like(gaps), where=gaps > 0.0)
-    seg_normals = np.column_stack([-tangent[:, 1] * inv, tangent[:, 0] * inv])
+        if ordered:
+            normals, ok = scan_order_normals(pts, int(normal_neighbours), float(normal_radius))
+        else:
+            tree = cKDTree(pts, leafsize=8)
+            table = neighbour_table(pts, tree, int(normal_neighbours))
+            normals, ok = estimate_normals(pts, table, float(normal_radius))
+        tangent = np.diff(pts, axis=0)
+        gaps = np.hypot(tangent[:, 0], tangent[:, 1])
+        inv = np.divide(1.0, gaps, out=np.zeros_like(gaps), where=gaps > 0.0)
+        seg_normals = np.column_stack([-tangent[:, 1] * inv, tangent[:, 0] * inv])
     for arr in (normals, ok, gaps, seg_normals):
         arr.flags.writeable = False
-    return PreparedScan(pts, tree, normals, ok, gaps, seg_normals)
+    scan = PreparedScan(pts, normals, ok, gaps, seg_normals)
+    if tree is not None:
+        scan.__dict__["tree"] = tree  # the cache of the `tree` property: built already
+    return scan
 
 
 @dataclass(frozen=True)

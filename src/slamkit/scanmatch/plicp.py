@@ -5,7 +5,8 @@ metric", ICRA 2008.
 :func:`~slamkit.scanmatch.scan_points` returns them): consecutive points are neighbours on a
 surface unless they are farther apart than ``max_gap`` (a range discontinuity: an edge, a door,
 dropped beams). Each current point, mapped by the estimate ``T`` into the reference frame as
-``q'_i``, takes its nearest reference point ``j1`` (KD-tree) and the closer of ``j1 - 1`` and
+``q'_i``, takes its nearest reference point ``j1`` (a KD-tree query; compiled, the exact
+search by bearing of :mod:`slamkit.scanmatch.kernels`) and the closer of ``j1 - 1`` and
 ``j1 + 1`` among those joined to ``j1`` by a segment no longer than ``max_gap``; ``j2``. Its
 error is the distance from ``q'_i`` to the line through ``p_j1`` and ``p_j2``,
 ``e_i = n_iᵀ (q'_i - p_j1)`` with ``n_i`` the unit normal of the segment. Pairs farther than
@@ -53,14 +54,16 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray, as_array
 from slamkit.errors import ConfigError, MatchError
+from slamkit.scanmatch import kernels
 from slamkit.scanmatch.covariance import (
+    degenerate_error,
     line_jacobian,
+    normalised_min_eigenvalue,
     point_to_line_covariance,
-    require_constrained,
 )
 from slamkit.scanmatch.icp import PreparedScan, prepare_scan, validate_common
 from slamkit.scanmatch.result import MatchResult, require_points
@@ -112,6 +115,12 @@ class PlIcpConfig:
             v = getattr(self, field)
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
                 raise ConfigError(f"PlIcpConfig.{field}: expected a finite number > 0, got {v!r}")
+
+
+_NOT_SPANNED = "plicp: the line normals do not span the plane (translation unconstrained)"
+
+
+_DEFAULT = PlIcpConfig()
 
 
 def lagrange_quartic(S: FloatArray, h: FloatArray) -> FloatArray:
@@ -188,10 +197,7 @@ def point_to_line_step(
     vt0, vt1, vc0, vc1 = (phi.T @ b).tolist()
     det_a = m00 * m11 - m01 * m01
     if not det_a > 1e-12 * (m00 + m11) ** 2:
-        raise MatchError(
-            "plicp: the line normals do not span the plane (translation unconstrained)",
-            "degenerate",
-        )
+        raise MatchError(_NOT_SPANNED, "degenerate")
     # A⁻¹ = [[m11, -m01], [-m01, m00]] / det A;  B = [[m02, m03], [m12, m13]]
     i00, i01, i11 = m11 / det_a, -m01 / det_a, m00 / det_a
     k00, k01 = i00 * m02 + i01 * m12, i00 * m03 + i01 * m13  # A⁻¹ B
@@ -215,28 +221,15 @@ def point_to_line_step(
     return np.array([i00 * r0 + i01 * r1, i01 * r0 + i11 * r1, theta])
 
 
-def plicp(
-    reference: ArrayLike | PreparedScan,
-    current: ArrayLike,
-    initial: ArrayLike = (0.0, 0.0, 0.0),
-    config: PlIcpConfig | None = None,
-) -> MatchResult:
-    """Register ``current (K, 2)`` points (current sensor frame, metres) to ``reference``
-    (``(M, 2)`` points in the reference frame **in scan order**, or a :class:`PreparedScan`
-    of them) by point-to-line ICP from ``initial = T_ref_cur`` guess ``(x, y, θ)``.
+_LoopOutput = tuple[int, int, int, FloatArray, FloatArray, float]
 
-    Returns a :class:`~slamkit.scanmatch.MatchResult` (``method="plicp"``; ``score`` and
-    ``inlier_fraction`` are the fraction of current points kept at the end; the covariance is
-    Censi's implicit-function estimate for the final point-to-line problem, the range noise
-    estimated from the residuals: :func:`slamkit.scanmatch.covariance.point_to_line_covariance`).
-    Raises ``MatchError`` with reason ``"too_few_points"``, ``"too_few_correspondences"``,
-    ``"degenerate"`` or ``"no_convergence"``; ``ShapeError``/``NonFiniteError`` for
-    malformed arrays.
-    """
-    cfg = PlIcpConfig() if config is None else config
-    ref = reference if isinstance(reference, PreparedScan) else prepare_scan(reference)
-    q = require_points(as_array(current, "current points", (None, 2)), cfg.min_points, "current")
-    x0 = as_array(initial, "initial pose", (3,))
+
+def _loop_numpy(
+    ref: PreparedScan, q: FloatArray, pose: FloatArray, cfg: PlIcpConfig, joined: NDArray[np.bool_]
+) -> _LoopOutput:
+    """The correspondence loop and the covariance in NumPy: the twin of
+    :func:`slamkit.scanmatch.kernels.plicp_loop` (the same arguments in other packaging, the
+    same outputs; see there)."""
     P = ref.points
     m_ref = P.shape[0]
     n_cur = q.shape[0]
@@ -246,7 +239,6 @@ def plicp(
     # no longer than max_gap; else a point so far away that it never wins and fails the
     # validity test (and a zero normal).
     far = 1e12
-    joined = (ref.gaps <= cfg.max_gap) & (ref.gaps > 0.0)
     table = np.zeros((m_ref + 1, 10))
     table[:, 0:4] = far
     table[m_ref, 8:10] = far
@@ -257,13 +249,12 @@ def plicp(
     table[:m_ref, 8:10] = P
     twice = np.array([[1.0, 0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 1.0]])  # q' -> (q', q')
     pair_sum = np.array([[1.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.0, 1.0]])
-    tx, ty, th = float(x0[0]), float(x0[1]), float(x0[2])
+    tx, ty, th = float(pose[0]), float(pose[1]), float(pose[2])
     seen: set[bytes] = set()  # every correspondence set met so far
-    converged = False
     it = n_keep = 0
+    no_cov = np.zeros((3, 3))
     keep = valid = use_next = np.zeros(n_cur, dtype=bool)
-    j1 = np.zeros(n_cur, dtype=np.intp)
-    a = normals = np.zeros((n_cur, 2))
+    j1 = np.full(n_cur, m_ref, dtype=np.intp)
     for it in range(1, cfg.max_iterations + 1):
         c, s = math.cos(th), math.sin(th)
         moved = q @ np.array([[c, s], [-s, c]])  # rows R q_i
@@ -294,23 +285,22 @@ def plicp(
             thr = float(order[n_t - 1]) if n_t else -1.0
         keep = err <= thr
         n_keep = int(np.count_nonzero(keep))
+        out = (np.array([tx, ty, th]), no_cov)
         if n_keep < cfg.min_correspondences:
-            raise MatchError(
-                f"plicp: {n_keep} correspondences after trimming at iteration {it}; at least "
-                f"{cfg.min_correspondences} are needed",
-                "too_few_correspondences",
-            )
+            return (kernels.TOO_FEW, it, n_keep, *out, 0.0)
         if it == 1:
-            has = ref.has_normal[np.minimum(j1, m_ref - 1)] & keep
-            jac = line_jacobian(q[has], ref.normals[j1[has]], th)
-            require_constrained(jac, q[has], 0.5 * cfg.min_eigenvalue, "plicp")
+            lam = _min_eigenvalue_numpy(ref, q, j1, keep, th)
+            if lam < 0.5 * cfg.min_eigenvalue:
+                return (kernels.DEGENERATE_START, it, n_keep, *out, lam)
         stamp = j1.tobytes() + use_next.tobytes() + keep.tobytes()
         if stamp in seen:
-            converged = True  # pairs met before: the steps would repeat (a cycle)
-            break
+            break  # pairs met before: the steps would repeat (a cycle)
         seen.add(stamp)
         # Dropped pairs get a zero normal, which zeroes their rows in the step's sums.
-        new = point_to_line_step(q, a, normals * keep[:, None])
+        try:
+            new = point_to_line_step(q, a, normals * keep[:, None])
+        except MatchError:
+            return (kernels.DEGENERATE_STEP, it, n_keep, *out, 0.0)
         dth = math.remainder(float(new[2]) - th, 2.0 * math.pi)
         small = (
             math.hypot(float(new[0]) - tx, float(new[1]) - ty) < cfg.translation_tolerance
@@ -318,21 +308,83 @@ def plicp(
         )
         tx, ty, th = float(new[0]), float(new[1]), th + dth
         if small:
-            converged = True
             break
-    if not converged:
+    else:
+        return (kernels.NO_CONVERGENCE, it, n_keep, np.array([tx, ty, th]), no_cov, 0.0)
+    th = math.remainder(th, 2.0 * math.pi)
+    pose = np.array([tx, ty, th])
+    lam = _min_eigenvalue_numpy(ref, q, j1, keep, th)
+    if lam < cfg.min_eigenvalue:
+        return (kernels.DEGENERATE_END, it, n_keep, pose, no_cov, lam)
+    j1v = j1[valid]
+    j2 = np.where(use_next[valid], j1v + 1, j1v - 1)
+    cov = point_to_line_covariance(q[valid], P[j1v], P[j2], j1v, j2, m_ref, pose, keep[valid])
+    return (kernels.CONVERGED, it, n_keep, pose, cov, 0.0)
+
+
+def _min_eigenvalue_numpy(
+    ref: PreparedScan, q: FloatArray, j1: NDArray[np.intp], keep: NDArray[np.bool_], th: float
+) -> float:
+    """The normalised Hessian's smallest eigenvalue over the kept pairs whose nearest
+    reference point has a normal, at heading ``th``."""
+    j = np.minimum(j1, ref.points.shape[0] - 1)
+    has = ref.has_normal[j] & keep
+    return normalised_min_eigenvalue(line_jacobian(q[has], ref.normals[j[has]], th), q[has])
+
+
+def plicp(
+    reference: ArrayLike | PreparedScan,
+    current: ArrayLike,
+    initial: ArrayLike = (0.0, 0.0, 0.0),
+    config: PlIcpConfig | None = None,
+) -> MatchResult:
+    """Register ``current (K, 2)`` points (current sensor frame, metres) to ``reference``
+    (``(M, 2)`` points in the reference frame **in scan order**, or a :class:`PreparedScan`
+    of them) by point-to-line ICP from ``initial = T_ref_cur`` guess ``(x, y, θ)``.
+
+    Returns a :class:`~slamkit.scanmatch.MatchResult` (``method="plicp"``; ``score`` and
+    ``inlier_fraction`` are the fraction of current points kept at the end; the covariance is
+    Censi's implicit-function estimate for the final point-to-line problem, the range noise
+    estimated from the residuals: :func:`slamkit.scanmatch.covariance.point_to_line_covariance`).
+    Raises ``MatchError`` with reason ``"too_few_points"``, ``"too_few_correspondences"``,
+    ``"degenerate"`` or ``"no_convergence"``; ``ShapeError``/``NonFiniteError`` for
+    malformed arrays.
+
+    With numba installed the loop runs compiled (:mod:`slamkit.scanmatch.kernels`), with the
+    same results to rounding.
+    """
+    cfg = _DEFAULT if config is None else config
+    ref = reference if isinstance(reference, PreparedScan) else prepare_scan(reference)
+    q = require_points(as_array(current, "current points", (None, 2)), cfg.min_points, "current")
+    x0 = as_array(initial, "initial pose", (3,))
+    joined = (ref.gaps <= cfg.max_gap) & (ref.gaps > 0.0)
+    if kernels.enabled():
+        status, it, n_keep, pose, cov, lam = kernels.plicp_loop(
+            ref.points, ref.segment_normals, joined, ref.has_normal, ref.normals,
+            kernels.writable(q), float(x0[0]), float(x0[1]), float(x0[2]),
+            cfg.max_iterations, float(cfg.max_correspondence_distance),
+            float(cfg.outlier_multiplier), float(cfg.outlier_floor), float(cfg.trim_fraction),
+            cfg.min_correspondences, float(cfg.translation_tolerance),
+            float(cfg.rotation_tolerance), float(cfg.min_eigenvalue),
+        )  # fmt: skip
+    else:
+        status, it, n_keep, pose, cov, lam = _loop_numpy(ref, q, x0, cfg, joined)
+    if status == kernels.TOO_FEW:
+        raise MatchError(
+            f"plicp: {n_keep} correspondences after trimming at iteration {it}; at least "
+            f"{cfg.min_correspondences} are needed",
+            "too_few_correspondences",
+        )
+    if status == kernels.DEGENERATE_START:
+        raise degenerate_error(lam, 0.5 * cfg.min_eigenvalue, "plicp")
+    if status == kernels.DEGENERATE_STEP:
+        raise MatchError(_NOT_SPANNED, "degenerate")
+    if status == kernels.NO_CONVERGENCE:
         raise MatchError(
             f"plicp: no convergence within {cfg.max_iterations} iterations",
             "no_convergence",
         )
-    th = math.remainder(th, 2.0 * math.pi)
-    j1 = np.minimum(j1, m_ref - 1)
-    has = ref.has_normal[j1] & keep
-    jac_check = line_jacobian(q[has], ref.normals[j1[has]], th)
-    require_constrained(jac_check, q[has], cfg.min_eigenvalue, "plicp")
-    j2 = np.where(use_next, j1 + 1, j1 - 1)[valid]
-    cov = point_to_line_covariance(
-        q[valid], a[valid], P[j2], j1[valid], j2, m_ref, np.array([tx, ty, th]), keep[valid]
-    )
-    frac = n_keep / n_cur
-    return MatchResult(np.array([tx, ty, th]), cov, frac, frac, it, "plicp")
+    if status == kernels.DEGENERATE_END:
+        raise degenerate_error(lam, cfg.min_eigenvalue, "plicp")
+    frac = n_keep / q.shape[0]
+    return MatchResult(pose, cov, frac, frac, it, "plicp")

@@ -1,0 +1,868 @@
+"""Compiled kernels of point-to-line ICP (numba), each the twin of a NumPy implementation in
+:mod:`slamkit.scanmatch.plicp`, :mod:`~slamkit.scanmatch.icp` and
+:mod:`~slamkit.scanmatch.covariance` that gives the same numbers to rounding.
+
+numba is an optional dependency (``pip install slamkit[fast]``). Whether it is used is decided
+once, at import: :data:`AVAILABLE` is true when ``import numba`` succeeds, and then the
+matchers call these kernels; without numba they run the NumPy twins. :func:`use_numpy` turns
+the kernels off inside a ``with`` block, so tests and benchmarks can run both paths in one
+process and compare them. The kernels are compiled on their first call (about 10 s of CPU
+for all of them) and cached on disk (``cache=True``, next to this file), so later processes
+only load them (a fraction of a second).
+
+**What is compiled.** One call runs the whole PLICP loop (correspondences, trimming, the
+closed-form step, the stopping rules and both degeneracy checks), one call prepares a
+reference scan (segment normals, gaps, point normals) and one computes the covariance. The
+arithmetic of each line is that of the NumPy twin, written as scalar loops over the points,
+so there are no temporaries and no per-call Python overhead per iteration.
+
+**Nearest reference point without a KD-tree.** A reference point ``p`` at bearing ``φ``
+(seen from the reference sensor, the origin) lies on the ray from the origin at that angle,
+so for a query ``q`` at range ``r_q`` and bearing ``φ_q``, with ``Δ = |φ - φ_q|``,
+
+    |q - p| >= r_q sin Δ = |q × u|   (Δ <= 90°, u the unit direction of p: the distance
+                                       from q to the line of the ray),
+    |q - p| >= r_q                   (Δ >= 90°: p is behind the line through the origin
+                                       perpendicular to q),
+
+a lower bound that grows with ``Δ`` up to 180°. Censi's CSM uses this bound to search the
+reference scan in beam order from the beam at ``φ_q``. Here the points are sorted once by
+bearing instead (a cheap monotone function of it, so no ``atan2`` per point; a scan is
+sorted already, or a rotation of sorted). That makes the search exact for any point set in
+any order. For each query the search takes the best of a guess (this current point's match
+at the previous iteration, else the previous current point's match), then walks the sorted
+points up and down from ``φ_q``. Each walk stops at the first point whose bound exceeds the
+best distance so far: if that point is within 180° the points beyond it are farther still,
+and if it is past 180° its half of the circle is covered and the other walk covers the rest.
+The answer is exactly the KD-tree's (ties go to the smaller index), after about 1-3 distance
+evaluations per query on a 180-beam scan instead of a tree descent.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any, TypeVar, cast
+
+import numpy as np
+
+from slamkit._validation import FloatArray
+
+__all__ = [
+    "AVAILABLE",
+    "CONVERGED",
+    "DEGENERATE_END",
+    "DEGENERATE_START",
+    "DEGENERATE_STEP",
+    "NO_CONVERGENCE",
+    "TOO_FEW",
+    "enabled",
+    "ieee_remainder",
+    "min_eigenvalue_sym3",
+    "nearest_points",
+    "plicp_loop",
+    "point_to_line_cov",
+    "root_of_multiplier",
+    "scan_tables",
+    "select_kth",
+    "use_numpy",
+    "writable",
+]
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def _import_numba() -> Any:
+    try:  # numba is optional: without it the NumPy twins run
+        return importlib.import_module("numba")
+    except ImportError:  # pragma: no cover - depends on the environment
+        return None
+
+
+_NUMBA = _import_numba()
+AVAILABLE: bool = _NUMBA is not None
+"""numba could be imported: the matchers use the compiled kernels (unless :func:`use_numpy`)."""
+
+
+def _jit(fn: F) -> F:
+    """``numba.njit(cache=True)`` when numba is installed, else ``fn`` itself (the matchers
+    never call it then, but the module stays importable)."""
+    if _NUMBA is None:  # pragma: no cover - depends on the environment
+        return fn
+    return cast(F, _NUMBA.njit(cache=True)(fn))
+
+
+_STATE = {"enabled": AVAILABLE}
+
+
+def enabled() -> bool:
+    """True when the matchers use these compiled kernels: numba is installed and no
+    :func:`use_numpy` block is active."""
+    return _STATE["enabled"]
+
+
+@contextmanager
+def use_numpy() -> Iterator[None]:
+    """Run the NumPy twins instead of the kernels inside the block (for tests and benchmarks
+    comparing the two; not thread-safe)."""
+    before = _STATE["enabled"]
+    _STATE["enabled"] = False
+    try:
+        yield
+    finally:
+        _STATE["enabled"] = before
+
+
+def writable(a: np.ndarray) -> np.ndarray:
+    """``a`` itself when C-contiguous and writable, else a copy that is: the kernels are
+    compiled once per array type, and a read-only or strided array is another type."""
+    if a.flags.c_contiguous and a.flags.writeable:
+        return a
+    return np.array(a, order="C")
+
+
+# Status codes of plicp_loop.
+CONVERGED = 0
+"""The loop stopped on a small step or a repeated correspondence set."""
+TOO_FEW = 1
+"""Fewer than ``min_correspondences`` pairs after trimming."""
+DEGENERATE_START = 2
+"""The normalised Hessian at the initial guess is below half ``min_eigenvalue``."""
+DEGENERATE_STEP = 3
+"""The normals of the kept pairs do not span the plane (the step's ``A`` is singular)."""
+NO_CONVERGENCE = 4
+"""``max_iterations`` were used up."""
+DEGENERATE_END = 5
+"""The normalised Hessian at the solution is below ``min_eigenvalue``."""
+
+_TWO_PI = 2.0 * math.pi
+
+
+@_jit
+def ieee_remainder(x: float, y: float) -> float:
+    """``math.remainder(x, y)`` (the IEEE remainder ``x - n y``, ``n`` the integer nearest
+    ``x / y``, ties to even), exact, for finite ``x`` and ``y != 0``: ``fmod`` is exact, and so
+    is the choice between ``m`` and ``m - |y|``."""
+    ax, ay = abs(x), abs(y)
+    m = np.fmod(ax, ay)
+    c = ay - m
+    if m < c:
+        r = m
+    elif m > c:
+        r = -c
+    else:  # half-way: keep the even multiple
+        r = m - 2.0 * np.fmod(0.5 * (ax - m), ay)
+    return math.copysign(1.0, x) * r
+
+
+@_jit
+def root_of_multiplier(s11: float, s12: float, s22: float, h1: float, h2: float) -> float:
+    """Compiled twin of :func:`slamkit.scanmatch.plicp.largest_real_root` (the same Newton
+    iteration, operation for operation)."""
+    mid, rad = 0.5 * (s11 + s22), math.hypot(0.5 * (s11 - s22), s12)
+    e1, e2 = mid - rad, mid + rad
+    phi = 0.5 * math.atan2(2.0 * s12, s11 - s22)
+    v2x, v2y = math.cos(phi), math.sin(phi)
+    g2 = h1 * v2x + h2 * v2y
+    g1 = -h1 * v2y + h2 * v2x
+    norm_h = math.hypot(h1, h2)
+    scale = max(abs(e1), abs(e2), norm_h, 1e-300)
+    eps = 1e-12 * scale
+    lam = max(norm_h - e2, -e1 + eps)
+    for _ in range(60):
+        u1, u2 = e1 + lam, e2 + lam
+        c2 = (g1 / u1) ** 2 + (g2 / u2) ** 2
+        if c2 <= 1.0 and lam <= -e1 + eps and abs(g1) <= eps:
+            return -e1
+        norm_c = math.sqrt(c2)
+        psi = 1.0 / norm_c - 1.0
+        dpsi = (g1 * g1 / u1**3 + g2 * g2 / u2**3) / (c2 * norm_c)
+        if not dpsi > 0.0:
+            return lam
+        step = -psi / dpsi
+        lam += step
+        if abs(step) <= eps:
+            return lam
+    return lam
+
+
+# --- the reference ---------------------------------------------------------------------------
+
+
+@_jit
+def scan_tables(
+    points: FloatArray, window: int, max_spacing: float
+) -> tuple[FloatArray, np.ndarray, FloatArray, FloatArray]:
+    """``(normals (M, 2), has_normal (M,), gaps (M - 1,), segment_normals (M - 1, 2))`` of a
+    scan: the twin of :func:`slamkit.scanmatch.covariance.scan_order_normals` followed by the
+    gaps and segment normals of :func:`slamkit.scanmatch.icp.prepare_scan`."""
+    m = points.shape[0]
+    normals = np.zeros((m, 2))
+    ok = np.zeros(m, dtype=np.bool_)
+    gaps = np.empty(max(m - 1, 0))
+    seg = np.zeros((max(m - 1, 0), 2))
+    for j in range(m - 1):
+        tx = points[j + 1, 0] - points[j, 0]
+        ty = points[j + 1, 1] - points[j, 1]
+        g = math.hypot(tx, ty)
+        gaps[j] = g
+        if g > 0.0:
+            inv = 1.0 / g
+            seg[j, 0] = -ty * inv
+            seg[j, 1] = tx * inv
+    k = min(window | 1, m if m % 2 else m - 1)
+    if m < 3 or k < 3:
+        return normals, ok, gaps, seg
+    cx = 0.0
+    cy = 0.0
+    for j in range(m):
+        cx += points[j, 0]
+        cy += points[j, 1]
+    cx /= m
+    cy /= m
+    # Prefix sums of x, y, x², xy, y² (centroid-relative) and of the spacings > max_spacing.
+    prefix = np.zeros((m + 1, 5))
+    too_far = np.zeros(m, dtype=np.int64)
+    for j in range(m):
+        x = points[j, 0] - cx
+        y = points[j, 1] - cy
+        prefix[j + 1, 0] = prefix[j, 0] + x
+        prefix[j + 1, 1] = prefix[j, 1] + y
+        prefix[j + 1, 2] = prefix[j, 2] + x * x
+        prefix[j + 1, 3] = prefix[j, 3] + x * y
+        prefix[j + 1, 4] = prefix[j, 4] + y * y
+        if j > 0:
+            dx = x - (points[j - 1, 0] - cx)
+            dy = y - (points[j - 1, 1] - cy)
+            too_far[j] = too_far[j - 1] + (1 if math.hypot(dx, dy) > max_spacing else 0)
+    half = k // 2
+    for j in range(m):
+        start = min(max(j - half, 0), m - k)
+        if too_far[start + k - 1] - too_far[start] != 0:
+            continue
+        sx = (prefix[start + k, 0] - prefix[start, 0]) / k
+        sy = (prefix[start + k, 1] - prefix[start, 1]) / k
+        sxx = (prefix[start + k, 2] - prefix[start, 2]) / k - sx**2
+        sxy = (prefix[start + k, 3] - prefix[start, 3]) / k - sx * sy
+        syy = (prefix[start + k, 4] - prefix[start, 4]) / k - sy**2
+        phi = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+        normals[j, 0] = -math.sin(phi)
+        normals[j, 1] = math.cos(phi)
+        ok[j] = True
+    return normals, ok, gaps, seg
+
+
+# --- nearest neighbours by bearing -----------------------------------------------------------
+
+
+@_jit
+def select_kth(a: FloatArray, k: int) -> float:
+    """The ``k``-th smallest entry of ``a`` (0-based; ``np.sort(a)[k]``), by quickselect
+    (Hoare partitions around a median of three): ``a`` is permuted so that ``a[:k] <= a[k] <=
+    a[k + 1:]``. Expected time linear, no sort needed for an order statistic."""
+    lo, hi = 0, a.shape[0] - 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if a[mid] < a[lo]:
+            a[mid], a[lo] = a[lo], a[mid]
+        if a[hi] < a[lo]:
+            a[hi], a[lo] = a[lo], a[hi]
+        if a[hi] < a[mid]:
+            a[hi], a[mid] = a[mid], a[hi]
+        pivot = a[mid]
+        i, j = lo, hi
+        while i <= j:
+            while a[i] < pivot:
+                i += 1
+            while a[j] > pivot:
+                j -= 1
+            if i <= j:
+                a[i], a[j] = a[j], a[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break  # a[j + 1 : i] all equal the pivot
+    return a[k]
+
+
+@_jit
+def _sift_down(keys: FloatArray, idx: np.ndarray, root: int, end: int) -> None:
+    while True:
+        child = 2 * root + 1
+        if child >= end:
+            return
+        if child + 1 < end and keys[idx[child + 1]] > keys[idx[child]]:
+            child += 1
+        if keys[idx[child]] <= keys[idx[root]]:
+            return
+        idx[root], idx[child] = idx[child], idx[root]
+        root = child
+
+
+@_jit
+def _argsort(keys: FloatArray) -> np.ndarray:
+    """Indices that sort ``keys`` (ties in any order). A scan's bearings are sorted already,
+    or a rotation of sorted ones (a full turn starting anywhere): found in one pass; anything
+    else is heap-sorted."""
+    m = keys.shape[0]
+    descents, at = 0, 0
+    for j in range(1, m):
+        if keys[j] < keys[j - 1]:
+            descents += 1
+            at = j
+    idx = np.empty(m, dtype=np.int64)
+    if descents == 0 or (descents == 1 and keys[m - 1] <= keys[0]):
+        for k in range(m):
+            idx[k] = (at + k) % m
+        return idx
+    for k in range(m):
+        idx[k] = k
+    for root in range(m // 2 - 1, -1, -1):
+        _sift_down(keys, idx, root, m)
+    for end in range(m - 1, 0, -1):
+        idx[0], idx[end] = idx[end], idx[0]
+        _sift_down(keys, idx, 0, end)
+    return idx
+
+
+@_jit
+def _count_below(ascending: FloatArray, value: float) -> int:
+    """How many entries of ``ascending`` are below ``value`` (bisection;
+    ``np.searchsorted(ascending, value, side="left")``)."""
+    lo, hi = 0, ascending.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if ascending[mid] < value:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@_jit
+def min_eigenvalue_sym3(h: FloatArray) -> float:
+    """The smallest eigenvalue of a symmetric ``h (3, 3)`` by cyclic Jacobi rotations (each
+    zeroes one off-diagonal entry; convergence is quadratic, a few sweeps), accurate to
+    rounding of ``|h|`` like ``np.linalg.eigvalsh(h)[0]``."""
+    a = h.copy()
+    scale = 0.0
+    for row in range(3):
+        for col in range(3):
+            scale += a[row, col] * a[row, col]
+    for _ in range(30):
+        off = a[0, 1] ** 2 + a[0, 2] ** 2 + a[1, 2] ** 2
+        if off <= 1e-34 * scale:
+            break
+        for p, q in ((0, 1), (0, 2), (1, 2)):
+            apq = a[p, q]
+            if apq == 0.0:
+                continue
+            theta = (a[q, q] - a[p, p]) / (2.0 * apq)
+            if abs(theta) > 1e150:
+                t = 0.5 / theta
+            else:
+                t = math.copysign(1.0, theta) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+            c = 1.0 / math.sqrt(t * t + 1.0)
+            s = t * c
+            a[p, p] -= t * apq
+            a[q, q] += t * apq
+            a[p, q] = a[q, p] = 0.0
+            r = 3 - p - q  # the third index
+            arp, arq = a[r, p], a[r, q]
+            a[r, p] = a[p, r] = c * arp - s * arq
+            a[r, q] = a[q, r] = s * arp + c * arq
+    return min(a[0, 0], a[1, 1], a[2, 2])
+
+
+@_jit
+def _pseudo_bearing(x: float, y: float) -> float:
+    """A cheap strictly increasing function of ``atan2(y, x)``, in ``(-2, 2]`` (0 at the
+    origin): ``±(1 - x / (|x| + |y|))`` with the sign of ``y``. Sorting by it is sorting by
+    bearing, without a ``atan2`` per point."""
+    s = abs(x) + abs(y)
+    if s == 0.0:
+        return 0.0
+    t = 1.0 - x / s
+    return t if y >= 0.0 else -t
+
+
+@_jit
+def _bearing_index(points: FloatArray) -> tuple[np.ndarray, FloatArray, FloatArray]:
+    """``(order, key, table)``: the points sorted by bearing from the origin (``key`` their
+    :func:`_pseudo_bearing`), and per sorted point ``(x, y, u_x, u_y)`` with ``u`` its unit
+    direction (``(1, 0)`` at the origin)."""
+    m = points.shape[0]
+    ang = np.empty(m)
+    for j in range(m):
+        ang[j] = _pseudo_bearing(points[j, 0], points[j, 1])
+    order = _argsort(ang)
+    key = ang[order]
+    table = np.empty((m, 4))
+    for k in range(m):
+        x, y = points[order[k], 0], points[order[k], 1]
+        r = math.hypot(x, y)
+        table[k, 0] = x
+        table[k, 1] = y
+        table[k, 2] = x / r if r > 0.0 else 1.0
+        table[k, 3] = y / r if r > 0.0 else 0.0
+    return order, key, table
+
+
+@_jit
+def _nearest(
+    order: np.ndarray,
+    key: FloatArray,
+    table: FloatArray,
+    points: FloatArray,
+    x: float,
+    y: float,
+    guess: int,
+    max_d2: float,
+) -> int:
+    """Index of the reference point nearest ``(x, y)`` with squared distance below ``max_d2``
+    (ties: the smaller index), or ``M`` when none is; the bearing walk of the module
+    docstring, started from the point ``guess`` (any index; ``M`` for none).
+
+    The bound of a point with unit direction ``u`` is ``|q × u|`` (``= r_q sin Δ``) when
+    ``q · u > 0``, else ``r_q``. Each walk may stop at the first point whose bound exceeds the
+    best distance while its ``Δ`` is at most 180° (the bound grows with ``Δ`` up to there);
+    a walk that stops beyond 180° has covered its half of the circle, and the other walk
+    covers the rest."""
+    m = points.shape[0]
+    best_d2 = max_d2
+    best_j = m
+    if guess < m:
+        dx = x - points[guess, 0]
+        dy = y - points[guess, 1]
+        d2 = dx * dx + dy * dy
+        if d2 < best_d2:
+            best_d2, best_j = d2, guess
+    best_d = math.sqrt(best_d2)
+    rq = math.sqrt(x * x + y * y)
+    margin = 1e-9 * (1.0 + rq)  # rounding of the bound, far above it, far below any spacing
+    start = _count_below(key, _pseudo_bearing(x, y))
+    for side in range(2):  # up: increasing bearings from φ_q; down: decreasing
+        for step in range(m):
+            k = start + step if side == 0 else start - 1 - step
+            if k >= m:
+                k -= m
+            elif k < 0:
+                k += m
+            ux, uy = table[k, 2], table[k, 3]
+            bound = abs(x * uy - y * ux) if x * ux + y * uy > 0.0 else rq
+            if bound > best_d + margin:
+                break
+            dx = x - table[k, 0]
+            dy = y - table[k, 1]
+            d2 = dx * dx + dy * dy
+            j = order[k]
+            if d2 < best_d2 or (d2 == best_d2 and j < best_j < m):  # strict at the bound
+                best_d2, best_j = d2, j
+                best_d = math.sqrt(d2)
+    return best_j
+
+
+@_jit
+def nearest_points(points: FloatArray, queries: FloatArray, max_distance: float) -> np.ndarray:
+    """For each of ``queries (K, 2)``, the index of the nearest of ``points (M, 2)`` closer
+    than ``max_distance`` (ties: the smaller index), else ``M``: what
+    ``cKDTree(points).query(queries, distance_upper_bound=max_distance)[1]`` returns, found by
+    the bearing walk of the module docstring (each query starts from the previous query's
+    answer)."""
+    order, key, table = _bearing_index(points)
+    m = points.shape[0]
+    out = np.empty(queries.shape[0], dtype=np.int64)
+    guess = m
+    for i in range(queries.shape[0]):
+        guess = _nearest(
+            order,
+            key,
+            table,
+            points,
+            queries[i, 0],
+            queries[i, 1],
+            guess,
+            max_distance * max_distance,
+        )
+        out[i] = guess
+    return out
+
+
+# --- the PLICP loop --------------------------------------------------------------------------
+
+
+@_jit
+def _min_eigenvalue(
+    q: FloatArray,
+    normals: FloatArray,
+    has_normal: np.ndarray,
+    j1: np.ndarray,
+    keep: np.ndarray,
+    theta: float,
+) -> float:
+    """Twin of ``normalised_min_eigenvalue(line_jacobian(q[use], normals[j1[use]], θ),
+    q[use])`` (:mod:`slamkit.scanmatch.covariance`) for ``use = keep & has_normal[j1]``
+    (a kept pair has ``j1 < M``)."""
+    c, s = np.cos(theta), np.sin(theta)
+    h = np.zeros((3, 3))
+    sq = 0.0
+    count = 0
+    for i in range(q.shape[0]):
+        if not (keep[i] and has_normal[j1[i]]):
+            continue
+        qx, qy = q[i, 0], q[i, 1]
+        nx, ny = normals[j1[i], 0], normals[j1[i], 1]
+        r = nx * (-s * qx - c * qy) + ny * (c * qx - s * qy)
+        h[0, 0] += nx * nx
+        h[0, 1] += nx * ny
+        h[0, 2] += nx * r
+        h[1, 1] += ny * ny
+        h[1, 2] += ny * r
+        h[2, 2] += r * r
+        sq += qx * qx + qy * qy
+        count += 1
+    if count == 0:
+        return 0.0
+    inv_len = 1.0 / max(math.sqrt(sq / count), 1e-9)
+    h[0, 2] *= inv_len
+    h[1, 2] *= inv_len
+    h[2, 2] *= inv_len * inv_len
+    h[1, 0], h[2, 0], h[2, 1] = h[0, 1], h[0, 2], h[1, 2]
+    h /= count
+    return min_eigenvalue_sym3(h)
+
+
+@_jit
+def plicp_loop(
+    points: FloatArray,
+    segment_normals: FloatArray,
+    joined: np.ndarray,
+    has_normal: np.ndarray,
+    normals: FloatArray,
+    q: FloatArray,
+    tx: float,
+    ty: float,
+    th: float,
+    max_iterations: int,
+    max_distance: float,
+    outlier_multiplier: float,
+    outlier_floor: float,
+    trim_fraction: float,
+    min_correspondences: int,
+    translation_tolerance: float,
+    rotation_tolerance: float,
+    min_eigenvalue: float,
+) -> tuple[int, int, int, FloatArray, FloatArray, float]:
+    """The loop of :func:`slamkit.scanmatch.plicp.plicp` after validation, and the covariance,
+    compiled: returns ``(status, iterations, n_kept, pose (3,), cov (3, 3), eigenvalue)``
+    with ``status`` one of the codes of this module, ``n_kept`` the pairs kept at the last
+    iteration and ``eigenvalue`` the smallest normalised eigenvalue behind a ``DEGENERATE_*``
+    status (else 0). ``pose`` (θ wrapped) and ``cov`` are the solution when ``status ==
+    CONVERGED`` (``cov`` is zero otherwise). ``joined (M - 1,)`` marks the segments no longer
+    than ``max_gap`` and not of zero length."""
+    m = points.shape[0]
+    n = q.shape[0]
+    order, key, table = _bearing_index(points)
+    max_d2 = max_distance * max_distance
+    j1 = np.full(n, m, dtype=np.int64)
+    use_next = np.zeros(n, dtype=np.bool_)
+    valid = np.zeros(n, dtype=np.bool_)
+    keep = np.zeros(n, dtype=np.bool_)
+    err = np.empty(n)
+    work = np.empty(n)
+    nrm = np.zeros((n, 2))
+    n_keep = 0
+    history = np.empty((max_iterations, n), dtype=np.int64)
+    cov = np.zeros((3, 3))
+    status = NO_CONVERGENCE
+    it = 0
+    while it < max_iterations:
+        it += 1
+        c, s = math.cos(th), math.sin(th)
+        guess = m
+        n_valid = 0
+        for i in range(n):
+            qx, qy = q[i, 0], q[i, 1]
+            mx = (qx * c + qy * -s) + tx
+            my = (qx * s + qy * c) + ty
+            start = j1[i] if j1[i] < m else guess
+            j = _nearest(order, key, table, points, mx, my, start, max_d2)
+            j1[i] = j
+            if j < m:
+                guess = j
+            has_prev = j < m and j >= 1 and joined[j - 1]
+            has_next = j < m - 1 and joined[j]
+            nxt = False
+            if has_next and has_prev:
+                dx = points[j - 1, 0] - mx
+                dy = points[j - 1, 1] - my
+                d_prev = dx * dx + dy * dy
+                dx = points[j + 1, 0] - mx
+                dy = points[j + 1, 1] - my
+                nxt = dx * dx + dy * dy < d_prev
+            elif has_next:
+                nxt = True
+            use_next[i] = nxt
+            if has_prev or has_next:
+                valid[i] = True
+                n_valid += 1
+                seg = j if nxt else j - 1
+                nrm[i, 0] = segment_normals[seg, 0]
+                nrm[i, 1] = segment_normals[seg, 1]
+                err[i] = abs(nrm[i, 0] * (mx - points[j, 0]) + nrm[i, 1] * (my - points[j, 1]))
+            else:
+                valid[i] = False
+                nrm[i, 0] = 0.0
+                nrm[i, 1] = 0.0
+                err[i] = np.inf
+        # Trimming by order statistics (the NumPy twin reads them from a sorted copy): the
+        # median of the valid errors (the invalid ones are +inf, above all), the adaptive
+        # limit, then the trim fraction of those within it.
+        thr = -1.0
+        if n_valid:
+            for i in range(n):
+                work[i] = err[i]
+            limit = max(outlier_multiplier * select_kth(work, (n_valid - 1) // 2), outlier_floor)
+            n_lim = 0
+            for i in range(n):
+                n_lim += err[i] <= limit
+            n_t = math.ceil(trim_fraction * n_lim)
+            if n_t:
+                thr = select_kth(work, n_t - 1)
+        n_keep = 0
+        for i in range(n):
+            keep[i] = err[i] <= thr
+            n_keep += keep[i]
+        if n_keep < min_correspondences:
+            return TOO_FEW, it, n_keep, np.array([tx, ty, th]), cov, 0.0
+        if it == 1:
+            lam = _min_eigenvalue(q, normals, has_normal, j1, keep, th)
+            if lam < 0.5 * min_eigenvalue:
+                return DEGENERATE_START, it, n_keep, np.array([tx, ty, th]), cov, lam
+        # A correspondence set met before: the steps would repeat (a cycle).
+        row = history[it - 1]
+        for i in range(n):
+            row[i] = 4 * j1[i] + 2 * use_next[i] + keep[i]
+        repeated = False
+        for past in range(it - 1):
+            same = True
+            for i in range(n):
+                if history[past, i] != row[i]:
+                    same = False
+                    break
+            if same:
+                repeated = True
+                break
+        if repeated:
+            status = CONVERGED
+            break
+        # The closed-form step over the kept pairs: M = Σ φ φᵀ, v = Σ φ b.
+        m00 = m01 = m02 = m03 = m11 = m12 = m13 = m22 = m23 = m33 = 0.0
+        vt0 = vt1 = vc0 = vc1 = 0.0
+        for i in range(n):
+            if not keep[i]:
+                continue
+            nx, ny = nrm[i, 0], nrm[i, 1]
+            qx, qy = q[i, 0], q[i, 1]
+            p2 = nx * qx + ny * qy
+            p3 = ny * qx - nx * qy
+            b = nx * points[j1[i], 0] + ny * points[j1[i], 1]
+            m00 += nx * nx
+            m01 += nx * ny
+            m02 += nx * p2
+            m03 += nx * p3
+            m11 += ny * ny
+            m12 += ny * p2
+            m13 += ny * p3
+            m22 += p2 * p2
+            m23 += p2 * p3
+            m33 += p3 * p3
+            vt0 += nx * b
+            vt1 += ny * b
+            vc0 += p2 * b
+            vc1 += p3 * b
+        det_a = m00 * m11 - m01 * m01
+        if not det_a > 1e-12 * (m00 + m11) ** 2:
+            return DEGENERATE_STEP, it, n_keep, np.array([tx, ty, th]), cov, 0.0
+        i00, i01, i11 = m11 / det_a, -m01 / det_a, m00 / det_a
+        k00, k01 = i00 * m02 + i01 * m12, i00 * m03 + i01 * m13
+        k10, k11 = i01 * m02 + i11 * m12, i01 * m03 + i11 * m13
+        s11 = m22 - (m02 * k00 + m12 * k10)
+        s12 = m23 - (m02 * k01 + m12 * k11)
+        s22 = m33 - (m03 * k01 + m13 * k11)
+        h1 = vc0 - (k00 * vt0 + k10 * vt1)
+        h2 = vc1 - (k01 * vt0 + k11 * vt1)
+        lam = root_of_multiplier(s11, s12, s22, h1, h2)
+        c0 = (s22 + lam) * h1 - s12 * h2
+        c1 = -s12 * h1 + (s11 + lam) * h2
+        if c0 == 0.0 and c1 == 0.0:
+            c0 = 1.0
+        theta = math.atan2(c1, c0)
+        cos_t, sin_t = math.cos(theta), math.sin(theta)
+        r0 = vt0 - (m02 * cos_t + m03 * sin_t)
+        r1 = vt1 - (m12 * cos_t + m13 * sin_t)
+        new_x = i00 * r0 + i01 * r1
+        new_y = i01 * r0 + i11 * r1
+        dth = ieee_remainder(theta - th, _TWO_PI)
+        small = (
+            math.hypot(new_x - tx, new_y - ty) < translation_tolerance
+            and abs(dth) < rotation_tolerance
+        )
+        tx, ty, th = new_x, new_y, th + dth
+        if small:
+            status = CONVERGED
+            break
+    if status != CONVERGED:
+        return NO_CONVERGENCE, it, n_keep, np.array([tx, ty, th]), cov, 0.0
+    th = ieee_remainder(th, _TWO_PI)
+    pose = np.array([tx, ty, th])
+    lam = _min_eigenvalue(q, normals, has_normal, j1, keep, th)
+    if lam < min_eigenvalue:
+        return DEGENERATE_END, it, n_keep, pose, cov, lam
+    # The covariance over the pairs with a segment (the segment ends j1 and j2 = j1 ± 1).
+    n_valid = 0
+    for i in range(n):
+        n_valid += valid[i]
+    cur = np.empty((n_valid, 2))
+    end_a = np.empty((n_valid, 2))
+    end_b = np.empty((n_valid, 2))
+    index_a = np.empty(n_valid, dtype=np.int64)
+    index_b = np.empty(n_valid, dtype=np.int64)
+    kept = np.empty(n_valid, dtype=np.bool_)
+    v = 0
+    for i in range(n):
+        if not valid[i]:
+            continue
+        ja = j1[i]
+        jb = ja + 1 if use_next[i] else ja - 1
+        cur[v, 0], cur[v, 1] = q[i, 0], q[i, 1]
+        end_a[v, 0], end_a[v, 1] = points[ja, 0], points[ja, 1]
+        end_b[v, 0], end_b[v, 1] = points[jb, 0], points[jb, 1]
+        index_a[v], index_b[v], kept[v] = ja, jb, keep[i]
+        v += 1
+    cov = point_to_line_cov(cur, end_a, end_b, index_a, index_b, m, pose, kept)
+    return CONVERGED, it, n_keep, pose, cov, 0.0
+
+
+# --- the covariance --------------------------------------------------------------------------
+
+
+@_jit
+def point_to_line_cov(
+    current: FloatArray,
+    ref_a: FloatArray,
+    ref_b: FloatArray,
+    index_a: np.ndarray,
+    index_b: np.ndarray,
+    n_reference: int,
+    pose: FloatArray,
+    kept: np.ndarray,
+) -> FloatArray:
+    """Compiled twin of :func:`slamkit.scanmatch.covariance.point_to_line_covariance` (same
+    arguments, same formulas; see there)."""
+    m = current.shape[0]
+    tx, ty, th = pose[0], pose[1], pose[2]
+    c, s = np.cos(th), np.sin(th)
+    ratio = np.empty(m)
+    h = np.zeros((3, 3))
+    gram = np.zeros((3, 3))
+    g_ref = np.zeros((n_reference, 3))
+    e2_nrq = 0.0
+    for i in range(m):
+        qx, qy = current[i, 0], current[i, 1]
+        rqx, rqy = qx * c + qy * -s, qx * s + qy * c  # R q
+        drqx, drqy = qx * -s + qy * -c, qx * c + qy * -s  # R' q
+        ax, ay = ref_a[i, 0], ref_a[i, 1]
+        bx, by = ref_b[i, 0], ref_b[i, 1]
+        dx, dy = bx - ax, by - ay
+        seg_len = math.hypot(dx, dy)
+        taux, tauy = dx / seg_len, dy / seg_len
+        nx, ny = -tauy, taux  # τ turned by +90°
+        relx, rely = rqx + tx - ax, rqy + ty - ay
+        e = nx * relx + ny * rely
+        s_along = (taux * relx + tauy * rely) / seg_len
+        n_drq = nx * drqx + ny * drqy
+        tau_drq = taux * drqx + tauy * drqy
+        rr = math.hypot(qx, qy)
+        ux, uy = qx / rr, qy / rr
+        n_ru = nx * (ux * c + uy * -s) + ny * (ux * s + uy * c)
+        n_dru = nx * (ux * -s + uy * -c) + ny * (ux * c + uy * -s)
+        n_wa = (nx * ax + ny * ay) / math.hypot(ax, ay)
+        n_wb = (nx * bx + ny * by) / math.hypot(bx, by)
+        de_a, de_b = (1.0 - s_along) * n_wa, s_along * n_wb  # -∂e/∂ρ
+        dn_a, dn_b = n_wa / seg_len, -n_wb / seg_len  # ∂n/∂ρ = dn τ
+        ratio[i] = abs(e) / math.sqrt(n_ru**2 + (de_a**2 + de_b**2))
+        if not kept[i]:
+            continue
+        jac0, jac1, jac2 = nx, ny, n_drq
+        h[0, 0] += jac0 * jac0
+        h[0, 1] += jac0 * jac1
+        h[0, 2] += jac0 * jac2
+        h[1, 1] += jac1 * jac1
+        h[1, 2] += jac1 * jac2
+        h[2, 2] += jac2 * jac2
+        e2_nrq += e * (nx * rqx + ny * rqy)
+        g0, g1 = 2.0 * n_ru * jac0, 2.0 * n_ru * jac1
+        g2 = 2.0 * n_ru * jac2 + 2.0 * e * n_dru
+        gram[0, 0] += g0 * g0
+        gram[0, 1] += g0 * g1
+        gram[0, 2] += g0 * g2
+        gram[1, 1] += g1 * g1
+        gram[1, 2] += g1 * g2
+        gram[2, 2] += g2 * g2
+        for end in range(2):
+            de, dn, idx = (de_a, dn_a, index_a[i]) if end == 0 else (de_b, dn_b, index_b[i])
+            e_dn = 2.0 * e * dn
+            g_ref[idx, 0] += -2.0 * de * jac0 + e_dn * taux
+            g_ref[idx, 1] += -2.0 * de * jac1 + e_dn * tauy
+            g_ref[idx, 2] += -2.0 * de * jac2 + e_dn * tau_drq
+    mid = m // 2
+    upper = select_kth(ratio, mid)  # the median: the middle one, or the mean of the middle two
+    if m % 2:
+        median = upper
+    else:
+        lower = ratio[0]
+        for i in range(1, mid):
+            lower = max(lower, ratio[i])  # after the selection, ratio[:mid] <= upper
+        median = 0.5 * (lower + upper)
+    sigma = 1.4826 * median
+    for j in range(n_reference):
+        g0, g1, g2 = g_ref[j, 0], g_ref[j, 1], g_ref[j, 2]
+        gram[0, 0] += g0 * g0
+        gram[0, 1] += g0 * g1
+        gram[0, 2] += g0 * g2
+        gram[1, 1] += g1 * g1
+        gram[1, 2] += g1 * g2
+        gram[2, 2] += g2 * g2
+    h *= 2.0
+    h[2, 2] -= 2.0 * e2_nrq  # ∂²e/∂θ² = -nᵀ R q
+    for a in range(3):
+        for b in range(a):
+            h[a, b] = h[b, a]
+            gram[a, b] = gram[b, a]
+    # H⁻¹ = adj(H) / det H (3×3, symmetric, non-singular after the degeneracy test).
+    inv = np.empty((3, 3))
+    inv[0, 0] = h[1, 1] * h[2, 2] - h[1, 2] * h[2, 1]
+    inv[0, 1] = h[0, 2] * h[2, 1] - h[0, 1] * h[2, 2]
+    inv[0, 2] = h[0, 1] * h[1, 2] - h[0, 2] * h[1, 1]
+    inv[1, 1] = h[0, 0] * h[2, 2] - h[0, 2] * h[2, 0]
+    inv[1, 2] = h[0, 2] * h[1, 0] - h[0, 0] * h[1, 2]
+    inv[2, 2] = h[0, 0] * h[1, 1] - h[0, 1] * h[1, 0]
+    inv[1, 0], inv[2, 0], inv[2, 1] = inv[0, 1], inv[0, 2], inv[1, 2]
+    det = h[0, 0] * inv[0, 0] + h[0, 1] * inv[1, 0] + h[0, 2] * inv[2, 0]
+    cov = np.empty((3, 3))
+    s2 = sigma * sigma / (det * det)
+    for a in range(3):  # σ² H⁻¹ G H⁻ᵀ, symmetric to rounding
+        for b in range(a, 3):
+            acc = 0.0
+            for k in range(3):
+                for l in range(3):
+                    acc += inv[a, k] * gram[k, l] * inv[b, l]
+            cov[a, b] = cov[b, a] = s2 * acc
+    return cov
