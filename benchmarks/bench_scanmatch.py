@@ -31,7 +31,12 @@ are timed):
   Open3D's default relative fitness/RMSE thresholds (1e-6); for point-to-plane the target
   normals are estimated by Open3D (``estimate_normals``, 15 nearest neighbours) on a copy of
   the reference extruded to z = ±0.05 m, since all normals of a flat cloud are vertical, and
-  their z part is dropped (a tilted normal couples in roll and pitch).
+  their z part is dropped (a tilted normal couples in roll and pitch);
+* ``correlative``, ``normal-icp``: slamkit's other matchers on the same pairs (not peers):
+  :func:`slamkit.scanmatch.correlative_match` with its default window (±0.5 m, ±20°,
+  branch and bound; the reference rasterised in each call) and
+  :func:`slamkit.scanmatch.normal_icp.normal_icp` against the reference scan as a one-scan
+  :class:`~slamkit.scanmatch.point_map.PointMap`.
 
 Published anchor (not run here): Censi's C implementation of PLICP (CSM) reports 8.7 ms per
 180-beam match at 7.5 iterations on average (ICRA 2008).
@@ -63,7 +68,9 @@ from slamkit.datasets import find_data_root, load_dataset
 from slamkit.datasets.stream import LaserScan
 from slamkit.errors import DataNotFoundError, MatchError
 from slamkit.geometry.pose2 import between, compose
-from slamkit.scanmatch import icp, kernels, plicp, scan_points
+from slamkit.scanmatch import correlative_match, icp, kernels, plicp, scan_points
+from slamkit.scanmatch.normal_icp import normal_icp
+from slamkit.scanmatch.point_map import PointMap
 from slamkit.sim import random_scan_pairs, rooms_world
 
 try:  # Open3D is an optional peer: the benchmark runs without it
@@ -189,12 +196,24 @@ def plicp_numpy(ref: np.ndarray, cur: np.ndarray, init: Pose) -> Pose:
         return plicp(ref, cur, init).pose
 
 
+def normal_icp_of_scan(ref: np.ndarray, cur: np.ndarray, init: Pose) -> Pose:
+    cloud = PointMap(0.05)
+    cloud.insert(np.zeros(3), ref)
+    return normal_icp(cloud.near(np.zeros(2), 100.0), cur, init).pose
+
+
 def _methods() -> dict[str, Matcher]:
     methods: dict[str, Matcher] = {
         "plicp": lambda r, c, x: plicp(r, c, x).pose,
         "plicp-numpy": plicp_numpy,
         "icp": lambda r, c, x: icp(r, c, x).pose,
         "numpy-icp": numpy_icp,
+        # slamkit's other matchers on the same pairs (not peers: their rows show what each
+        # costs and how far it reaches): Olson's correlative search over ±0.5 m / ±20°
+        # (the reference rasterised in each call), and point-to-normal ICP against the
+        # reference scan as a one-scan point map.
+        "correlative": lambda r, c, x: correlative_match(r, c, x).pose,
+        "normal-icp": normal_icp_of_scan,
     }
     if o3d is not None:
         methods["open3d-p2p"] = open3d_p2p
