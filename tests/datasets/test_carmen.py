@@ -365,3 +365,30 @@ def test_loop5_log(data_root):
     scan = next(ev for ev in ds.events if isinstance(ev, LaserScan))
     np.testing.assert_allclose(scan.ranges[:3], [0.642, 0.645, 0.645])
     assert ds.metadata["max_range_readings"] == 6726  # SICK 8 m mode codes >= 8.183 m
+
+
+def test_corrupt_gzip_bodies_are_format_errors(tmp_path):
+    """Every single-byte flip inside the compressed body of a gzipped log is either read (a
+    flip the checksum cannot see does not exist: gzip's CRC-32 sees all) or refused as a
+    DatasetFormatError naming the file — never a raw zlib.error."""
+    good = _write(tmp_path, _basic_log(), gz=True).read_bytes()
+    for k in range(12, len(good) - 8, max(1, (len(good) - 20) // 40)):
+        bad = bytearray(good)
+        bad[k] ^= 0xFF
+        path = tmp_path / f"flip{k}.log.gz"
+        path.write_bytes(bytes(bad))
+        with pytest.raises(DatasetFormatError) as info:
+            read_carmen_log(path)
+        assert str(path) in str(info.value)
+
+
+def test_line_numbers_count_newlines_only_and_digits_are_ascii(tmp_path):
+    lines = _basic_log()
+    lines.insert(2, "# a comment with a form feed \x0c and a line separator \u2028 in it")
+    lines[4] = lines[4].replace(" 1.0 2.0 0.5 ", " 1.0 2.0 x ", 1)  # the first FLASER
+    with pytest.raises(DatasetFormatError, match=r"log\.log:5:"):
+        read_carmen_log(_write(tmp_path, lines))
+    arabic = _basic_log()
+    arabic[3] = arabic[3].replace(" 1.0 2.0 0.5 ", " ١ 2.0 0.5 ", 1)
+    with pytest.raises(DatasetFormatError, match=r"log\.log:4:"):
+        read_carmen_log(_write(tmp_path, arabic))

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from slamkit.datasets import Control, Dataset, LandmarkReadings
-from slamkit.datasets._text import read_table
 from slamkit.datasets.mrclam import load_mrclam, mrclam_files
 from slamkit.datasets.plaza import DRP_FILE, PLAZA1_FILES, RANGE_SCALE, load_plaza1
+from slamkit.datasets.text import read_table
 from slamkit.errors import ConfigError, DataNotFoundError, DatasetFormatError
 from slamkit.eval import absolute_trajectory_error, associate
 from slamkit.geometry import angle_diff, wrap_angle

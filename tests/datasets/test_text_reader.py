@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from slamkit.datasets._text import MAX_REPORTED_LINES, read_table
+from slamkit.datasets.text import MAX_REPORTED_LINES, read_table
 from slamkit.errors import DataNotFoundError, DatasetFormatError
 
 GOOD = """# a header line
@@ -158,3 +158,28 @@ def test_large_gzip_file_reads_fast(tmp_path: Path) -> None:
     assert table.values.shape == (100_000, 3)
     np.testing.assert_allclose(table.values, np.round(rows, 3), rtol=0, atol=1e-6)
     assert elapsed < 2.0  # typically ~0.15 s
+
+
+def test_line_numbers_count_newlines_only(tmp_path):
+    text = "1 2\n# \x0b \x0c \x1c \x85 \u2028 \u2029 in a comment\n3 x\n"
+    with pytest.raises(DatasetFormatError, match=r"t\.txt:3:"):
+        read_table(_write(tmp_path / "t.txt", text), 2)
+
+
+def test_numbers_are_ascii_only(tmp_path):
+    with pytest.raises(DatasetFormatError, match=r"t\.txt:2: .*non-ASCII"):
+        read_table(_write(tmp_path / "t.txt", "1 2\n١٢ 3\n"), 2)
+    table = read_table(_write(tmp_path / "u.txt", "1 2  # Tübingen\n"), 2)  # comments may
+    np.testing.assert_array_equal(table.values, [[1.0, 2.0]])
+
+
+def test_a_corrupt_gzip_body_and_bad_utf8_are_format_errors(tmp_path):
+    good = gzip.compress(GOOD.encode())
+    bad = bytearray(good)
+    bad[len(bad) // 2] ^= 0xFF
+    (tmp_path / "c.txt.gz").write_bytes(bytes(bad))
+    with pytest.raises(DatasetFormatError, match=r"c\.txt\.gz"):
+        read_table(tmp_path / "c.txt.gz", 3)
+    (tmp_path / "b.txt").write_bytes(b"1 2 3\n4 5 \xff\n")
+    with pytest.raises(DatasetFormatError, match=r"b\.txt:2: not UTF-8"):
+        read_table(tmp_path / "b.txt", 3)

@@ -17,7 +17,7 @@ import pytest
 
 from slamkit.app.presets import preset_for
 from slamkit.datasets import Control, Dataset, LandmarkReadings, load_dataset
-from slamkit.datasets._text import read_table
+from slamkit.datasets.text import read_table
 from slamkit.datasets.victoria_park import (
     DETECTIONS_FILE,
     GPS_FILE,

@@ -6,7 +6,6 @@ the rules for malformed lines are described in :mod:`slamkit.datasets.carmen`.
 
 from __future__ import annotations
 
-import gzip
 import math
 import warnings
 from collections.abc import Mapping
@@ -18,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
+from slamkit.datasets.text import ascii_fields, read_text, text_lines
 from slamkit.errors import DatasetFormatError
 
 __all__ = [
@@ -44,17 +44,10 @@ _KNOWN_COUNTS: dict[int, tuple[float, float]] = {
 
 
 def read_lines(path: Path) -> list[str]:
-    """The lines of a gzip or plain text file (gzip recognised by its magic bytes)."""
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise DatasetFormatError(f"cannot read the file ({exc.strerror})", path) from exc
-    if raw[:2] == b"\x1f\x8b":
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError) as exc:
-            raise DatasetFormatError(f"not a valid gzip file ({exc})", path) from exc
-    return raw.decode("utf-8", errors="replace").splitlines()
+    """The lines of a gzip or plain text file (gzip recognised by its magic bytes), split at
+    ``\n`` only (:func:`slamkit.datasets.text.read_text`, :func:`~slamkit.datasets.text.
+    text_lines`)."""
+    return text_lines(read_text(path))
 
 
 class LineProblems:
@@ -81,6 +74,8 @@ class LineProblems:
 
 def parse_floats(tokens: list[str]) -> list[float] | None:
     """The tokens as numbers, or None when one of them is not a number."""
+    if not ascii_fields(tokens):
+        return None
     try:
         return [float(t) for t in tokens]
     except ValueError:

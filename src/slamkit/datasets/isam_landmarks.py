@@ -54,6 +54,7 @@ from slamkit.datasets.stream import (
     MotionSpec,
     Odometry,
 )
+from slamkit.datasets.text import text_lines
 from slamkit.errors import DatasetFormatError
 from slamkit.geometry import pose2, wrap_angle
 from slamkit.maps import LandmarkMap
@@ -115,7 +116,7 @@ def read_isam_landmark_graph(path: str | Path) -> IsamLandmarkGraph:
     # each type is then converted by one NumPy call (a bad token is located afterwards).
     tokens: dict[bool, list[str]] = {True: [], False: []}  # is_edge -> flat value tokens
     lines: dict[bool, list[int]] = {True: [], False: []}
-    for no, line in enumerate(text.splitlines(), start=1):
+    for no, line in enumerate(text_lines(text), start=1):
         fields = line.split()
         if not fields or fields[0].startswith("#"):
             continue

@@ -105,7 +105,6 @@ from typing import Any
 import numpy as np
 
 from slamkit.config import config_from_mapping, config_to_dict
-from slamkit.datasets._text import NumericTable, read_table
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.stream import (
     Control,
@@ -116,6 +115,7 @@ from slamkit.datasets.stream import (
     LandmarkSensorSpec,
     MotionSpec,
 )
+from slamkit.datasets.text import NumericTable, read_table
 from slamkit.errors import ConfigError, DataNotFoundError, DatasetFormatError
 from slamkit.geometry import wrap_angle
 from slamkit.maps import LandmarkMap

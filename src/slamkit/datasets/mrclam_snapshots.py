@@ -42,9 +42,9 @@ from typing import Any
 import numpy as np
 
 from slamkit.config import config_from_mapping
-from slamkit.datasets._text import NumericTable, read_table
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.stream import Dataset, GroundTruth, LandmarkReadings, LandmarkSensorSpec
+from slamkit.datasets.text import NumericTable, read_table
 from slamkit.errors import ConfigError, DatasetFormatError
 from slamkit.geometry import wrap_angle
 from slamkit.maps import LandmarkMap

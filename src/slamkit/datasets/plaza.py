@@ -78,7 +78,6 @@ import numpy as np
 
 from slamkit._validation import FloatArray
 from slamkit.config import config_from_mapping, config_to_dict
-from slamkit.datasets._text import NumericTable, read_table
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.stream import (
     Control,
@@ -89,6 +88,7 @@ from slamkit.datasets.stream import (
     LandmarkSensorSpec,
     MotionSpec,
 )
+from slamkit.datasets.text import NumericTable, read_table
 from slamkit.errors import ConfigError, DataNotFoundError, DatasetFormatError
 from slamkit.geometry import wrap_angle
 from slamkit.maps import LandmarkMap

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from slamkit._validation import FloatArray, as_array
-from slamkit.datasets._text import read_table
+from slamkit.datasets.text import read_table
 from slamkit.errors import DatasetFormatError, InputError
 
 __all__ = ["Relations", "read_relations"]

@@ -131,7 +131,6 @@ from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
 from slamkit.config import config_from_mapping, config_to_dict
-from slamkit.datasets._text import NumericTable, read_table
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.plaza import cut_intervals
 from slamkit.datasets.stream import (
@@ -144,6 +143,7 @@ from slamkit.datasets.stream import (
     MotionSpec,
     measured_detection_range,
 )
+from slamkit.datasets.text import NumericTable, read_table
 from slamkit.errors import ConfigError, DataNotFoundError, DatasetFormatError
 from slamkit.geometry import wrap_angle
 from slamkit.models import Ackermann

@@ -81,7 +81,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 
-from slamkit.datasets._text import read_text
+from slamkit.datasets.text import read_text
 from slamkit.errors import InputError
 from slamkit.io.graphfiles.families import FILE_FAMILIES, detect_family, family_for_suffix
 from slamkit.io.graphfiles.reader import group_lines, parse_graph_text

@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from slamkit._validation import FloatArray, as_array
+from slamkit.datasets.text import text_lines
 from slamkit.errors import DatasetFormatError, ShapeError
 from slamkit.geometry import wrap_angle
 
@@ -43,7 +44,7 @@ def read_tum(path: str | Path) -> tuple[FloatArray, FloatArray]:
     """Read a TUM file into ``times (N,)`` and SE(2) poses ``(N, 3)`` (x, y, yaw)."""
     p = Path(path)
     rows: list[list[float]] = []
-    for lineno, line in enumerate(p.read_text(encoding="utf-8").splitlines(), start=1):
+    for lineno, line in enumerate(text_lines(p.read_text(encoding="utf-8")), start=1):
         text = line.strip()
         if not text or text.startswith("#"):
             continue

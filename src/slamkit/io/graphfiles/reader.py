@@ -25,6 +25,7 @@ from typing import Literal, cast
 import numpy as np
 
 from slamkit._validation import FloatArray
+from slamkit.datasets.text import text_lines
 from slamkit.errors import DatasetFormatError
 from slamkit.io.graphfiles.families import (
     FAMILIES,
@@ -86,7 +87,7 @@ def group_lines(text: str) -> dict[str, _Group]:
     comment, blank lines are skipped."""
     groups: dict[str, _Group] = {}
     has_comments = "#" in text
-    for n, line in enumerate(text.splitlines(), start=1):
+    for n, line in enumerate(text_lines(text), start=1):
         if has_comments and "#" in line:
             line = line[: line.index("#")]
         parts = line.split(None, 1)

@@ -27,7 +27,7 @@ import numpy as np
 from slamkit._validation import FloatArray
 from slamkit.errors import DataNotFoundError, DatasetFormatError
 
-__all__ = ["NumericTable", "read_table"]
+__all__ = ["NumericTable", "ascii_fields", "read_table", "read_text", "text_lines"]
 
 #: How many skipped line numbers a lenient read keeps (the count is always exact).
 MAX_REPORTED_LINES = 20
@@ -50,20 +50,47 @@ class NumericTable:
         return int(self.values.shape[0])
 
 
+GZIP_MAGIC = b"\x1f\x8b"
+
+
 def read_text(path: Path) -> str:
+    """The text of ``path``: gzip-compressed when it starts with gzip's magic bytes (or is
+    named ``*.gz``), UTF-8. The one way every reader opens a file: a missing file is a
+    :class:`~slamkit.errors.DataNotFoundError`; a corrupt gzip stream (``zlib.error``,
+    ``EOFError``, a bad header) and bytes that are not UTF-8 are a
+    :class:`~slamkit.errors.DatasetFormatError` (the latter naming the line)."""
     try:
-        if path.suffix == ".gz":
-            with gzip.open(path, "rt", encoding="utf-8") as fh:
-                return fh.read()
-        return path.read_text(encoding="utf-8")
+        raw = path.read_bytes()
     except FileNotFoundError:
         raise DataNotFoundError(f"{path}: not found") from None
-    except (gzip.BadGzipFile, EOFError, zlib.error) as exc:
-        raise DatasetFormatError(f"not a valid gzip file ({exc})", path) from exc
-    except UnicodeDecodeError as exc:
-        raise DatasetFormatError(f"not UTF-8 text ({exc.reason})", path) from exc
     except OSError as exc:
         raise DataNotFoundError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
+    if raw[:2] == GZIP_MAGIC or path.suffix == ".gz":
+        try:
+            raw = gzip.decompress(raw)
+        except (gzip.BadGzipFile, EOFError, zlib.error, OSError) as exc:
+            raise DatasetFormatError(f"not a valid gzip file ({exc})", path) from exc
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise DatasetFormatError(f"not UTF-8 text ({exc.reason})", path, line) from exc
+
+
+def text_lines(text: str) -> list[str]:
+    """The lines of ``text``, split at ``\n`` only (a trailing ``\r`` removed), so that line
+    numbers are those of an editor: ``str.splitlines`` also breaks at ``\x0b``, ``\x0c``,
+    ``\x1c``-``\x1e``, ``\x85``, ``\u2028`` and ``\u2029``, which a corrupt file may hold."""
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    return [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+
+
+def ascii_fields(fields: list[str]) -> bool:
+    """Whether every field is ASCII: numbers are read in ASCII only (Python's ``float`` and
+    NumPy also take other scripts' digits, ``'١٢'`` as 12)."""
+    return all(f.isascii() for f in fields)
 
 
 def _split(line: str, delimiter: str | None) -> list[str]:
@@ -116,9 +143,17 @@ def read_table(
     numbers: list[int] = []
     bad: list[int] = []
     count_error: DatasetFormatError | None = None
-    for i, line in enumerate(text.splitlines(), start=1):
+    for i, line in enumerate(text_lines(text), start=1):
         parts = _split(line, delimiter)
         if not parts:
+            continue
+        if not ascii_fields(parts):
+            if not lenient:
+                count_error = DatasetFormatError(
+                    "a field holds non-ASCII characters; expected ASCII numbers", p, i
+                )
+                break
+            bad.append(i)
             continue
         if len(parts) != columns:
             if not lenient:
