@@ -113,3 +113,15 @@ def test_malformed_rows_name_file_and_line(
     assert info.value.line == line
     assert info.value.path == root / rel
     assert f"{Path(rel).name}:{line}:" in str(info.value)
+
+
+def test_a_measurement_file_with_only_its_header_is_refused(
+    data_root: Path, tmp_path: Path
+) -> None:
+    root = _copy_files(data_root, tmp_path)
+    path = root / MEASUREMENT_FILE
+    header = [ln for ln in path.read_text().splitlines() if ln.startswith("#")]
+    path.write_text("\n".join(header) + "\n")
+    with pytest.raises(DatasetFormatError, match="expected at least 1 data row") as info:
+        load_mrclam_snapshots({}, seed=0, data_root=root)
+    assert info.value.path == path

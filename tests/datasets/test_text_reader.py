@@ -109,8 +109,14 @@ def test_lenient_reports_a_bounded_number_of_lines(tmp_path: Path) -> None:
     assert table.skipped_lines == tuple(range(2, 2 * MAX_REPORTED_LINES + 1, 2))
 
 
-def test_empty_file_gives_an_empty_table(tmp_path: Path) -> None:
-    table = read_table(_write(tmp_path / "e.txt", "# only a header\n\n"), 4)
+def test_an_empty_file_is_refused_unless_allowed(tmp_path: Path) -> None:
+    """The same rule for every reader: a file of headers only is not data."""
+    path = _write(tmp_path / "e.txt", "# only a header\n\n")
+    with pytest.raises(DatasetFormatError, match=r"e\.txt: expected at least 1 data row"):
+        read_table(path, 4)
+    with pytest.raises(DatasetFormatError, match="2 malformed line"):
+        read_table(_write(tmp_path / "f.txt", "1 2\n3\n"), 4, lenient=True)
+    table = read_table(path, 4, min_rows=0)
     assert table.values.shape == (0, 4) and table.line_numbers.shape == (0,)
 
 
@@ -143,7 +149,7 @@ def test_values_round_trip_exactly(tmp_path_factory: pytest.TempPathFactory, dat
     # repr() of a float is the shortest string that reads back to the same float.
     text = "# header\n" + "".join("\t".join(repr(float(v)) for v in row) + "\n" for row in data)
     path.write_text(text, encoding="utf-8")
-    table = read_table(path, data.shape[1])
+    table = read_table(path, data.shape[1], min_rows=0)
     np.testing.assert_array_equal(table.values, data.reshape(-1, data.shape[1]))
 
 

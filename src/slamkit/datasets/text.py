@@ -125,13 +125,16 @@ def read_table(
     *,
     lenient: bool = False,
     delimiter: str | None = None,
+    min_rows: int = 1,
 ) -> NumericTable:
     """Read a numeric table of ``columns`` columns from ``path`` (``.gz``: gzip).
 
     ``delimiter=None`` splits on runs of white space (tabs, trailing blanks allowed); ``","``
     splits on commas (an empty field is an error). Raises :class:`DatasetFormatError` with the
     file and 1-based line of the first malformed line, unless ``lenient`` is true: then such
-    lines are skipped and counted. A missing file raises
+    lines are skipped and counted. A file with fewer than ``min_rows`` data rows (default
+    1: an empty reading, GPS or landmark file is refused, never loaded as a data set with
+    nothing in it) raises :class:`DatasetFormatError` too. A missing file raises
     :class:`~slamkit.errors.DataNotFoundError`.
     """
     if columns < 1:
@@ -187,6 +190,14 @@ def read_table(
     if count_error is not None:
         raise count_error
 
+    if len(numbers) < min_rows:
+        found = "none" if not numbers else str(len(numbers))
+        skipped = f" ({len(bad)} malformed line(s) skipped)" if bad else ""
+        raise DatasetFormatError(
+            f"expected at least {min_rows} data row(s) of {columns} numbers, found "
+            f"{found}{skipped}",
+            p,
+        )
     bad.sort()
     return NumericTable(
         values=np.ascontiguousarray(values, dtype=np.float64),
