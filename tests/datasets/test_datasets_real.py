@@ -499,11 +499,12 @@ def test_plaza_malformed_row_names_file_and_line(
 
 
 def test_plaza_malformed_files_without_a_line(tmp_path: Path) -> None:
-    """Errors about a whole file name the file (there is no single line to blame)."""
+    """Errors about a whole file name the file (there is no single line to blame); a
+    duplicated beacon id names the line of its second listing."""
     folder = _write_plaza(tmp_path, {(_TL, 5): "1 -17.664893 59.009181"})  # id 1 twice
-    with pytest.raises(DatasetFormatError, match="listed twice") as err:
+    with pytest.raises(DatasetFormatError, match="beacon id 1 is listed twice") as err:
         load_plaza1({}, seed=0, data_root=tmp_path)
-    assert err.value.path == folder / _TL and err.value.line is None
+    assert err.value.path == folder / _TL and err.value.line == 5
     (folder / _GT).write_text(_PLAZA_HEAD[_GT][0] + "\n" + _PLAZA_HEAD[_GT][1] + "\n")
     (folder / _TL).write_text("\n".join(_PLAZA_HEAD[_TL]) + "\n")
     with pytest.raises(DatasetFormatError, match="at least 2 rows") as err:

@@ -189,3 +189,18 @@ def test_a_corrupt_gzip_body_and_bad_utf8_are_format_errors(tmp_path):
     (tmp_path / "b.txt").write_bytes(b"1 2 3\n4 5 \xff\n")
     with pytest.raises(DatasetFormatError, match=r"b\.txt:2: not UTF-8"):
         read_table(tmp_path / "b.txt", 3)
+
+
+def test_integer_fields_have_bounds(tmp_path):
+    """Ids of 2^63 or more were cast to -9223372036854775808 by NumPy; beyond 2^53 a float
+    table cannot hold them exactly: refused with the line."""
+    from slamkit.datasets.text import integer_column
+
+    path = _write(tmp_path / "ids.txt", "1 0.5\n9223372036854775808 0.5\n")
+    table = read_table(path, 2)
+    with pytest.raises(DatasetFormatError, match=r"ids\.txt:2: expected an integer id"):
+        integer_column(table, 0, "id", path)
+    ok = read_table(_write(tmp_path / "ok.txt", "3 0.5\n-7 1\n"), 2)
+    np.testing.assert_array_equal(integer_column(ok, 0, "id", path), [3, -7])
+    with pytest.raises(DatasetFormatError, match=r":1: expected an integer id"):
+        integer_column(read_table(_write(tmp_path / "f.txt", "1.5 2\n"), 2), 0, "id", path)

@@ -54,7 +54,7 @@ from slamkit.datasets.stream import (
     MotionSpec,
     Odometry,
 )
-from slamkit.datasets.text import text_lines
+from slamkit.datasets.text import integer_values, text_lines
 from slamkit.errors import DatasetFormatError
 from slamkit.geometry import pose2, wrap_angle
 from slamkit.maps import LandmarkMap
@@ -135,6 +135,9 @@ def read_isam_landmark_graph(path: str | Path) -> IsamLandmarkGraph:
         lines[is_edge].append(no)
     e = _to_table(tokens[True], lines[True], 11, "EDGE2", p)
     lm = _to_table(tokens[False], lines[False], 7, "LANDMARK", p)
+    for table, at, tag in ((e, lines[True], "EDGE2"), (lm, lines[False], "LANDMARK")):
+        for col in (0, 1):
+            integer_values(table[:, col], at, f"{tag} index", p)
     return IsamLandmarkGraph(
         path=p,
         edge_ids=e[:, :2].astype(np.int64),

@@ -115,7 +115,7 @@ from slamkit.datasets.stream import (
     LandmarkSensorSpec,
     MotionSpec,
 )
-from slamkit.datasets.text import NumericTable, read_table
+from slamkit.datasets.text import NumericTable, integer_column, read_table
 from slamkit.errors import ConfigError, DataNotFoundError, DatasetFormatError
 from slamkit.geometry import wrap_angle
 from slamkit.maps import LandmarkMap
@@ -210,10 +210,10 @@ def _find(root: Path, relative: str) -> Path:
 
 def _barcode_table(table: NumericTable, path: Path) -> dict[int, int]:
     """``barcode -> subject`` from ``Barcodes.dat`` (both columns integers, barcodes unique)."""
+    integer_column(table, 0, "subject", path)
+    integer_column(table, 1, "barcode", path)
     out: dict[int, int] = {}
     for (subject, barcode), line in zip(table.values, table.line_numbers, strict=True):
-        if subject != int(subject) or barcode != int(barcode):
-            raise DatasetFormatError("expected integer subject and barcode", path, int(line))
         if int(barcode) in out:
             raise DatasetFormatError(f"barcode {int(barcode)} listed twice", path, int(line))
         out[int(barcode)] = int(subject)
@@ -223,13 +223,7 @@ def _barcode_table(table: NumericTable, path: Path) -> dict[int, int]:
 
 
 def _landmark_map(table: NumericTable, path: Path) -> LandmarkMap:
-    subjects = table.values[:, 0]
-    bad = np.flatnonzero(subjects != np.round(subjects))
-    if bad.size:
-        raise DatasetFormatError(
-            "expected an integer subject", path, int(table.line_numbers[bad[0]])
-        )
-    ids = subjects.astype(np.int64)
+    ids = integer_column(table, 0, "subject", path)
     _, first = np.unique(ids, return_index=True)
     if first.size != ids.size:
         dup = np.setdiff1d(np.arange(ids.size), first)[0]

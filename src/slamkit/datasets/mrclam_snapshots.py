@@ -44,7 +44,7 @@ import numpy as np
 from slamkit.config import config_from_mapping
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.stream import Dataset, GroundTruth, LandmarkReadings, LandmarkSensorSpec
-from slamkit.datasets.text import NumericTable, read_table
+from slamkit.datasets.text import NumericTable, integer_column, read_table
 from slamkit.errors import ConfigError, DatasetFormatError
 from slamkit.geometry import wrap_angle
 from slamkit.maps import LandmarkMap
@@ -94,16 +94,9 @@ class MrclamSnapshotOptions:
 
 
 def _integer_column(table: NumericTable, col: int, what: str, path: Path) -> np.ndarray:
-    """Column ``col`` of ``table`` as integers; DatasetFormatError at the first non-integer."""
-    values = table.values[:, col]
-    bad = np.flatnonzero(values != np.round(values))
-    if bad.size:
-        raise DatasetFormatError(
-            f"column {col + 1}: expected an integer {what}, got {values[bad[0]]!r}",
-            path,
-            int(table.line_numbers[bad[0]]),
-        )
-    return values.astype(np.int64)
+    """Column ``col`` of ``table`` as integers (:func:`~slamkit.datasets.text.integer_column`,
+    the message naming the column)."""
+    return integer_column(table, col, f"{what} in column {col + 1}", path)
 
 
 def _first_bad(table: NumericTable, bad: np.ndarray) -> int:

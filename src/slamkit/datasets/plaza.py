@@ -88,7 +88,7 @@ from slamkit.datasets.stream import (
     LandmarkSensorSpec,
     MotionSpec,
 )
-from slamkit.datasets.text import NumericTable, read_table
+from slamkit.datasets.text import NumericTable, integer_column, integer_values, read_table
 from slamkit.errors import ConfigError, DataNotFoundError, DatasetFormatError
 from slamkit.geometry import wrap_angle
 from slamkit.maps import LandmarkMap
@@ -169,17 +169,14 @@ def _check_increasing(table: NumericTable, path: Path, *, strict: bool) -> None:
 
 
 def _beacons(table: NumericTable, path: Path) -> LandmarkMap:
-    ids = table.values[:, 0]
-    bad = np.flatnonzero(ids != np.round(ids))
-    if bad.size:
+    ids = integer_column(table, 0, "beacon id", path)
+    _, first = np.unique(ids, return_index=True)
+    if first.size != ids.size:
+        dup = int(np.setdiff1d(np.arange(ids.size), first)[0])
         raise DatasetFormatError(
-            "expected an integer beacon id", path, int(table.line_numbers[bad[0]])
+            f"beacon id {int(ids[dup])} is listed twice", path, int(table.line_numbers[dup])
         )
-    if np.unique(ids).size != ids.size:
-        raise DatasetFormatError("a beacon id is listed twice", path)
-    if ids.size == 0:
-        raise DatasetFormatError("no beacons", path)
-    return LandmarkMap(table.values[:, 1:3].copy(), ids.astype(np.int64))
+    return LandmarkMap(table.values[:, 1:3].copy(), ids)
 
 
 def cut_intervals(
@@ -255,18 +252,13 @@ def load_plaza1(
         raise DatasetFormatError(
             f"expected a positive range, got {m[r, 3]}", p_td, int(td.line_numbers[r])
         )
-    ids = m[:, 2]
-    bad = np.flatnonzero(ids != np.round(ids))
-    if bad.size:
-        raise DatasetFormatError(
-            "expected an integer beacon id", p_td, int(td.line_numbers[bad[0]])
-        )
-    known = np.isin(ids.astype(np.int64), beacons.ids)
+    ids = integer_values(m[:, 2], td.line_numbers, "beacon id", p_td)
+    known = np.isin(ids, beacons.ids)
     jumps_back = int(np.count_nonzero(np.diff(m[:, 0]) < 0))
     order = np.argsort(m[known, 0], kind="stable")
     r_t = m[known, 0][order]
     r_z = (opts.range_scale * m[known, 3][order])[:, None]
-    r_id = ids[known].astype(np.int64)[order]
+    r_id = ids[known][order]
     n_read = int(np.searchsorted(r_t, cut, side="right"))
     group_t, group_start = np.unique(r_t[:n_read], return_index=True)
     group_end = np.append(group_start[1:], n_read)

@@ -23,11 +23,21 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray
 from slamkit.errors import DataNotFoundError, DatasetFormatError
 
-__all__ = ["NumericTable", "ascii_fields", "read_table", "read_text", "text_lines"]
+__all__ = [
+    "MAX_EXACT_INTEGER",
+    "NumericTable",
+    "ascii_fields",
+    "integer_column",
+    "integer_values",
+    "read_table",
+    "read_text",
+    "text_lines",
+]
 
 #: How many skipped line numbers a lenient read keeps (the count is always exact).
 MAX_REPORTED_LINES = 20
@@ -205,6 +215,35 @@ def read_table(
         skipped=len(bad),
         skipped_lines=tuple(bad[:MAX_REPORTED_LINES]),
     )
+
+
+MAX_EXACT_INTEGER = 2**53
+"""The largest integer a table reads exactly: numbers are parsed as float64, whose integers
+are exact up to 2⁵³; an id beyond it would be silently rounded (or, cast to int64 from 2⁶³
+on, wrapped to a negative number)."""
+
+
+def integer_values(
+    values: FloatArray, line_numbers: ArrayLike, what: str, path: Path
+) -> NDArray[np.int64]:
+    """``values`` as int64 when every one is an integer within ``±MAX_EXACT_INTEGER``, else
+    a :class:`DatasetFormatError` naming ``what``, the file and the line of the first one
+    that is not."""
+    v = np.asarray(values, dtype=np.float64)
+    bad = np.flatnonzero((v != np.round(v)) | ~(np.abs(v) <= MAX_EXACT_INTEGER))
+    if bad.size:
+        lines = np.asarray(line_numbers, dtype=np.int64).reshape(-1)
+        raise DatasetFormatError(
+            f"expected an integer {what} (at most 2^53 in magnitude), got {v[bad[0]]!r}",
+            path,
+            int(lines[bad[0]]),
+        )
+    return v.astype(np.int64)
+
+
+def integer_column(table: NumericTable, col: int, what: str, path: Path) -> NDArray[np.int64]:
+    """Column ``col`` of ``table`` through :func:`integer_values`."""
+    return integer_values(table.values[:, col], table.line_numbers, what, path)
 
 
 def _convert_rowwise(fields: list[str], columns: int) -> tuple[FloatArray, np.ndarray]:

@@ -143,7 +143,7 @@ from slamkit.datasets.stream import (
     MotionSpec,
     measured_detection_range,
 )
-from slamkit.datasets.text import NumericTable, read_table
+from slamkit.datasets.text import NumericTable, integer_values, read_table
 from slamkit.errors import ConfigError, DataNotFoundError, DatasetFormatError
 from slamkit.geometry import wrap_angle
 from slamkit.models import Ackermann
@@ -333,7 +333,7 @@ def load_victoria_park(
     keep = ~poor & ~outside & (t_det <= cut)
     t_det = t_det[keep]
     z = laser_to_vehicle(d[keep, 1], d[keep, 2], opts.laser_offset)
-    truth_id = d[keep, 5].astype(np.int64)
+    truth_id = integer_values(d[keep, 5], det.line_numbers[keep], "feature index", p_det)
     group_t, group_start = np.unique(t_det, return_index=True)
     group_end = np.append(group_start[1:], t_det.size)
 
