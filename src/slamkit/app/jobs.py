@@ -9,8 +9,10 @@ from typing import Any
 
 from slamkit.app.presets import resolve_preset
 from slamkit.datasets.files import load_data
+from slamkit.errors import ConfigError
 from slamkit.eval.records import RunScores
 from slamkit.io import atomic_folder, write_json, write_tum
+from slamkit.io.folders import check_output_folder
 from slamkit.pipeline import Progress, Result, get_estimator_entry, run
 from slamkit.pipeline.evaluate import evaluate
 
@@ -72,6 +74,9 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         entry.name, request.dataset, request.estimator_config, request.preset
     )
     entry.make_config(config)  # fail on bad config before loading
+    if isinstance(request.seed, bool) or not isinstance(request.seed, int) or request.seed < 0:
+        raise ConfigError(f"seed: expected an integer >= 0, got {request.seed!r}")
+    check_output_folder(request.out_dir, overwrite=request.overwrite)  # before the work
     dataset = load_data(
         request.dataset,
         seed=request.seed,

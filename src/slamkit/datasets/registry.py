@@ -280,9 +280,13 @@ def load_dataset(
         missing = (
             entry.files if root is None else [f for f in entry.files if not (root / f).exists()]
         )
-        raise DataNotFoundError(
-            f"data set {name!r} needs {', '.join(missing)} under the data folder (set SLAMKIT_DATA)"
+        where = (
+            "under the data folder (set SLAMKIT_DATA)"
+            if data_root is None
+            else f"under the data folder {data_root} given"
+            + (" (which is not a folder)" if not Path(data_root).is_dir() else "")
         )
+        raise DataNotFoundError(f"data set {name!r} needs {', '.join(missing)} {where}")
     merged = {**entry.defaults, **dict(options or {})}
     dataset: Dataset = entry.loader()(merged, seed=seed, data_root=root)
     if dataset.name != entry.name:  # a variant carries its own registered name

@@ -13,7 +13,7 @@ from typing import Any
 
 from slamkit.errors import InputError
 
-__all__ = ["atomic_folder", "write_json"]
+__all__ = ["atomic_folder", "check_output_folder", "write_json"]
 
 
 def write_json(path: str | Path, data: Any) -> None:
@@ -22,19 +22,40 @@ def write_json(path: str | Path, data: Any) -> None:
     Path(path).write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
 
 
-@contextlib.contextmanager
-def atomic_folder(target: str | Path, *, overwrite: bool = False) -> Iterator[Path]:
-    """Yield a temporary folder beside ``target``; on success it replaces ``target`` in one
-    rename, on any error it is removed and ``target`` is left as it was.
-
-    Refuses to replace an existing non-empty ``target`` unless ``overwrite`` is set.
-    """
+def check_output_folder(target: str | Path, *, overwrite: bool = False) -> Path:
+    """Check, before any work, that ``target`` can be written as an output folder: not a
+    file, not a non-empty folder (unless ``overwrite``), its parent creatable and writable.
+    Creates the parent; raises :class:`~slamkit.errors.InputError` saying what is wrong."""
     dest = Path(target)
     if dest.exists() and not dest.is_dir():
         raise InputError(f"{dest}: exists and is not a folder")
     if dest.exists() and any(dest.iterdir()) and not overwrite:
         raise InputError(f"{dest}: folder exists and is not empty (use --overwrite)")
-    dest.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        dest.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(
+            f"{dest}: cannot create the folder it goes in ({exc.strerror or exc})"
+        ) from exc
+    if not dest.parent.is_dir():
+        raise InputError(f"{dest}: {dest.parent} is not a folder")
+    try:
+        probe = tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".probe", dir=dest.parent)
+    except OSError as exc:
+        raise InputError(f"{dest}: cannot write in {dest.parent} ({exc.strerror or exc})") from exc
+    os.rmdir(probe)
+    return dest
+
+
+@contextlib.contextmanager
+def atomic_folder(target: str | Path, *, overwrite: bool = False) -> Iterator[Path]:
+    """Yield a temporary folder beside ``target``; on success it replaces ``target`` in one
+    rename, on any error it is removed and ``target`` is left as it was.
+
+    Refuses to replace an existing non-empty ``target`` unless ``overwrite`` is set, and a
+    target that cannot be written (:func:`check_output_folder`).
+    """
+    dest = check_output_folder(target, overwrite=overwrite)
     tmp = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".partial", dir=dest.parent))
     try:
         yield tmp

@@ -1,0 +1,74 @@
+"""CLI faults end as one line and exit code 1, checked before any work is done."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from slamkit.cli.main import app
+
+runner = CliRunner()
+
+
+def _one_line_error(args: list[str], expected: str) -> None:
+    res = runner.invoke(app, args)
+    assert res.exit_code == 1, res.output
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and expected in lines[0], lines
+
+
+def test_an_impossible_or_unwritable_out_is_refused(tmp_path: Path) -> None:
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    _one_line_error(["run", "dead-reckoning", "--out", str(afile / "sub")], "cannot create")
+    _one_line_error(["run", "dead-reckoning", "--out", "/proc/x"], "cannot write in /proc")
+    _one_line_error(["run", "dead-reckoning", "--out", str(afile)], "not a folder")
+
+
+def test_a_full_out_folder_is_refused_before_the_run(tmp_path: Path, monkeypatch) -> None:
+    """The folder is checked first: the estimator is never built (it would fail loudly)."""
+    import slamkit.app.jobs as jobs
+
+    full = tmp_path / "full"
+    full.mkdir()
+    (full / "keep.txt").write_text("x")
+
+    def never(*args, **kwargs):
+        raise AssertionError("the run started although the output folder is full")
+
+    monkeypatch.setattr(jobs, "run", never)
+    _one_line_error(["run", "dead-reckoning", "--out", str(full)], "not empty")
+
+
+@pytest.mark.parametrize("how", ["option", "config"])
+def test_a_negative_seed_is_refused(tmp_path: Path, how: str) -> None:
+    args = ["run", "dead-reckoning", "--out", str(tmp_path / "r")]
+    if how == "option":
+        args += ["--seed", "-1"]
+    else:
+        (tmp_path / "c.toml").write_text("seed = -1\n")
+        args += ["--config", str(tmp_path / "c.toml")]
+    _one_line_error(args, "seed: expected an integer >= 0")
+
+
+def test_a_binary_config_file_and_a_data_root_that_is_a_file(tmp_path: Path) -> None:
+    (tmp_path / "bin.toml").write_bytes(b"\x00\x01\xff\xfe")
+    _one_line_error(
+        [
+            "run",
+            "dead-reckoning",
+            "--config",
+            str(tmp_path / "bin.toml"),
+            "--out",
+            str(tmp_path / "a"),
+        ],
+        "not a text file",
+    )
+    (tmp_path / "root").write_text("x")
+    _one_line_error(
+        ["run", "dead-reckoning", "--data", "plaza1", "--data-root", str(tmp_path / "root"),
+         "--out", str(tmp_path / "b")],
+        "(which is not a folder)",
+    )  # fmt: skip
