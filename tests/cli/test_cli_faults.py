@@ -72,3 +72,17 @@ def test_a_binary_config_file_and_a_data_root_that_is_a_file(tmp_path: Path) -> 
          "--out", str(tmp_path / "b")],
         "(which is not a folder)",
     )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("table", "expected"),
+    [
+        ("initial_sigma_xy = inf", "initial_sigma_xy: expected a finite number"),
+        ("laps = 100000000", "above the limit of 2,000,000 (set max_steps"),
+        ("dt = 1e-7", "above the limit of 2,000,000 (set max_steps"),
+    ],
+)
+def test_simulator_settings_that_would_hang_or_exhaust_memory(tmp_path, table, expected):
+    (tmp_path / "c.toml").write_text(f"[dataset]\n{table}\n")
+    args = ["run", "dead-reckoning", "--config", str(tmp_path / "c.toml")]
+    _one_line_error([*args, "--out", str(tmp_path / "r")], expected)

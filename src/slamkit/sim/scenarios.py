@@ -8,6 +8,7 @@ every data set), so ``slamkit run ESTIMATOR --data five-features`` just works.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -62,6 +63,10 @@ class LandmarkScenarioConfig:
     """Commanded forward speed [m/s]."""
     laps: int = 1
     """How many times the route is driven."""
+    max_steps: int = 2_000_000
+    """Refuse a drive estimated to take more control steps than this (a typo such as
+    ``laps = 100000000`` or ``dt = 1e-7`` would otherwise run for hours or run out of
+    memory)."""
     sigma_v: float = 0.10
     """Standard deviation of the executed speed about the commanded one [m/s]."""
     sigma_omega_deg: float = 5.0
@@ -99,6 +104,11 @@ class LandmarkScenarioConfig:
 
     def __post_init__(self) -> None:
         _check_kidnap(self.kidnap_time, self.kidnap_skip)
+        _check_finite(self, (
+            "dt", "speed", "sigma_v", "sigma_omega_deg", "sigma_range", "sigma_bearing_deg",
+            "initial_sigma_xy", "initial_sigma_theta_deg", "prior_error_theta_deg",
+            "kidnap_time", "kidnap_skip", "fov_deg", "min_range",
+        ))  # fmt: skip
         for name in ("dt", "speed", "max_range", "fov_deg"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"{name}: expected a positive number, got {getattr(self, name)}")
@@ -142,6 +152,8 @@ class LaserScenarioConfig:
     dt: float = 0.2
     speed: float = 0.8
     laps: int = 1
+    max_steps: int = 2_000_000
+    """As in :class:`LandmarkScenarioConfig`."""
     sigma_v: float = 0.05
     sigma_omega_deg: float = 3.0
     n_beams: int = 181
@@ -161,6 +173,14 @@ class LaserScenarioConfig:
 
     def __post_init__(self) -> None:
         _check_kidnap(self.kidnap_time, self.kidnap_skip)
+        _check_finite(self, (
+            "dt", "speed", "sigma_v", "sigma_omega_deg", "fov_deg", "max_range", "sigma_range",
+            "grid_resolution", "initial_sigma_xy", "initial_sigma_theta_deg", "kidnap_time",
+            "kidnap_skip",
+        ))  # fmt: skip
+        for name in ("sigma_v", "sigma_omega_deg", "initial_sigma_xy", "initial_sigma_theta_deg"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"{name}: expected a number >= 0, got {getattr(self, name)}")
         if self.n_beams < 1:
             raise ConfigError(f"n_beams: expected >= 1, got {self.n_beams}")
         for name in ("dt", "speed", "fov_deg", "max_range", "sigma_range", "grid_resolution"):
@@ -172,6 +192,15 @@ class LaserScenarioConfig:
         endpoint = self.fov_deg < 360.0
         angles = np.linspace(-half, half, self.n_beams, endpoint=endpoint)
         return LaserSpec(angles, self.max_range, self.sigma_range)
+
+
+def _check_finite(config: object, names: tuple[str, ...]) -> None:
+    """Noise levels, periods and speeds must be finite: ``inf`` passes a ``>= 0`` test but
+    hangs the sampler (a covariance of inf) or never ends a drive."""
+    for name in names:
+        value = getattr(config, name)
+        if not math.isfinite(value):
+            raise ConfigError(f"{name}: expected a finite number, got {value}")
 
 
 def _check_kidnap(kidnap_time: float, kidnap_skip: float) -> None:
@@ -197,9 +226,19 @@ def _follow(
     rng: np.random.Generator,
     kidnap_time: float,
     kidnap_skip: float,
+    max_steps: int,
     tolerance: float = 0.3,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """True poses and commanded controls of a closed-loop drive along the waypoints."""
+    """True poses and commanded controls of a closed-loop drive along the waypoints;
+    refuses a drive of more than ``max_steps`` steps (estimated from the route's length,
+    the laps, the speed and the period) before allocating it."""
+    route = float(np.sum(np.hypot(*np.diff(np.vstack([waypoints, waypoints[:1]]), axis=0).T)))
+    steps = laps * route / (speed * dt)
+    if steps > max_steps:
+        raise ConfigError(
+            f"laps = {laps}, speed = {speed} m/s, dt = {dt} s: about {steps:.3g} steps of a "
+            f"{route:.0f}-m route, above the limit of {max_steps:,} (set max_steps to allow it)"
+        )
     try:
         drive = follow_waypoints(
             start, waypoints, speed=speed, dt=dt, laps=laps, tolerance=tolerance,
@@ -240,6 +279,7 @@ def landmark_dataset(
     truth, controls = _follow(
         x0, waypoints, speed=cfg.speed, dt=cfg.dt, laps=cfg.laps, control_cov=cfg.control_cov(),
         rng=rng, kidnap_time=cfg.kidnap_time, kidnap_skip=cfg.kidnap_skip,
+        max_steps=cfg.max_steps,
     )  # fmt: skip
     times = cfg.dt * np.arange(truth.shape[0], dtype=np.float64)
     prior = prior + np.array([*cfg.prior_error_xy, np.deg2rad(cfg.prior_error_theta_deg)])
@@ -383,6 +423,7 @@ def build_rooms_laser(
     truth, controls = _follow(
         x0, waypoints, speed=cfg.speed, dt=cfg.dt, laps=cfg.laps, control_cov=q, rng=rng,
         kidnap_time=cfg.kidnap_time, kidnap_skip=cfg.kidnap_skip, tolerance=0.25,
+        max_steps=cfg.max_steps,
     )  # fmt: skip
     times = cfg.dt * np.arange(truth.shape[0], dtype=np.float64)
     laser = cfg.laser_spec()
