@@ -872,3 +872,11 @@ def test_map_command_help_shows_units_and_tables():
     assert "TOML/JSON file with [mapping] and [dataset] tables" in text
     assert "Usable range r_max of the laser [m], or 'sensor'" in text
     assert "Default 30 m (unless the config file sets [mapping.model] max_range)" in text
+
+
+def test_a_grid_too_large_is_refused_with_its_size(rooms):
+    """A resolution typo (1e-4 m) must not reach MemoryError: the size is checked first."""
+    with pytest.raises(InputError, match=r"above the limit of 1,000 cells \(max_cells\)"):
+        build_occupancy_map(rooms, OccupancyMappingConfig(resolution=0.1, max_cells=1000))
+    with pytest.raises(ConfigError, match="max_cells"):
+        OccupancyMappingConfig(max_cells=0)

@@ -28,6 +28,9 @@ __all__ = ["LogOddsGrid", "lattice_cells"]
 
 IntArray = NDArray[np.int64]
 
+DEFAULT_MAX_CELLS = 500_000_000
+"""The largest grid a mapper allocates unless told otherwise: 2 GB of float32 log odds."""
+
 _EXPIT_BLOCK = 1 << 16  # cells converted to probabilities at a time (512 kB of float64)
 
 
@@ -43,9 +46,18 @@ class LogOddsGrid:
     mapper; :meth:`to_occupancy_grid` returns an immutable probability grid."""
 
     def __init__(
-        self, resolution: float, row0: int, col0: int, rows: int, cols: int, l0: float = 0.0
+        self,
+        resolution: float,
+        row0: int,
+        col0: int,
+        rows: int,
+        cols: int,
+        l0: float = 0.0,
+        *,
+        max_cells: int = DEFAULT_MAX_CELLS,
     ) -> None:
         self.resolution = as_positive(resolution, "resolution")
+        self.max_cells = int(max_cells)
         if rows < 1 or cols < 1:
             raise InputError(f"grid size: expected at least 1 × 1 cells, got {rows} × {cols}")
         self.row0, self.col0 = int(row0), int(col0)
@@ -58,7 +70,15 @@ class LogOddsGrid:
 
     @classmethod
     def covering(
-        cls, xmin: float, ymin: float, xmax: float, ymax: float, resolution: float, l0: float
+        cls,
+        xmin: float,
+        ymin: float,
+        xmax: float,
+        ymax: float,
+        resolution: float,
+        l0: float,
+        *,
+        max_cells: int = DEFAULT_MAX_CELLS,
     ) -> LogOddsGrid:
         """The smallest block of lattice cells covering the box ``[xmin, xmax] × [ymin, ymax]``."""
         res = as_positive(resolution, "resolution")
@@ -66,9 +86,16 @@ class LogOddsGrid:
         hi = lattice_cells(np.array([xmax, ymax]), res)
         if np.any(hi < lo):
             raise InputError(f"grid bounds: empty box ({xmin}, {ymin}, {xmax}, {ymax})")
-        return cls(res, int(lo[0]), int(lo[1]), int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1), l0)
+        rows, cols = int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1)
+        return cls(res, int(lo[0]), int(lo[1]), rows, cols, l0, max_cells=max_cells)
 
     def _prior_block(self, rows: int, cols: int) -> NDArray[np.float32]:
+        if rows * cols > self.max_cells:
+            raise InputError(
+                f"a grid of {rows:,} × {cols:,} cells at {self.resolution:g} m "
+                f"({4 * rows * cols / 1e9:.3g} GB) is above the limit of {self.max_cells:,} "
+                "cells (max_cells): a coarser resolution or a shorter usable range, or raise it"
+            )
         # A prior of 0.5 (l0 = 0) uses np.zeros, whose pages the OS hands out lazily: cells
         # no scan ever reaches then cost no memory traffic until they are read.
         if self.l0 == 0.0:
@@ -282,6 +309,9 @@ class LogOddsGrid:
         return OccupancyGrid(self.probabilities(), self.resolution, self.origin_xy)
 
     def copy(self) -> LogOddsGrid:
-        out = LogOddsGrid(self.resolution, self.row0, self.col0, *self.shape, l0=self.l0)
+        out = LogOddsGrid(
+            self.resolution, self.row0, self.col0, *self.shape, l0=self.l0,
+            max_cells=self.max_cells,
+        )  # fmt: skip
         out.log_odds = self.log_odds.copy()
         return out

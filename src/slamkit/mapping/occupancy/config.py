@@ -44,6 +44,9 @@ class OccupancyMappingConfig:
     Only :func:`~slamkit.mapping.occupancy.build_occupancy_map` (a batch over a whole log)
     can size from the data; the pipeline estimator sees one scan at a time and always grows
     (the cells are the same: every grid lies on one lattice anchored at the world origin)."""
+    max_cells: int = 500_000_000
+    """Refuse to allocate (or grow to) a grid of more cells than this (4 bytes each: 2 GB by
+    default), with the size it would have had, instead of running out of memory."""
     margin: float = 1.0
     """Free border around the data bounds, and the least a growing grid adds [m]."""
     pose_source: Literal["truth", "odometry"] = "truth"
@@ -53,7 +56,7 @@ class OccupancyMappingConfig:
     def __post_init__(self) -> None:
         if not (math.isfinite(self.resolution) and self.resolution > 0):
             raise ConfigError(f"resolution: expected a number > 0, got {self.resolution!r}")
-        for name in ("beam_stride", "scan_stride"):
+        for name in ("beam_stride", "scan_stride", "max_cells"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"{name}: expected an integer >= 1, got {getattr(self, name)}")
         for name in ("min_travel", "min_rotation_deg", "margin"):

@@ -93,7 +93,13 @@ class OccupancyMapper:
             xmin, ymin, xmax, ymax = bounds
             m = config.margin
             self.grid = LogOddsGrid.covering(
-                xmin - m, ymin - m, xmax + m, ymax + m, config.resolution, self.model.l0
+                xmin - m,
+                ymin - m,
+                xmax + m,
+                ymax + m,
+                config.resolution,
+                self.model.l0,
+                max_cells=config.max_cells,
             )
         self._table: PolarTable | None = None
         if config.precompute:
@@ -178,6 +184,7 @@ class OccupancyMapper:
                 int(hi[0] - lo[0]) + 1 + 2 * m,
                 int(hi[1] - lo[1]) + 1 + 2 * m,
                 self.model.l0,
+                max_cells=self.config.max_cells,
             )
         elif not self._fixed and self.grid.grow_to_cells(lo, hi, self._margin_cells):
             self.stats.grid_growths += 1
