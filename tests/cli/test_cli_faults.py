@@ -86,3 +86,45 @@ def test_simulator_settings_that_would_hang_or_exhaust_memory(tmp_path, table, e
     (tmp_path / "c.toml").write_text(f"[dataset]\n{table}\n")
     args = ["run", "dead-reckoning", "--config", str(tmp_path / "c.toml")]
     _one_line_error([*args, "--out", str(tmp_path / "r")], expected)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("sig", "code", "word"), [("INT", 130, "interrupted"), ("TERM", 143, "terminated")]
+)
+def test_an_interrupted_run_says_so_and_leaves_nothing_behind(tmp_path, sig, code, word):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    (tmp_path / "long.toml").write_text("[dataset]\nlaps = 400\n")
+    out = tmp_path / "runs" / "r"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "slamkit.cli.main", "run", "fastslam2", "--config",
+         str(tmp_path / "long.toml"), "--out", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 60
+    while not (tmp_path / "runs").exists() and time.monotonic() < deadline:
+        time.sleep(0.1)  # the output folder's parent is made before the work starts
+    time.sleep(2.0)
+    proc.send_signal(getattr(signal, f"SIG{sig}"))
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == code, err
+    assert err.strip().splitlines()[-1] == f"{word}; nothing was written"
+    assert not out.exists() and os.listdir(tmp_path / "runs") == []
+
+
+def test_stale_partial_folders_of_a_killed_run_are_removed(tmp_path):
+    from slamkit.io import atomic_folder
+
+    dead = tmp_path / ".r.999999999.abcd.partial"  # no such process
+    dead.mkdir()
+    (dead / "metrics.json").write_text("{}")
+    mine = tmp_path / ".other.999999999.x.partial"  # another target's: left alone
+    mine.mkdir()
+    with atomic_folder(tmp_path / "r") as tmp:
+        (tmp / "a.txt").write_text("a")
+    assert not dead.exists() and mine.exists() and (tmp_path / "r" / "a.txt").exists()

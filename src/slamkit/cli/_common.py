@@ -22,13 +22,29 @@ console = Console()
 err_console = Console(stderr=True)
 
 
+class Terminated(KeyboardInterrupt):
+    """Raised by the SIGTERM handler the ``slamkit`` command installs, so that a terminated
+    run unwinds (and removes its partial output) as an interrupted one does."""
+
+
+def terminate(signum: int, frame: object) -> None:
+    """The SIGTERM handler: unwind like Ctrl-C."""
+    raise Terminated
+
+
 def known_errors(fn: Callable[P, R]) -> Callable[P, R]:
-    """Turn slamkit's own errors into one red line on stderr and exit code 1."""
+    """Turn slamkit's own errors into one red line on stderr and exit code 1; an interrupt
+    (Ctrl-C, or SIGTERM) into one line and exit code 130 (143 for SIGTERM). Output folders
+    are written atomically, so an interrupted run leaves nothing behind."""
 
     @functools.wraps(fn)
     def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
         try:
             return fn(*args, **kwargs)
+        except KeyboardInterrupt as exc:
+            what = "terminated" if isinstance(exc, Terminated) else "interrupted"
+            err_console.print(f"{what}; nothing was written", highlight=False)
+            raise typer.Exit(143 if isinstance(exc, Terminated) else 130) from None
         except SlamkitError as exc:
             # escaped: a message naming a "[mapping]" table is not rich markup
             err_console.print(

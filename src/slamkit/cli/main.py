@@ -9,6 +9,7 @@ Heavy imports happen inside the commands so ``slamkit --help`` stays fast.
 from __future__ import annotations
 
 import math
+import signal
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -16,7 +17,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from slamkit.cli._common import console, known_errors, progress_bar, split_config
+from slamkit.cli._common import console, known_errors, progress_bar, split_config, terminate
 from slamkit.cli.eval_cmd import eval_app
 from slamkit.cli.map_cmd import map_app
 from slamkit.cli.optimize_cmd import optimize_command
@@ -247,7 +248,8 @@ def data_list_command(
 
 
 def main() -> None:
-    """Entry point of the ``slamkit`` console script."""
+    """Entry point of the ``slamkit`` console script (SIGTERM unwinds like Ctrl-C)."""
+    signal.signal(signal.SIGTERM, terminate)
     app()
 
 

@@ -13,7 +13,7 @@ from typing import Any
 
 from slamkit.errors import InputError
 
-__all__ = ["atomic_folder", "check_output_folder", "write_json"]
+__all__ = ["atomic_folder", "check_output_folder", "remove_stale_partials", "write_json"]
 
 
 def write_json(path: str | Path, data: Any) -> None:
@@ -47,6 +47,29 @@ def check_output_folder(target: str | Path, *, overwrite: bool = False) -> Path:
     return dest
 
 
+def remove_stale_partials(target: Path) -> list[Path]:
+    """Remove the partial folders ``.NAME.PID.*.partial`` beside ``target`` whose process has
+    ended (a run killed before it could clean up); returns those removed."""
+    removed = []
+    for partial in target.parent.glob(f".{target.name}.*.partial"):
+        pid_text = partial.name[len(target.name) + 2 :].split(".", 1)[0]
+        if not pid_text.isdigit() or _alive(int(pid_text)):
+            continue
+        shutil.rmtree(partial, ignore_errors=True)
+        removed.append(partial)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process
+        return True
+    return True
+
+
 @contextlib.contextmanager
 def atomic_folder(target: str | Path, *, overwrite: bool = False) -> Iterator[Path]:
     """Yield a temporary folder beside ``target``; on success it replaces ``target`` in one
@@ -56,7 +79,10 @@ def atomic_folder(target: str | Path, *, overwrite: bool = False) -> Iterator[Pa
     target that cannot be written (:func:`check_output_folder`).
     """
     dest = check_output_folder(target, overwrite=overwrite)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".partial", dir=dest.parent))
+    remove_stale_partials(dest)
+    tmp = Path(
+        tempfile.mkdtemp(prefix=f".{dest.name}.{os.getpid()}.", suffix=".partial", dir=dest.parent)
+    )
     try:
         yield tmp
     except BaseException:
