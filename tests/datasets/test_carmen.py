@@ -392,3 +392,14 @@ def test_line_numbers_count_newlines_only_and_digits_are_ascii(tmp_path):
     arabic[3] = arabic[3].replace(" 1.0 2.0 0.5 ", " ١ 2.0 0.5 ", 1)
     with pytest.raises(DatasetFormatError, match=r"log\.log:4:"):
         read_carmen_log(_write(tmp_path, arabic))
+
+
+@pytest.mark.parametrize(
+    "param",
+    ["PARAM laser_front_laser_resolution 90 host 0", "PARAM laser_front_laser_fov 1000 host 0"],
+)
+def test_impossible_declared_beam_geometry_is_refused(tmp_path, param):
+    """90° steps on a 180-beam log would span 16,110°; a 1000° field of view is no laser."""
+    lines = [param, _flaser(_ranges(), (0.0, 0.0, 0.0), 1.0)]
+    with pytest.raises(DatasetFormatError):
+        read_carmen_log(_write(tmp_path, lines))

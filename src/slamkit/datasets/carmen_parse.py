@@ -151,7 +151,8 @@ def resolve_geometry(
     n_beams: int, fov: float | None, res: float | None, source: str
 ) -> tuple[float, float, str] | None:
     """``(fov, resolution, how)`` for ``n_beams`` given what is declared (either may be
-    None); None if the declared geometry contradicts the beam count."""
+    None); None if the declared geometry contradicts the beam count or is impossible (a
+    field of view outside (0°, 360°], a resolution outside (0, fov])."""
     if fov is None and res is None:
         if n_beams not in _KNOWN_COUNTS:
             return None
@@ -163,6 +164,8 @@ def resolve_geometry(
     if res is None:
         known = _KNOWN_COUNTS.get(n_beams)
         res = known[1] if known is not None and abs(known[0] - fov) < 1e-9 else fov / n_beams
+    if not (0.0 < fov <= 360.0 + 1e-9 and 0.0 < res <= fov):  # e.g. 90° steps, 1000° views
+        return None
     if n_beams not in _geometry_counts(fov, res):
         return None
     return fov, res, source
