@@ -290,3 +290,20 @@ def test_edge_kind_must_match_the_dimension() -> None:
     )
     with pytest.raises(InputError, match="'se2' is not supported in a 3D graph"):
         optimize(g3)
+
+
+def test_huge_information_is_refused_without_overflow_warnings(tmp_path):
+    import warnings
+
+    from slamkit.errors import SlamkitError
+    from slamkit.io.posegraph import read_graph
+    from slamkit.optim import optimize
+
+    path = tmp_path / "big.g2o"
+    path.write_text(
+        "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1e200 0 0 1e200 0 1e200\n"
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any RuntimeWarning fails the test
+        with pytest.raises(SlamkitError, match=r"big\.g2o:3"):
+            optimize(read_graph(path))

@@ -768,8 +768,10 @@ def sesync_row_weights(information: FloatArray) -> FloatArray:
     """
     kappa = information[:, 2, 2]
     a, b, d = information[:, 0, 0], information[:, 0, 1], information[:, 1, 1]
-    det = a * d - b * b
-    with np.errstate(divide="ignore", invalid="ignore"):
+    # Information entries near the float range (1e200) overflow here: the weights then come
+    # out non-finite and the caller's check names the edge; the arithmetic stays silent.
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        det = a * d - b * b
         tau = 2.0 * det / (a + d)  # tr(Ω_tt⁻¹) = (a + d) / det
     w = np.empty((information.shape[0], 4))
     w[:, 0] = w[:, 1] = np.sqrt(np.maximum(2.0 * kappa, 0.0))
