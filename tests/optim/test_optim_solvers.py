@@ -495,3 +495,24 @@ def test_result_reports_both_objectives(objective: str) -> None:
         assert res.cost == pytest.approx(minimised, rel=1e-12)
     else:  # the landmark edges keep their g2o error in the SE-Sync objective
         assert res.cost > minimised
+
+
+@pytest.mark.realdata
+def test_dogleg_does_not_claim_convergence_on_a_step_cut_by_its_trust_region(data_root) -> None:
+    """From a trust radius of 1e-7, the first steps are cut to the region: their tiny cost
+    change once ended the run "converged" at χ² 551.7 after one iteration; now the region
+    grows until the Gauss-Newton step fits and dogleg reaches LM's optimum (45.0)."""
+    from slamkit.io.posegraph import read_graph
+    from slamkit.optim import optimize
+    from slamkit.optim.settings import DoglegConfig, OptimizerConfig
+
+    path = data_root / "posegraph2d/intel.g2o"
+    if not path.exists():
+        pytest.skip(f"{path} not found")
+    graph = read_graph(path)
+    tiny = optimize(
+        graph, OptimizerConfig(solver="dogleg", dogleg=DoglegConfig(trust_radius_initial=1e-7))
+    )
+    lm = optimize(graph, OptimizerConfig(solver="lm"))
+    assert tiny.converged and tiny.iterations > 1
+    assert tiny.chi2 == pytest.approx(lm.chi2, rel=1e-6)

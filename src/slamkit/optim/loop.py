@@ -74,11 +74,17 @@ class Estimate:
 @dataclass(frozen=True)
 class Step:
     """An accepted step: the new estimate, the step's size ``max |δ|`` (read by the step
-    tolerance and recorded) and the damping (LM ``λ``, dogleg ``Δ``, 0) it was found with."""
+    tolerance and recorded) and the damping (LM ``λ``, dogleg ``Δ``, 0) it was found with.
+
+    ``bounded``: the step was cut to a trust region instead of being the model's minimiser.
+    A small cost change or step then says that the region is small, not that the cost is at
+    a minimum, so the small-change rules do not end the loop on it (dogleg once stopped
+    "converged" at a χ² of 1,940 on MIT, where GN and LM reach 770.7)."""
 
     estimate: Estimate
     size: float
     damping: float
+    bounded: bool = False
 
 
 @dataclass(frozen=True)
@@ -246,7 +252,9 @@ def run_least_squares(
             if callback is not None:
                 callback(history[-1])
             return LoopOutcome(current, it, found.converged, found.reason, stalled=True)
-        why = _small_change(rule, current.lin.cost, found.estimate.lin.cost, found.size)
+        why = None
+        if not found.bounded:
+            why = _small_change(rule, current.lin.cost, found.estimate.lin.cost, found.size)
         current = found.estimate
         history.append(ctx.info(it, current.lin, found.size, True, found.damping, since))
         if callback is not None and callback(history[-1]):

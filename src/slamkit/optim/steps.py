@@ -138,7 +138,7 @@ class DoglegStep:
             elif gain < 0.25:
                 self.radius = radius / 2.0
             if gain > 0:
-                return Step(new, _max_abs(h), self.radius)
+                return Step(new, _max_abs(h), self.radius, bounded=n_gn > radius)
             if self.radius < self.config.trust_radius_min:
                 return NoStep(
                     "no decrease found (trust radius < trust_radius_min)", False, self.radius
