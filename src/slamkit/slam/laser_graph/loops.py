@@ -1,0 +1,150 @@
+"""Loop closures: candidates from a search region grown with the path travelled, matched by
+the correlative matcher against a candidate's submap, verified, refined.
+
+**Search region.** The front end's drift grows with the path it has integrated, so the
+estimate of the new keyframe relative to an old keyframe ``j`` is uncertain by about
+
+    r(j) = min(r₀ + k_r · s(j), r_max),     α(j) = min(α₀ + k_α · s(j), α_max)
+
+where ``s(j)`` is the path length travelled since ``j`` [m] (a linear bound, chosen over
+marginal covariances because it costs nothing and holds for the scan-matching drift of
+indoor logs, which grows about linearly with distance). Keyframes with ``s(j) ≥
+min_travel`` whose estimated position lies within ``r(j)`` of the new keyframe's are
+candidates, nearest first.
+
+**Verification.** The new keyframe's scan is matched against the candidate's submap (its
+scan and its neighbours', in its frame) by Olson's correlative search over the window
+``±r(j)``, ``±α(j)`` around the current estimate; the match must reach ``min_score``. The
+optimum is refined by point-to-normal ICP against the same submap, which must pair
+``min_inliers`` of the scan and may move the optimum only a few cells (a refinement that
+walks away means the correlative peak was not a real alignment). The back end then checks
+consistency (:mod:`slamkit.slam.laser_graph.backend`: a closure whose residual stays large
+after optimisation is removed).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from slamkit._validation import FloatArray
+from slamkit.errors import MatchError
+from slamkit.geometry.angles import wrap_angle_float
+from slamkit.geometry.pose2 import between, transform_points
+from slamkit.scanmatch.correlative import CorrelativeConfig, CorrelativeReference, correlative_match
+from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
+from slamkit.scanmatch.point_map import PointMap
+from slamkit.scanmatch.result import MatchResult
+from slamkit.slam.laser_graph.config import LoopSettings
+
+__all__ = [
+    "LoopMatch",
+    "loop_candidates",
+    "search_window",
+    "submap",
+    "verify_closure",
+]
+
+
+@dataclass(frozen=True)
+class LoopMatch:
+    """A verified closure ``T_j_k`` with its covariance ``(3, 3)``, the correlative score and
+    the refinement's inlier fraction."""
+
+    pose: FloatArray
+    cov: FloatArray
+    score: float
+    inliers: float
+
+
+def search_window(travel: float, settings: LoopSettings) -> tuple[float, float]:
+    """The search radius [m] and rotation half-window [rad] after ``travel`` metres."""
+    r = min(settings.radius + settings.radius_per_metre * travel, settings.max_radius)
+    a = min(settings.angle_deg + settings.angle_per_metre_deg * travel, settings.max_angle_deg)
+    return r, math.radians(a)
+
+
+def loop_candidates(
+    positions: FloatArray, travelled: FloatArray, k: int, settings: LoopSettings
+) -> list[int]:
+    """The candidates for keyframe ``k``: keyframes ``j < k`` with ``travelled[k] -
+    travelled[j] ≥ min_travel`` within the search radius of ``positions[k]`` (``(K, 2)``
+    estimated positions, ``(K,)`` path lengths), nearest first, at most ``max_candidates``,
+    at least ``submap_keyframes`` apart in index."""
+    travel = travelled[k] - travelled[:k]
+    eligible = np.flatnonzero(travel >= settings.min_travel)
+    if eligible.size == 0:
+        return []
+    d = np.hypot(*(positions[eligible] - positions[k]).T)
+    radius = np.minimum(
+        settings.radius + settings.radius_per_metre * travel[eligible], settings.max_radius
+    )
+    inside = d <= radius
+    order = eligible[inside][np.argsort(d[inside], kind="stable")]
+    chosen: list[int] = []
+    for j in order:
+        if all(abs(int(j) - c) >= settings.submap_keyframes for c in chosen):
+            chosen.append(int(j))
+            if len(chosen) == settings.max_candidates:
+                break
+    return chosen
+
+
+def submap(
+    poses: FloatArray, points: list[FloatArray], j: int, half: int
+) -> tuple[FloatArray, NormalCloud]:
+    """Keyframe ``j``'s submap in its own frame: the points of keyframes ``j - half, ...,
+    j + half`` (those that exist, ``points[i]`` in keyframe ``i``'s frame, ``poses (K, 3)``),
+    concatenated in keyframe and beam order, and the same points with normals as a
+    :class:`NormalCloud` (one per 2.5 cm voxel)."""
+    lo, hi = max(j - half, 0), min(j + half + 1, len(points))
+    cloud = PointMap(0.025)
+    parts = []
+    for i in range(lo, hi):
+        T_j_i = between(poses[j], poses[i])
+        parts.append(transform_points(T_j_i, points[i]))
+        cloud.insert(T_j_i, points[i])
+    pts, normals = cloud.arrays()
+    return np.concatenate(parts), NormalCloud.build(pts, normals)
+
+
+def verify_closure(
+    reference_points: FloatArray,
+    reference_cloud: NormalCloud,
+    points: FloatArray,
+    initial: FloatArray,
+    window: tuple[float, float],
+    settings: LoopSettings,
+    icp_config: NormalIcpConfig,
+) -> LoopMatch | str:
+    """Match ``points (N, 2)`` (the new keyframe, its frame) to a candidate's submap from
+    ``initial = T_j_k`` over ``window = (radius [m], angle [rad])``; the verified
+    :class:`LoopMatch`, or the reason it was refused (``"low_score"``, ``"degenerate"``,
+    ``"too_few_points"``, ``"refine:<reason>"``, ``"inliers"``, ``"refinement"``)."""
+    radius, angle = window
+    cfg = CorrelativeConfig(
+        window_xy=radius,
+        window_theta=angle,
+        resolution=settings.resolution,
+        sigma=settings.sigma,
+        levels=5,
+        min_score=settings.min_score,
+    )
+    try:
+        coarse = correlative_match(CorrelativeReference.from_points(reference_points, cfg), points, initial, cfg)
+    except MatchError as exc:
+        return exc.reason
+    try:
+        fine: MatchResult = normal_icp(reference_cloud, points, coarse.pose, icp_config)
+    except MatchError as exc:
+        return f"refine:{exc.reason}"
+    if fine.inlier_fraction < settings.min_inliers:
+        return "inliers"
+    step = between(coarse.pose, fine.pose)
+    if math.hypot(step[0], step[1]) > settings.max_refinement_xy or abs(
+        wrap_angle_float(float(step[2]))
+    ) > math.radians(settings.max_refinement_deg):
+        return "refinement"
+    return LoopMatch(fine.pose, fine.cov, coarse.score, fine.inlier_fraction)
