@@ -16,13 +16,13 @@ from typing import Literal
 import numpy as np
 
 from slamkit._validation import FloatArray
-from slamkit.errors import ConvergenceError
+from slamkit.errors import ConvergenceError, ShapeError
 from slamkit.geometry.pose2 import between
 from slamkit.optim.data import EdgeSet, GraphData
 from slamkit.optim.settings import OptimizerConfig
 from slamkit.optim.solvers import optimize
 
-__all__ = ["EdgeKind", "PoseGraph", "edge_chi2"]
+__all__ = ["EdgeKind", "OptimizationRecord", "PoseGraph", "edge_chi2", "optimize_consistent"]
 
 EdgeKind = Literal["odometry", "neighbour", "loop"]
 """Where an edge came from: the scan match to the previous keyframe (or the wheels when it
@@ -69,6 +69,7 @@ class PoseGraph:
         self._z: list[FloatArray] = []
         self._info: list[FloatArray] = []
         self._kind: list[EdgeKind] = []
+        self._off: set[int] = set()  # edges left out of the solve (optimize_consistent)
         self.solves: list[OptimizationRecord] = []
 
     def __len__(self) -> int:
@@ -81,6 +82,12 @@ class PoseGraph:
 
     def pose(self, k: int) -> FloatArray:
         return self._poses[k]
+
+    def set_poses(self, poses: FloatArray) -> None:
+        """Replace the estimate of every keyframe ``(K, 3)``."""
+        if poses.shape != (len(self._poses), 3):
+            raise ShapeError(f"poses: expected ({len(self._poses)}, 3), got {poses.shape}")
+        self._poses = [p.copy() for p in np.asarray(poses, dtype=np.float64)]
 
     def add_pose(self, pose: FloatArray) -> int:
         """A new keyframe at ``pose``; its index."""
@@ -98,8 +105,13 @@ class PoseGraph:
         self._kind.append(kind)
         return len(self._i) - 1
 
+    def disable_edges(self, indices: list[int]) -> None:
+        """Leave the edges at ``indices`` out of :meth:`optimize` (until removed)."""
+        self._off = set(indices)
+
     def remove_edges(self, indices: list[int]) -> None:
         """Drop the edges at ``indices``."""
+        self._off = set()
         drop = set(indices)
         keep = [k for k in range(len(self._i)) if k not in drop]
         self._i = [self._i[k] for k in keep]
@@ -129,6 +141,10 @@ class PoseGraph:
         """The graph as :class:`~slamkit.optim.GraphData` (ids = keyframe indices, the
         first keyframe fixed), at the current estimate."""
         i, j, z, info = self.edges()
+        if self._off:
+            on = np.ones(i.size, dtype=bool)
+            on[list(self._off)] = False
+            i, j, z, info = i[on], j[on], z[on], info[on]
         edges = (EdgeSet("se2", i, j, z, info, np.zeros(i.size, dtype=np.int64)),)
         n = len(self._poses)
         return GraphData(
@@ -161,3 +177,38 @@ class PoseGraph:
         )
         self.solves.append(record)
         return record
+
+
+def optimize_consistent(graph: PoseGraph, pending: list[int], max_chi2: float) -> list[int]:
+    """Optimise ``graph`` with the new closures ``pending`` (edge indices), keeping only
+    closures consistent with the rest: the total ``Σ eᵀ Ω e`` may grow by at most
+    ``max_chi2`` per kept closure over its value without them (at the current estimate,
+    the last optimum extended by the front end). While it grows more, the pending closure
+    with the largest residual is removed and the graph solved again from the same start.
+
+    The growth is the closure's Mahalanobis distance from what the graph predicts (its
+    error against the relative pose, weighted by the closure's and the graph's
+    uncertainty), so a wrong closure that the graph can only absorb by bending many edges
+    is refused even when its own residual becomes small. Returns the removed edges'
+    indices (as they were on entry)."""
+    chi2 = graph.chi2()
+    mask = np.ones(chi2.size, dtype=bool)
+    mask[pending] = False
+    before = float(chi2[mask].sum())
+    start = graph.poses
+    alive = list(pending)
+    removed: list[int] = []
+    while True:
+        graph.optimize()
+        chi2 = graph.chi2()
+        kept = [e for e in range(chi2.size) if e not in removed]
+        growth = float(chi2[kept].sum()) - before
+        if not alive or growth <= max_chi2 * len(alive):
+            break
+        worst = max(alive, key=lambda e: chi2[e])
+        alive.remove(worst)
+        removed.append(worst)
+        graph.set_poses(start)
+        graph.disable_edges(removed)
+    graph.remove_edges(removed)
+    return removed

@@ -29,7 +29,7 @@ class FrontEndSettings(Section):
     """... or has turned this much from it [deg]."""
     min_overlap: float = setting(0.6, fraction(), "a fraction in [0, 1]")
     """... or its match paired less than this fraction of its points with the keyframe."""
-    neighbour_edges: int = setting(2, int_at_least(0), "an integer >= 0")
+    neighbour_edges: int = setting(4, int_at_least(0), "an integer >= 0")
     """Besides the edge to the previous keyframe, a new keyframe is matched (point-to-line
     ICP from the current estimate) to this many keyframes before that one; each match that
     succeeds is one more edge (it shortens the chain along which errors add up)."""
@@ -55,12 +55,12 @@ class LoopSettings(Section):
     SECTION: ClassVar[str] = "loops"
 
     enabled: bool = True
-    min_travel: float = setting(4.0, finite_above(0.0), "a finite number > 0")
+    min_travel: float = setting(3.0, finite_above(0.0), "a finite number > 0")
     """A keyframe is a candidate only once the robot has travelled this far along its path
     since it [m] (nearer ones are tied by the front end's edges already)."""
     radius: float = setting(0.5, finite_above(0.0), "a finite number > 0")
     """Search radius around the current estimate at zero travel [m] ..."""
-    radius_per_metre: float = setting(0.03, finite_at_least(0.0), "a finite number >= 0")
+    radius_per_metre: float = setting(0.02, finite_at_least(0.0), "a finite number >= 0")
     """... grown by this much per metre travelled since the candidate [m/m] (the drift a
     front end accumulates: radius = radius + radius_per_metre · travel) ..."""
     max_radius: float = setting(3.0, finite_above(0.0), "a finite number > 0")
@@ -74,7 +74,7 @@ class LoopSettings(Section):
     max_candidates: int = setting(2, int_at_least(1), "an integer >= 1")
     """Candidates tried per new keyframe: the nearest ones (in the current estimate), at
     least ``submap_keyframes`` keyframes apart from each other."""
-    submap_keyframes: int = setting(5, int_at_least(1), "an integer >= 1")
+    submap_keyframes: int = setting(11, int_at_least(1), "an integer >= 1")
     """A candidate's reference: its own points and those of ``submap_keyframes // 2``
     keyframes either side, in its frame."""
     resolution: float = setting(0.05, finite_above(0.0), "a finite number > 0")
@@ -90,9 +90,18 @@ class LoopSettings(Section):
     ..."""
     max_refinement_deg: float = setting(3.0, finite_above(0.0), "a finite number > 0")
     """... and turn it at most this much [deg]."""
-    max_chi2: float = setting(25.0, finite_above(0.0), "a finite number > 0")
-    """Consistency: after the graph is optimised with a new closure, a closure whose
-    residual ``eᵀ Ω e`` exceeds this is removed and the graph optimised again."""
+    pair_keyframes: int = setting(10, int_at_least(1), "an integer >= 1")
+    """Pairwise consistency: a verified closure waits for a partner whose ends both lie
+    within this many keyframes of its own ..."""
+    pair_xy: float = setting(0.1, finite_above(0.0), "a finite number > 0")
+    """... and which closes the cycle with it within this [m] ..."""
+    pair_deg: float = setting(1.5, finite_above(0.0), "a finite number > 0")
+    """... and this [deg]."""
+    max_chi2: float = setting(100.0, finite_above(0.0), "a finite number > 0")
+    """Consistency: optimising the graph with new closures may raise its total
+    ``Σ eᵀ Ω e`` by at most this much per closure (generous: the front end's edges are
+    treated as independent, so a long chain looks surer than it is), else the worst closure is removed and the graph solved again
+    (:func:`~slamkit.slam.laser_graph.backend.optimize_consistent`)."""
     cov_scale: float = setting(4.0, finite_above(0.0), "a finite number > 0")
     """Multiplies a closure's (floored) match covariance: its reference is a submap of
     several keyframes whose relative poses carry errors of their own."""
@@ -102,10 +111,12 @@ class LoopSettings(Section):
 
 
 def default_optimizer() -> OptimizerConfig:
-    """The back-end's default: Levenberg-Marquardt with a Cauchy kernel of width 1 (in
-    units of the whitened residual), a few iterations from the warm start."""
+    """The back-end's default: Levenberg-Marquardt on plain least squares (closures are
+    checked for consistency instead, which a robust kernel would blur: it gives a correct
+    closure that must pull a long drift too little weight to close the loop), at most 20
+    iterations from the warm start."""
     return OptimizerConfig(
-        robust=RobustConfig(kernel="cauchy", width=1.0),
+        robust=RobustConfig(kernel="none"),
         stopping=StoppingConfig(max_iterations=20, relative_tolerance=1e-5),
     )
 

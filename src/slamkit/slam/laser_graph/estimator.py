@@ -33,10 +33,17 @@ from slamkit.mapping.occupancy.config import OccupancyMappingConfig
 from slamkit.mapping.occupancy.mapper import OccupancyMapper
 from slamkit.scanmatch.icp import prepare_scan
 from slamkit.scanmatch.result import scan_points
-from slamkit.slam.laser_graph.backend import PoseGraph
+from slamkit.slam.laser_graph.backend import PoseGraph, optimize_consistent
 from slamkit.slam.laser_graph.config import LaserGraphConfig
 from slamkit.slam.laser_graph.frontend import Keyframe, Tracker, floored_information, match_neighbours
-from slamkit.slam.laser_graph.loops import loop_candidates, search_window, submap, verify_closure
+from slamkit.slam.laser_graph.loops import (
+    LoopMatch,
+    loop_candidates,
+    pair_consistent,
+    search_window,
+    submap,
+    verify_closure,
+)
 
 __all__ = ["LaserGraphSlam"]
 
@@ -69,6 +76,8 @@ class LaserGraphSlam(EstimatorShell):
         self._ranges: list[FloatArray] = []
         self._counts: Counter[str] = Counter()
         self._pending = 0  # closures added since the last optimisation
+        self._waiting: list[tuple[int, int, LoopMatch]] = []  # verified, no partner yet
+        self._confirmed: list[tuple[int, int, LoopMatch]] = []  # recent ones in the graph
         self._last_solve = 0  # the keyframe count at the last optimisation
         # (stamp, keyframe index or -1 for the start pose, offset) of every time stamp.
         self._stamps: list[float] = [float(dataset.start_time)]
@@ -209,24 +218,43 @@ class LaserGraphSlam(EstimatorShell):
             if isinstance(found, str):
                 self._counts[f"loop_rejected:{found}"] += 1
                 continue
-            info = floored_information(found.cov, self._cfg.frontend, scale=s.cov_scale)
-            self._graph.add_edge(j, k, found.pose, info, "loop")
+            self._counts["loops_verified"] += 1
+            self._confirm(poses, (j, k, found))
+
+    def _confirm(self, poses: FloatArray, new: tuple[int, int, LoopMatch]) -> None:
+        """Add ``new`` and its waiting partners once one agrees with it (pairwise
+        consistency, :func:`~slamkit.slam.laser_graph.loops.pair_consistent`)."""
+        s = self._cfg.loops
+        j, k, found = new
+        self._waiting = [w for w in self._waiting if k - w[1] <= s.pair_keyframes]
+        partners = [
+            w
+            for w in [*self._waiting, *self._confirmed]
+            if abs(w[0] - j) <= s.pair_keyframes
+            and 0 < k - w[1] <= s.pair_keyframes
+            and pair_consistent(poses, (j, k, found.pose), (w[0], w[1], w[2].pose), s)
+        ]
+        if not partners:
+            self._waiting.append(new)
+            return
+        for w in [*partners, new]:
+            if w in self._confirmed:
+                continue
+            info = floored_information(w[2].cov, self._cfg.frontend, scale=s.cov_scale)
+            self._graph.add_edge(w[0], w[1], w[2].pose, info, "loop")
             self._counts["loops_added"] += 1
             self._pending += 1
+            if w in self._waiting:
+                self._waiting.remove(w)
+        self._confirmed = [*self._confirmed[-4 * s.pair_keyframes :], *partners, new]
 
     def _optimize(self) -> None:
-        self._graph.optimize()
-        chi2 = self._graph.chi2()
         kinds = self._graph.edge_kinds()
-        bad = [
-            e
-            for e, kind in enumerate(kinds)
-            if kind == "loop" and chi2[e] > self._cfg.loops.max_chi2
-        ]
-        if bad:  # inconsistent closures: out, and the graph solved again without them
-            self._graph.remove_edges(bad)
-            self._counts["loop_rejected:chi2"] += len(bad)
-            self._graph.optimize()
+        pending = [e for e in range(len(kinds)) if kinds[e] == "loop"][-self._pending :]
+        if not self._pending:
+            pending = []
+        removed = optimize_consistent(self._graph, pending, self._cfg.loops.max_chi2)
+        self._counts["loop_rejected:chi2"] += len(removed)
         self._counts["solves"] += 1
         self._pending = 0
         self._last_solve = len(self._graph)
@@ -243,7 +271,9 @@ class LaserGraphSlam(EstimatorShell):
             "odometry_edges": c["odometry_edges"],
             "neighbour_edges": c["neighbour_edges"],
             "loop_candidates": c["loop_candidates"],
+            "loops_verified": c["loops_verified"],
             "loops_added": c["loops_added"],
+            "loops_unconfirmed": c["loops_verified"] - c["loops_added"],
             "loops_kept": len(self.loop_closures()),
             "loops_rejected": {
                 k[len("loop_rejected:") :]: v for k, v in c.items() if k.startswith("loop_rejected:")

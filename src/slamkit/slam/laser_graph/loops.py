@@ -20,6 +20,12 @@ optimum is refined by point-to-normal ICP against the same submap, which must pa
 walks away means the correlative peak was not a real alignment). The back end then checks
 consistency (:mod:`slamkit.slam.laser_graph.backend`: a closure whose residual stays large
 after optimisation is removed).
+
+**Pairwise consistency.** A verified closure enters the graph only once another closure
+nearby (both ends within ``pair_keyframes`` keyframes of its own) agrees with it: the cycle
+``T_j_k`` vs ``T_j_j' ⊕ T_j'_k' ⊕ T_k'_k`` (the short chains from the current estimate)
+must close within ``pair_xy`` / ``pair_deg``. Aliased matches in a corridor or between
+look-alike rooms land at poses that do not agree from one keyframe to the next.
 """
 
 from __future__ import annotations
@@ -32,7 +38,7 @@ import numpy as np
 from slamkit._validation import FloatArray
 from slamkit.errors import MatchError
 from slamkit.geometry.angles import wrap_angle_float
-from slamkit.geometry.pose2 import between, transform_points
+from slamkit.geometry.pose2 import between, compose, transform_points
 from slamkit.scanmatch.correlative import CorrelativeConfig, CorrelativeReference, correlative_match
 from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
 from slamkit.scanmatch.point_map import PointMap
@@ -41,6 +47,7 @@ from slamkit.slam.laser_graph.config import LoopSettings
 
 __all__ = [
     "LoopMatch",
+    "pair_consistent",
     "loop_candidates",
     "search_window",
     "submap",
@@ -148,3 +155,21 @@ def verify_closure(
     ) > math.radians(settings.max_refinement_deg):
         return "refinement"
     return LoopMatch(fine.pose, fine.cov, coarse.score, fine.inlier_fraction)
+
+
+def pair_consistent(
+    poses: FloatArray,
+    a: tuple[int, int, FloatArray],
+    b: tuple[int, int, FloatArray],
+    settings: LoopSettings,
+) -> bool:
+    """Whether closures ``a = (j, k, T_j_k)`` and ``b = (j', k', T_j'_k')`` agree: the cycle
+    ``between(T_j_k, T_j_j' ⊕ T_j'_k' ⊕ T_k'_k)`` (chains at ``poses (K, 3)``) within
+    ``pair_xy`` [m] and ``pair_deg``."""
+    j, k, z = a
+    j2, k2, z2 = b
+    via = compose(compose(between(poses[j], poses[j2]), z2), between(poses[k2], poses[k]))
+    e = between(z, via)
+    return math.hypot(e[0], e[1]) <= settings.pair_xy and abs(
+        wrap_angle_float(float(e[2]))
+    ) <= math.radians(settings.pair_deg)
