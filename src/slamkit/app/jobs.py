@@ -66,7 +66,8 @@ class RunReport:
 def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
     """Load the data set, run the estimator, evaluate, and write into ``request.out_dir``:
     ``trajectory.tum``, ``metrics.json``, ``config.json`` (the resolved configuration),
-    ``graph.g2o`` when the estimator built a pose graph, and PNG plots. The folder is written completely or not at all."""
+    ``graph.g2o`` when the estimator built a pose graph, and PNG plots. The folder is
+    written completely or not at all."""
     entry = get_estimator_entry(request.estimator)
     config, preset = resolve_preset(
         entry.name, request.dataset, request.estimator_config, request.preset

@@ -14,7 +14,6 @@ from slamkit._validation import FloatArray
 from slamkit.config import config_to_dict
 from slamkit.datasets.stream import Dataset, group_by_time, with_known_poses
 from slamkit.errors import ConvergenceError, InputError
-from slamkit.geometry.pose2 import interpolate_poses
 from slamkit.estimation.contract import (
     Estimator,
     EstimatorOutput,
@@ -23,6 +22,7 @@ from slamkit.estimation.contract import (
     ParticleView,
     PoseEstimate,
 )
+from slamkit.geometry.pose2 import interpolate_poses
 from slamkit.pipeline.registry import EstimatorEntry, get_estimator_entry
 
 __all__ = ["Progress", "Result", "run"]

@@ -100,7 +100,8 @@ class LoopSettings(Section):
     max_chi2: float = setting(100.0, finite_above(0.0), "a finite number > 0")
     """Consistency: optimising the graph with new closures may raise its total
     ``Σ eᵀ Ω e`` by at most this much per closure (generous: the front end's edges are
-    treated as independent, so a long chain looks surer than it is), else the worst closure is removed and the graph solved again
+    treated as independent, so a long chain looks surer than it is), else the worst
+    closure is removed and the graph solved again
     (:func:`~slamkit.slam.laser_graph.backend.optimize_consistent`)."""
     cov_scale: float = setting(4.0, finite_above(0.0), "a finite number > 0")
     """Multiplies a closure's (floored) match covariance: its reference is a submap of

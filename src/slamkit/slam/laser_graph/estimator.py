@@ -35,7 +35,12 @@ from slamkit.scanmatch.icp import prepare_scan
 from slamkit.scanmatch.result import scan_points
 from slamkit.slam.laser_graph.backend import PoseGraph, optimize_consistent
 from slamkit.slam.laser_graph.config import LaserGraphConfig
-from slamkit.slam.laser_graph.frontend import Keyframe, Tracker, floored_information, match_neighbours
+from slamkit.slam.laser_graph.frontend import (
+    Keyframe,
+    Tracker,
+    floored_information,
+    match_neighbours,
+)
 from slamkit.slam.laser_graph.loops import (
     LoopMatch,
     loop_candidates,
@@ -61,9 +66,7 @@ class LaserGraphSlam(EstimatorShell):
         super().__init__()
         self._cfg = config
         self._laser = dataset.laser
-        self._max_range = (
-            dataset.laser.max_range if config.max_range is None else config.max_range
-        )
+        self._max_range = dataset.laser.max_range if config.max_range is None else config.max_range
         mounting = config.mounting if config.mounting is not None else dataset.laser.mounting
         self._mounting = np.asarray(mounting, dtype=np.float64)
         start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
@@ -155,6 +158,11 @@ class LaserGraphSlam(EstimatorShell):
     def graph(self) -> PoseGraph:
         """The pose graph so far."""
         return self._graph
+
+    @property
+    def keyframes(self) -> tuple[Keyframe, ...]:
+        """The keyframes so far, in the graph's order."""
+        return tuple(self._keys)
 
     @property
     def keyframe_times(self) -> FloatArray:
@@ -276,7 +284,9 @@ class LaserGraphSlam(EstimatorShell):
             "loops_unconfirmed": c["loops_verified"] - c["loops_added"],
             "loops_kept": len(self.loop_closures()),
             "loops_rejected": {
-                k[len("loop_rejected:") :]: v for k, v in c.items() if k.startswith("loop_rejected:")
+                k[len("loop_rejected:") :]: v
+                for k, v in c.items()
+                if k.startswith("loop_rejected:")
             },
             "keyframes_refused": sum(v for k, v in c.items() if k.startswith("keyframe_refused:")),
             "optimizations": len(solves),

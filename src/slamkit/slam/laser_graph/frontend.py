@@ -46,7 +46,9 @@ class Keyframe:
     travelled: float
 
 
-def floored_information(cov: FloatArray, settings: FrontEndSettings, scale: float = 1.0) -> FloatArray:
+def floored_information(
+    cov: FloatArray, settings: FrontEndSettings, scale: float = 1.0
+) -> FloatArray:
     """The information ``(scale Σ + F)⁻¹`` of a match covariance ``Σ (3, 3)`` with the floor
     ``F = diag(σ_xy², σ_xy², σ_θ²)`` of ``settings`` (symmetrised)."""
     s_xy, s_t = settings.cov_floor_xy, math.radians(settings.cov_floor_deg)

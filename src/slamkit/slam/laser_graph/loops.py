@@ -47,8 +47,8 @@ from slamkit.slam.laser_graph.config import LoopSettings
 
 __all__ = [
     "LoopMatch",
-    "pair_consistent",
     "loop_candidates",
+    "pair_consistent",
     "search_window",
     "submap",
     "verify_closure",
@@ -140,7 +140,9 @@ def verify_closure(
         min_score=settings.min_score,
     )
     try:
-        coarse = correlative_match(CorrelativeReference.from_points(reference_points, cfg), points, initial, cfg)
+        coarse = correlative_match(
+            CorrelativeReference.from_points(reference_points, cfg), points, initial, cfg
+        )
     except MatchError as exc:
         return exc.reason
     try:
