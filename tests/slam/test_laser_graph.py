@@ -231,3 +231,17 @@ def test_aces_first_600_s_relations(data_root) -> None:
     odometry = run("dead-reckoning", data, seed=0)
     odo = relation_errors(odometry.times, odometry.poses, data.truth.relations)
     assert rel.translation_mean < 0.3 * odo.translation_mean
+
+
+def test_a_smoothed_trajectory_is_checked() -> None:
+    from slamkit.errors import NonFiniteError, ShapeError
+    from slamkit.estimation import SmoothedTrajectory
+
+    ok = SmoothedTrajectory(np.array([0.0, 1.0]), np.zeros((2, 3)))
+    assert ok.poses.shape == (2, 3)
+    with pytest.raises(ShapeError, match="poses"):
+        SmoothedTrajectory(np.array([0.0, 1.0]), np.zeros((3, 3)))
+    with pytest.raises(InputError, match="increase"):
+        SmoothedTrajectory(np.array([1.0, 0.0]), np.zeros((2, 3)))
+    with pytest.raises(NonFiniteError):
+        SmoothedTrajectory(np.array([0.0, 1.0]), np.full((2, 3), np.nan))
