@@ -15,7 +15,10 @@ candidates, nearest first.
 **Verification.** The new keyframe's scan is matched against the candidate's submap (its
 scan and its neighbours', in its frame) by Olson's correlative search over the window
 ``±r(j)``, ``±α(j)`` around the current estimate; the match must reach ``min_score``. The
-optimum is refined by point-to-normal ICP against the same submap, which must pair
+optimum, when it lies farther than ``near_window`` from the estimate, must also score
+clearly better (by ``1 / ambiguity_ratio``) than the best pose within ``near_window``: an
+aliased match along a corridor scores about as well as the true one. The optimum is
+refined by point-to-normal ICP against the same submap, which must pair
 ``min_inliers`` of the scan and may move the optimum only a few cells (a refinement that
 walks away means the correlative peak was not a real alignment). The back end then checks
 consistency (:mod:`slamkit.slam.laser_graph.backend`: a closure whose residual stays large
@@ -30,6 +33,7 @@ look-alike rooms land at poses that do not agree from one keyframe to the next.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -129,7 +133,8 @@ def verify_closure(
     """Match ``points (N, 2)`` (the new keyframe, its frame) to a candidate's submap from
     ``initial = T_j_k`` over ``window = (radius [m], angle [rad])``; the verified
     :class:`LoopMatch`, or the reason it was refused (``"low_score"``, ``"degenerate"``,
-    ``"too_few_points"``, ``"refine:<reason>"``, ``"inliers"``, ``"refinement"``)."""
+    ``"too_few_points"``, ``"ambiguous"``, ``"refine:<reason>"``, ``"inliers"``,
+    ``"refinement"``)."""
     radius, angle = window
     cfg = CorrelativeConfig(
         window_xy=radius,
@@ -140,11 +145,27 @@ def verify_closure(
         min_score=settings.min_score,
     )
     try:
-        coarse = correlative_match(
-            CorrelativeReference.from_points(reference_points, cfg), points, initial, cfg
-        )
+        reference = CorrelativeReference.from_points(reference_points, cfg)
+        coarse = correlative_match(reference, points, initial, cfg)
     except MatchError as exc:
         return exc.reason
+    shift = between(initial, coarse.pose)
+    if math.hypot(shift[0], shift[1]) > settings.near_window:
+        # A far optimum must beat the best pose near the estimate clearly: along a corridor
+        # or between look-alike rooms the two score alike (an aliased match).
+        near = dataclasses.replace(cfg, window_xy=settings.near_window, min_score=0.0)
+        try:
+            close = correlative_match(reference, points, initial, near)
+        except MatchError:
+            close = None
+        # A near optimum on the window's edge is the far peak's flank, not a peak of its own.
+        inner = settings.near_window - 2.0 * settings.resolution
+        if (
+            close is not None
+            and np.abs(close.pose[:2] - initial[:2]).max() < inner
+            and close.score >= settings.ambiguity_ratio * coarse.score
+        ):
+            return "ambiguous"
     try:
         fine: MatchResult = normal_icp(reference_cloud, points, coarse.pose, icp_config)
     except MatchError as exc:
