@@ -6,7 +6,7 @@ Metres, and degrees where a name says so.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 from slamkit.config import Section, finite_above, finite_at_least, fraction, int_at_least, setting
 from slamkit.localization.laser_odometry import MapSettings
@@ -23,6 +23,15 @@ class FrontEndSettings(Section):
 
     SECTION: ClassVar[str] = "frontend"
 
+    reference: Literal["map", "keyframe"] = "keyframe"
+    """What a scan is tracked against: the local map of the last ``map_keyframes``
+    keyframes at their current estimates, in the current keyframe's frame (point-to-normal
+    ICP with the odometry's prediction as a prior, as laser odometry's map reference), or
+    the current keyframe's scan alone (point-to-line ICP)."""
+    map_keyframes: int = setting(20, int_at_least(1), "an integer >= 1")
+    """Map reference: keyframes in the local map."""
+    voxel: float = setting(0.05, finite_above(0.0), "a finite number > 0")
+    """Map reference: one point per square cell of this side [m]."""
     keyframe_distance: float = setting(0.4, finite_at_least(0.0), "a finite number >= 0")
     """A scan becomes a keyframe once the robot is this far from the current keyframe [m]."""
     keyframe_angle_deg: float = setting(12.0, finite_at_least(0.0), "a finite number >= 0")
@@ -60,10 +69,10 @@ class LoopSettings(Section):
     since it [m] (nearer ones are tied by the front end's edges already)."""
     radius: float = setting(0.5, finite_above(0.0), "a finite number > 0")
     """Search radius around the current estimate at zero travel [m] ..."""
-    radius_per_metre: float = setting(0.02, finite_at_least(0.0), "a finite number >= 0")
+    radius_per_metre: float = setting(0.03, finite_at_least(0.0), "a finite number >= 0")
     """... grown by this much per metre travelled since the candidate [m/m] (the drift a
     front end accumulates: radius = radius + radius_per_metre · travel) ..."""
-    max_radius: float = setting(3.0, finite_above(0.0), "a finite number > 0")
+    max_radius: float = setting(8.0, finite_above(0.0), "a finite number > 0")
     """... up to this [m]; also the largest translation window of the correlative search."""
     angle_deg: float = setting(10.0, finite_above(0.0), "a finite number > 0")
     """Rotation window at zero travel [deg] ..."""

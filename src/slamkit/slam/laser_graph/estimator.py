@@ -32,6 +32,7 @@ from slamkit.mapping.inverse_model import InverseSensorModel
 from slamkit.mapping.occupancy.config import OccupancyMappingConfig
 from slamkit.mapping.occupancy.mapper import OccupancyMapper
 from slamkit.scanmatch.icp import prepare_scan
+from slamkit.scanmatch.normal_icp import NormalCloud
 from slamkit.scanmatch.result import scan_points
 from slamkit.slam.laser_graph.backend import PoseGraph, optimize_consistent
 from slamkit.slam.laser_graph.config import LaserGraphConfig
@@ -39,6 +40,7 @@ from slamkit.slam.laser_graph.frontend import (
     Keyframe,
     Tracker,
     floored_information,
+    local_map,
     match_neighbours,
 )
 from slamkit.slam.laser_graph.loops import (
@@ -72,8 +74,13 @@ class LaserGraphSlam(EstimatorShell):
         start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
         self._start: FloatArray = np.array(start, dtype=np.float64)
         self._tracker = Tracker(
-            dataset.motion.model, dataset.motion.noise_cov, config.frontend, config.plicp
+            dataset.motion.model,
+            dataset.motion.noise_cov,
+            config.frontend,
+            config.plicp,
+            config.normal_icp,
         )
+        self._local: NormalCloud | None = None  # the local map in the keyframe's frame
         self._graph = PoseGraph(config.optimizer)
         self._keys: list[Keyframe] = []
         self._ranges: list[FloatArray] = []
@@ -113,7 +120,8 @@ class LaserGraphSlam(EstimatorShell):
         if not self._keys:
             self._add_keyframe(event, points)
             return
-        self._tracker.match(self._keys[-1].reference, points)
+        reference = self._local if self._local is not None else self._keys[-1].reference
+        self._tracker.match(reference, points)
         if self._tracker.keyframe_due():
             self._add_keyframe(event, points)
 
@@ -208,6 +216,11 @@ class LaserGraphSlam(EstimatorShell):
             self._close_loops(k)
         if self._pending and k - self._last_solve >= self._cfg.loops.optimize_every:
             self._optimize()
+        f = self._cfg.frontend
+        if f.reference == "map":
+            self._local = local_map(
+                self._graph.poses, [kf.points for kf in self._keys], k, f.map_keyframes, f.voxel
+            )
 
     def _close_loops(self, k: int) -> None:
         s = self._cfg.loops

@@ -11,7 +11,11 @@ covariance of that offset, propagated ``Σ ← G Σ Gᵀ + V Q Vᵀ`` in the key
 the motion models allow since they are invariant under a change of world frame). A scan
 becomes a keyframe when the offset reaches the keyframe distance or angle, or its match
 overlaps too little; the edge from the previous keyframe is its offset with the match's
-covariance (floored), or the odometry's covariance when the match failed.
+covariance (floored), or the odometry's covariance when the match failed. With the map
+reference (the default) a scan is matched instead against the local map of the last few
+keyframes in the current keyframe's frame (:func:`local_map`), by point-to-normal ICP with
+the odometry's prediction as a prior, so that a direction the map leaves unconstrained (a
+corridor) keeps the prediction.
 """
 
 from __future__ import annotations
@@ -28,10 +32,12 @@ from slamkit.geometry.angles import wrap_angle_float
 from slamkit.geometry.pose2 import between
 from slamkit.models.motion import MotionModel
 from slamkit.scanmatch.icp import PreparedScan
+from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
 from slamkit.scanmatch.plicp import PlIcpConfig, plicp
+from slamkit.scanmatch.point_map import PointMap
 from slamkit.slam.laser_graph.config import FrontEndSettings
 
-__all__ = ["Keyframe", "Tracker", "floored_information", "match_neighbours"]
+__all__ = ["Keyframe", "Tracker", "floored_information", "local_map", "match_neighbours"]
 
 
 @dataclass(frozen=True)
@@ -76,8 +82,10 @@ class Tracker:
         noise_cov: FloatArray,
         settings: FrontEndSettings,
         plicp_config: PlIcpConfig,
+        normal_icp_config: NormalIcpConfig,
     ) -> None:
         self.model = model
+        self.normal_icp = normal_icp_config
         self.Q = settings.motion_cov_scale * np.asarray(noise_cov, dtype=np.float64)
         self.settings = settings
         self.plicp = plicp_config
@@ -102,12 +110,21 @@ class Tracker:
         self.odometry_cov = G @ self.odometry_cov @ G.T + V @ self.Q @ V.T
         self.offset = moved
 
-    def match(self, reference: PreparedScan, points: FloatArray) -> bool:
-        """Register ``points`` to the keyframe from the predicted offset; on success the
-        offset becomes the match. Returns whether it matched (failures are counted by
-        reason, gated matches as ``"gated"``)."""
+    def match(self, reference: PreparedScan | NormalCloud, points: FloatArray) -> bool:
+        """Register ``points`` to the keyframe (its scan, or the local map in its frame:
+        point-to-normal ICP with the odometry prediction as a prior) from the predicted
+        offset; on success the offset becomes the match. Returns whether it matched
+        (failures are counted by reason, gated matches as ``"gated"``)."""
         try:
-            result = plicp(reference, points, self.offset, self.plicp)
+            if isinstance(reference, NormalCloud):
+                s_xy, s_t = self.settings.cov_floor_xy, math.radians(self.settings.cov_floor_deg)
+                prior = self.odometry_cov + np.diag([s_xy**2, s_xy**2, s_t**2])
+                result = normal_icp(
+                    reference, points, self.offset, self.normal_icp,
+                    prior_information=np.linalg.solve(prior, np.eye(3)),
+                )  # fmt: skip
+            else:
+                result = plicp(reference, points, self.offset, self.plicp)
         except MatchError as exc:
             self.counts[f"failed:{exc.reason}"] += 1
             self.match_cov, self.overlap = None, 0.0
@@ -162,3 +179,15 @@ def match_neighbours(
         if within_gate(prior, result.pose, settings):
             edges.append((i, result.pose, floored_information(result.cov, settings)))
     return edges
+
+
+def local_map(
+    poses: FloatArray, points: list[FloatArray], k: int, count: int, voxel: float
+) -> NormalCloud:
+    """The points of keyframes ``k - count + 1, ..., k`` (``points[i]`` in keyframe ``i``'s
+    frame, ``poses (K, 3)``) in keyframe ``k``'s frame, newest first, one per ``voxel``."""
+    cloud = PointMap(voxel)
+    for i in range(k, max(k - count, -1), -1):
+        cloud.insert(between(poses[k], poses[i]), points[i])
+    pts, normals = cloud.arrays()
+    return NormalCloud.build(pts, normals)
