@@ -179,7 +179,9 @@ class PoseGraph:
         return record
 
 
-def optimize_consistent(graph: PoseGraph, pending: list[int], max_chi2: float) -> list[int]:
+def optimize_consistent(
+    graph: PoseGraph, pending: list[int], max_chi2: float, max_edge_chi2: float = np.inf
+) -> list[int]:
     """Optimise ``graph`` with the new closures ``pending`` (edge indices), keeping only
     closures consistent with the rest: the total ``Σ eᵀ Ω e`` may grow by at most
     ``max_chi2`` per kept closure over its value without them (at the current estimate,
@@ -189,12 +191,15 @@ def optimize_consistent(graph: PoseGraph, pending: list[int], max_chi2: float) -
     The growth is the closure's Mahalanobis distance from what the graph predicts (its
     error against the relative pose, weighted by the closure's and the graph's
     uncertainty), so a wrong closure that the graph can only absorb by bending many edges
-    is refused even when its own residual becomes small. Returns the removed edges'
-    indices (as they were on entry)."""
+    is refused even when its own residual becomes small. A solve that leaves any earlier
+    edge with ``eᵀ Ω e`` above ``max_edge_chi2`` that was below it before counts as
+    inconsistent too: many closures that each fit, together, may tear the chain they were
+    added to. Returns the removed edges' indices (as they were on entry)."""
     chi2 = graph.chi2()
     mask = np.ones(chi2.size, dtype=bool)
     mask[pending] = False
     before = float(chi2[mask].sum())
+    intact = mask & (chi2 <= max_edge_chi2)
     start = graph.poses
     alive = list(pending)
     removed: list[int] = []
@@ -203,7 +208,8 @@ def optimize_consistent(graph: PoseGraph, pending: list[int], max_chi2: float) -
         chi2 = graph.chi2()
         kept = [e for e in range(chi2.size) if e not in removed]
         growth = float(chi2[kept].sum()) - before
-        if not alive or growth <= max_chi2 * len(alive):
+        torn = bool((chi2[intact] > max_edge_chi2).any())
+        if not alive or (growth <= max_chi2 * len(alive) and not torn):
             break
         worst = max(alive, key=lambda e: chi2[e])
         alive.remove(worst)

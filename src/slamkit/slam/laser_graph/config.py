@@ -117,6 +117,9 @@ class LoopSettings(Section):
     treated as independent, so a long chain looks surer than it is), else the worst
     closure is removed and the graph solved again
     (:func:`~slamkit.slam.laser_graph.backend.optimize_consistent`)."""
+    max_edge_chi2: float = setting(100.0, finite_above(0.0), "a finite number > 0")
+    """Consistency: ... and may leave no front-end edge with ``eᵀ Ω e`` above this (10
+    standard deviations) that was below it before."""
     cov_scale: float = setting(4.0, finite_above(0.0), "a finite number > 0")
     """Multiplies a closure's (floored) match covariance: its reference is a submap of
     several keyframes whose relative poses carry errors of their own."""

@@ -274,7 +274,8 @@ class LaserGraphSlam(EstimatorShell):
         pending = [e for e in range(len(kinds)) if kinds[e] == "loop"][-self._pending :]
         if not self._pending:
             pending = []
-        removed = optimize_consistent(self._graph, pending, self._cfg.loops.max_chi2)
+        s = self._cfg.loops
+        removed = optimize_consistent(self._graph, pending, s.max_chi2, s.max_edge_chi2)
         self._counts["loop_rejected:chi2"] += len(removed)
         self._counts["solves"] += 1
         self._pending = 0
