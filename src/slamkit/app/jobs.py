@@ -67,8 +67,9 @@ class RunReport:
 
 def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
     """Load the data set, run the estimator, evaluate, and write into ``request.out_dir``:
-    ``trajectory.tum``, ``metrics.json``, ``config.json`` (the resolved configuration) and
-    PNG plots. The folder is written completely or not at all."""
+    ``trajectory.tum``, ``metrics.json``, ``config.json`` (the resolved configuration),
+    ``graph.g2o`` when the estimator built a pose graph, and PNG plots. The folder is
+    written completely or not at all."""
     entry = get_estimator_entry(request.estimator)
     config, preset = resolve_preset(
         entry.name, request.dataset, request.estimator_config, request.preset
@@ -112,6 +113,10 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         write_tum(tmp / "trajectory.tum", result.times, result.poses)
         write_json(tmp / "metrics.json", evaluation.metrics)
         write_json(tmp / "config.json", resolved)
+        if result.output.graph is not None:  # a pose-graph estimator's graph, for other tools
+            from slamkit.io.posegraph import write_graph
+
+            write_graph(result.output.graph, tmp / "graph.g2o", family="g2o")
         if figures:
             from slamkit.viz import save_figure
 

@@ -105,6 +105,13 @@ DATASETS: dict[str, DatasetEntry] = {
             "slamkit.sim.scenarios:build_rooms_laser",
         ),
         DatasetEntry(
+            "corridor-loop-laser",
+            "simulated",
+            "laser drive round a 30 m x 20 m ring of corridors and on past the start (loop "
+            "closure), walls as ground truth",
+            "slamkit.sim.loop_world:build_corridor_loop",
+        ),
+        DatasetEntry(
             "rooms-laser-global",
             "simulated",
             "the laser tour of four rooms with no prior pose (global localization)",

@@ -19,8 +19,9 @@ from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset, Event
-from slamkit.errors import ConvergenceError
+from slamkit.errors import ConvergenceError, InputError, NonFiniteError, ShapeError
 from slamkit.maps import LandmarkMap, OccupancyGrid
+from slamkit.optim.data import GraphData
 
 __all__ = [
     "Estimator",
@@ -33,6 +34,7 @@ __all__ = [
     "ParticleSnapshot",
     "ParticleView",
     "PoseEstimate",
+    "SmoothedTrajectory",
     "SnapshotSchedule",
     "StepClock",
 ]
@@ -145,6 +147,33 @@ class SpreadSnapshots:
         return tuple(items[i] for i in np.unique(nearest))
 
 
+@dataclass(frozen=True)
+class SmoothedTrajectory:
+    """An estimator's final estimate of its whole path (a smoother's, a pose graph's after
+    its last optimisation): poses ``(N, 3)`` at increasing ``times (N,)`` [s] that cover
+    every time stamp of the stream (and the data set's start time). The runner puts these
+    poses, at its recorded times, in :attr:`~slamkit.pipeline.Result.poses` (the online
+    estimates go to :attr:`~slamkit.pipeline.Result.online_poses`)."""
+
+    times: FloatArray
+    poses: FloatArray
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.times, dtype=np.float64)
+        p = np.asarray(self.poses, dtype=np.float64)
+        if t.ndim != 1 or p.shape != (t.size, 3):
+            raise ShapeError(
+                f"smoothed trajectory: expected times (N,) and poses (N, 3), got {t.shape} "
+                f"and {p.shape}"
+            )
+        if not (np.isfinite(t).all() and np.isfinite(p).all()):
+            raise NonFiniteError("smoothed trajectory: non-finite times or poses")
+        if t.size > 1 and not (np.diff(t) > 0).all():
+            raise InputError("smoothed trajectory: times must increase")
+        object.__setattr__(self, "times", t)
+        object.__setattr__(self, "poses", p)
+
+
 class LandmarkIds(Enum):
     """How an estimator's landmark ids relate to the data set's (its output says which, so
     that evaluation pairs maps and scores associations correctly)."""
@@ -174,6 +203,13 @@ class EstimatorOutput:
     landmark_numbering: LandmarkIds | None = None
     """How the ids of ``landmarks`` and ``reading_landmarks`` relate to the data set's: the
     estimator says (``None``: it has no landmarks)."""
+    trajectory: SmoothedTrajectory | None = None
+    """The final estimate of the whole path, when the estimator revises its past (a pose
+    graph); the runner reports it instead of the online estimates. ``None``: the online
+    estimates are the result."""
+    graph: GraphData | None = None
+    """The pose graph an estimator built and optimised (written as ``graph.g2o`` by
+    :func:`slamkit.app.run_job`)."""
 
 
 @dataclass(frozen=True)

@@ -133,6 +133,14 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             requires=("motion", "laser"),
         ),
         EstimatorEntry(
+            "graph-slam",
+            "graph-based laser SLAM: scan-matched keyframes, correlative loop closures "
+            "verified and refined, the pose graph optimised; the map from the optimised poses",
+            "slamkit.slam.laser_graph:LaserGraphSlam",
+            "slamkit.slam.laser_graph:LaserGraphConfig",
+            requires=("motion", "laser"),
+        ),
+        EstimatorEntry(
             "occupancy-mapping",
             "occupancy grid with known (true) poses: log-odds, α/β inverse laser model, "
             "Bresenham rays",

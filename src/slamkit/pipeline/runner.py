@@ -22,6 +22,7 @@ from slamkit.estimation.contract import (
     ParticleView,
     PoseEstimate,
 )
+from slamkit.geometry.pose2 import interpolate_poses
 from slamkit.pipeline.registry import EstimatorEntry, get_estimator_entry
 
 __all__ = ["Progress", "Result", "run"]
@@ -49,6 +50,10 @@ class Result:
     output: EstimatorOutput
     frames: tuple[Frame, ...] = ()
     """Snapshots of the estimate at evenly spaced times (``run(..., frames=N)``)."""
+    online_poses: FloatArray | None = None
+    """The estimates recorded during the run ``(N, 3)`` when the estimator handed back a
+    revised path (:attr:`EstimatorOutput.trajectory`, then :attr:`poses` is that path at
+    :attr:`times`); ``None``: :attr:`poses` are the online estimates."""
 
     @property
     def total_seconds(self) -> float:
@@ -97,6 +102,10 @@ def run(
     particles), evenly spaced in time, the last one at the end of the run.
 
     ``config`` is a mapping (unknown keys rejected) or a config object.
+
+    An estimator that revises its past (a pose graph) hands its final path back as
+    :attr:`EstimatorOutput.trajectory`; :attr:`Result.poses` is then that path at the
+    recorded times and :attr:`Result.online_poses` the estimates recorded during the run.
     """
     if not (isinstance(frames, int) and frames >= 0):
         raise InputError(f"frames: expected an integer >= 0, got {frames!r}")
@@ -153,15 +162,23 @@ def run(
         progress(total, total)
     output = est.finish()
     have_cov = all(c is not None for c in covs) and bool(covs)
+    recorded = np.asarray(poses, dtype=float).reshape(-1, 3)
+    final, online = recorded, None
+    if output.trajectory is not None and times:
+        # A revised path (a pose graph after its last optimisation) replaces the online
+        # estimates at the recorded times; the online ones are kept beside it.
+        final = interpolate_poses(output.trajectory.times, output.trajectory.poses, times)
+        online = recorded
     return Result(
         estimator=entry.name,
         dataset=dataset.name,
         seed=seed,
         config=config_to_dict(cfg),
         times=np.asarray(times, dtype=float),
-        poses=np.asarray(poses, dtype=float).reshape(-1, 3),
+        poses=final,
         covariances=np.asarray(covs, dtype=float) if have_cov else None,
         step_seconds=np.asarray(seconds, dtype=float),
         output=output,
         frames=tuple(snapshots),
+        online_poses=online,
     )

@@ -1,0 +1,220 @@
+"""The pose graph of graph-based laser SLAM: keyframe poses, relative-pose edges, and the
+batch optimisation of :func:`slamkit.optim.optimize` over them.
+
+Every edge ``i → j`` measures ``Z = X_i⁻¹ X_j`` (``between``) with an information matrix
+``Ω``; its residual is ``e = Z⁻¹ ⊕ (X_i⁻¹ X_j)`` (the angle wrapped) and its cost
+``eᵀ Ω e``. The first keyframe is held fixed (the optimiser's ``anchor_first`` gauge), so
+the map stays in the frame the run started in.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from slamkit._validation import FloatArray
+from slamkit.errors import ConvergenceError, ShapeError
+from slamkit.geometry.pose2 import between
+from slamkit.optim.data import EdgeSet, GraphData
+from slamkit.optim.settings import OptimizerConfig
+from slamkit.optim.solvers import optimize
+
+__all__ = ["EdgeKind", "OptimizationRecord", "PoseGraph", "edge_chi2", "optimize_consistent"]
+
+EdgeKind = Literal["odometry", "neighbour", "loop"]
+"""Where an edge came from: the scan match to the previous keyframe (or the wheels when it
+failed), a match to an earlier neighbour, or a verified loop closure."""
+
+
+def edge_chi2(
+    poses: FloatArray,
+    i: np.ndarray,
+    j: np.ndarray,
+    measurement: FloatArray,
+    information: FloatArray,
+) -> FloatArray:
+    """``eᵀ Ω e`` of each edge ``(E,)`` at ``poses (N, 3)``, with ``e = between(Z, X_i⁻¹ X_j)``
+    (``i``, ``j``: row indices into ``poses``)."""
+    if len(i) == 0:
+        return np.zeros(0)
+    predicted = between(poses[i], poses[j])
+    e = between(measurement, predicted)
+    return np.einsum("ea,eab,eb->e", e, information, e)
+
+
+@dataclass(frozen=True)
+class OptimizationRecord:
+    """One solve: keyframes and edges at the time, LM iterations, cost before and after,
+    wall time [s]."""
+
+    keyframes: int
+    edges: int
+    iterations: int
+    initial_cost: float
+    cost: float
+    seconds: float
+
+
+class PoseGraph:
+    """Keyframe poses ``(K, 3)`` (the current estimate) and edges, grown one at a time."""
+
+    def __init__(self, optimizer: OptimizerConfig) -> None:
+        self.optimizer = optimizer
+        self._poses: list[FloatArray] = []
+        self._i: list[int] = []
+        self._j: list[int] = []
+        self._z: list[FloatArray] = []
+        self._info: list[FloatArray] = []
+        self._kind: list[EdgeKind] = []
+        self._off: set[int] = set()  # edges left out of the solve (optimize_consistent)
+        self.solves: list[OptimizationRecord] = []
+
+    def __len__(self) -> int:
+        return len(self._poses)
+
+    @property
+    def poses(self) -> FloatArray:
+        """The current estimate of every keyframe ``(K, 3)`` (a copy)."""
+        return np.asarray(self._poses, dtype=np.float64).reshape(-1, 3)
+
+    def pose(self, k: int) -> FloatArray:
+        return self._poses[k]
+
+    def set_poses(self, poses: FloatArray) -> None:
+        """Replace the estimate of every keyframe ``(K, 3)``."""
+        if poses.shape != (len(self._poses), 3):
+            raise ShapeError(f"poses: expected ({len(self._poses)}, 3), got {poses.shape}")
+        self._poses = [p.copy() for p in np.asarray(poses, dtype=np.float64)]
+
+    def add_pose(self, pose: FloatArray) -> int:
+        """A new keyframe at ``pose``; its index."""
+        self._poses.append(np.array(pose, dtype=np.float64))
+        return len(self._poses) - 1
+
+    def add_edge(
+        self, i: int, j: int, measurement: FloatArray, information: FloatArray, kind: EdgeKind
+    ) -> int:
+        """An edge ``i → j`` measuring ``T_i_j``; its index."""
+        self._i.append(int(i))
+        self._j.append(int(j))
+        self._z.append(np.array(measurement, dtype=np.float64))
+        self._info.append(np.array(information, dtype=np.float64))
+        self._kind.append(kind)
+        return len(self._i) - 1
+
+    def disable_edges(self, indices: list[int]) -> None:
+        """Leave the edges at ``indices`` out of :meth:`optimize` (until removed)."""
+        self._off = set(indices)
+
+    def remove_edges(self, indices: list[int]) -> None:
+        """Drop the edges at ``indices``."""
+        self._off = set()
+        drop = set(indices)
+        keep = [k for k in range(len(self._i)) if k not in drop]
+        self._i = [self._i[k] for k in keep]
+        self._j = [self._j[k] for k in keep]
+        self._z = [self._z[k] for k in keep]
+        self._info = [self._info[k] for k in keep]
+        self._kind = [self._kind[k] for k in keep]
+
+    def edge_kinds(self) -> list[EdgeKind]:
+        return list(self._kind)
+
+    def edges(self) -> tuple[np.ndarray, np.ndarray, FloatArray, FloatArray]:
+        """``i (E,)``, ``j (E,)``, measurements ``(E, 3)``, information ``(E, 3, 3)``."""
+        return (
+            np.asarray(self._i, dtype=np.int64),
+            np.asarray(self._j, dtype=np.int64),
+            np.asarray(self._z, dtype=np.float64).reshape(-1, 3),
+            np.asarray(self._info, dtype=np.float64).reshape(-1, 3, 3),
+        )
+
+    def chi2(self) -> FloatArray:
+        """``eᵀ Ω e`` of every edge at the current estimate ``(E,)``."""
+        i, j, z, info = self.edges()
+        return edge_chi2(self.poses, i, j, z, info)
+
+    def graph_data(self) -> GraphData:
+        """The graph as :class:`~slamkit.optim.GraphData` (ids = keyframe indices, the
+        first keyframe fixed), at the current estimate."""
+        i, j, z, info = self.edges()
+        if self._off:
+            on = np.ones(i.size, dtype=bool)
+            on[list(self._off)] = False
+            i, j, z, info = i[on], j[on], z[on], info[on]
+        edges = (EdgeSet("se2", i, j, z, info, np.zeros(i.size, dtype=np.int64)),)
+        n = len(self._poses)
+        return GraphData(
+            dim=2,
+            pose_ids=np.arange(n, dtype=np.int64),
+            poses=self.poses,
+            edges=edges if i.size else (),
+            fixed_ids=np.zeros(1 if n else 0, dtype=np.int64),
+        )
+
+    def optimize(self) -> OptimizationRecord:
+        """Optimise every keyframe pose from the current estimate (the first held fixed);
+        the estimate becomes the optimum. Raises :class:`ConvergenceError` when the solver
+        returns non-finite poses."""
+        tic = time.perf_counter()
+        data = self.graph_data()
+        result = optimize(data, self.optimizer, initial_poses=data.poses)
+        if not np.isfinite(result.poses).all():
+            raise ConvergenceError(
+                f"pose-graph optimisation over {len(self)} keyframes returned non-finite poses"
+            )
+        self._poses = [p.copy() for p in np.asarray(result.poses, dtype=np.float64)]
+        record = OptimizationRecord(
+            keyframes=len(self),
+            edges=data.n_edges,
+            iterations=result.iterations,
+            initial_cost=float(result.initial_cost),
+            cost=float(result.cost),
+            seconds=time.perf_counter() - tic,
+        )
+        self.solves.append(record)
+        return record
+
+
+def optimize_consistent(
+    graph: PoseGraph, pending: list[int], max_chi2: float, max_edge_chi2: float = np.inf
+) -> list[int]:
+    """Optimise ``graph`` with the new closures ``pending`` (edge indices), keeping only
+    closures consistent with the rest: the total ``Σ eᵀ Ω e`` may grow by at most
+    ``max_chi2`` per kept closure over its value without them (at the current estimate,
+    the last optimum extended by the front end). While it grows more, the pending closure
+    with the largest residual is removed and the graph solved again from the same start.
+
+    The growth is the closure's Mahalanobis distance from what the graph predicts (its
+    error against the relative pose, weighted by the closure's and the graph's
+    uncertainty), so a wrong closure that the graph can only absorb by bending many edges
+    is refused even when its own residual becomes small. A solve that leaves any earlier
+    edge with ``eᵀ Ω e`` above ``max_edge_chi2`` that was below it before counts as
+    inconsistent too: many closures that each fit, together, may tear the chain they were
+    added to. Returns the removed edges' indices (as they were on entry)."""
+    chi2 = graph.chi2()
+    mask = np.ones(chi2.size, dtype=bool)
+    mask[pending] = False
+    before = float(chi2[mask].sum())
+    intact = mask & (chi2 <= max_edge_chi2)
+    start = graph.poses
+    alive = list(pending)
+    removed: list[int] = []
+    while True:
+        graph.optimize()
+        chi2 = graph.chi2()
+        kept = [e for e in range(chi2.size) if e not in removed]
+        growth = float(chi2[kept].sum()) - before
+        torn = bool((chi2[intact] > max_edge_chi2).any())
+        if not alive or (growth <= max_chi2 * len(alive) and not torn):
+            break
+        worst = max(alive, key=lambda e: chi2[e])
+        alive.remove(worst)
+        removed.append(worst)
+        graph.set_poses(start)
+        graph.disable_edges(removed)
+    graph.remove_edges(removed)
+    return removed

@@ -1,0 +1,309 @@
+"""Graph-based 2D laser SLAM on the estimator shell (registered as ``graph-slam``).
+
+Front end (:mod:`~slamkit.slam.laser_graph.frontend`): scans tracked against the current
+keyframe by point-to-line ICP from the odometry's prediction; keyframes every
+``keyframe_distance`` / ``keyframe_angle_deg``; edges to the previous keyframe and to a few
+before it. Loops (:mod:`~slamkit.slam.laser_graph.loops`): candidates in a search region
+grown with the path travelled, correlative matching against the candidate's submap,
+verification and refinement. Back end (:mod:`~slamkit.slam.laser_graph.backend`): the pose
+graph, optimised (Levenberg-Marquardt, Cauchy kernel, warm start) after each keyframe that
+brings closures and once more at the end, with closures whose residual stays large removed.
+
+Every time stamp is held as *(keyframe, offset from it)*, so the path at the end is each
+keyframe's optimised pose composed with the offset (:attr:`EstimatorOutput.trajectory`,
+which the runner reports); the map is the occupancy grid of the keyframes' scans at their
+optimised poses, the graph is :attr:`EstimatorOutput.graph`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+
+import numpy as np
+
+from slamkit._validation import FloatArray
+from slamkit.datasets.stream import Dataset, Event, LaserScan
+from slamkit.errors import InputError, MatchError
+from slamkit.estimation.contract import EstimatorOutput, PoseEstimate, SmoothedTrajectory
+from slamkit.estimation.shell import EstimatorShell
+from slamkit.geometry.pose2 import between, compose, transform_points
+from slamkit.mapping.inverse_model import InverseSensorModel
+from slamkit.mapping.occupancy.config import OccupancyMappingConfig
+from slamkit.mapping.occupancy.mapper import OccupancyMapper
+from slamkit.scanmatch.icp import prepare_scan
+from slamkit.scanmatch.normal_icp import NormalCloud
+from slamkit.scanmatch.result import scan_points
+from slamkit.slam.laser_graph.backend import PoseGraph, optimize_consistent
+from slamkit.slam.laser_graph.config import LaserGraphConfig
+from slamkit.slam.laser_graph.frontend import (
+    Keyframe,
+    Tracker,
+    floored_information,
+    local_map,
+    match_neighbours,
+)
+from slamkit.slam.laser_graph.loops import (
+    LoopMatch,
+    loop_candidates,
+    pair_consistent,
+    search_window,
+    submap,
+    verify_closure,
+)
+
+__all__ = ["LaserGraphSlam"]
+
+
+class LaserGraphSlam(EstimatorShell):
+    """Graph-based laser SLAM (see the module docstring). Needs a laser and odometry."""
+
+    name = "graph SLAM"
+
+    def __init__(self, dataset: Dataset, config: LaserGraphConfig, rng: np.random.Generator):
+        if dataset.laser is None:
+            raise InputError(f"graph SLAM needs laser scans; {dataset.name!r} has none")
+        if dataset.motion is None:
+            raise InputError(f"graph SLAM needs odometry; {dataset.name!r} has none")
+        super().__init__()
+        self._cfg = config
+        self._laser = dataset.laser
+        self._max_range = dataset.laser.max_range if config.max_range is None else config.max_range
+        mounting = config.mounting if config.mounting is not None else dataset.laser.mounting
+        self._mounting = np.asarray(mounting, dtype=np.float64)
+        start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
+        self._start: FloatArray = np.array(start, dtype=np.float64)
+        self._tracker = Tracker(
+            dataset.motion.model,
+            dataset.motion.noise_cov,
+            config.frontend,
+            config.plicp,
+            config.normal_icp,
+        )
+        self._local: NormalCloud | None = None  # the local map in the keyframe's frame
+        self._graph = PoseGraph(config.optimizer)
+        self._keys: list[Keyframe] = []
+        self._ranges: list[FloatArray] = []
+        self._counts: Counter[str] = Counter()
+        self._pending = 0  # closures added since the last optimisation
+        self._waiting: list[tuple[int, int, LoopMatch]] = []  # verified, no partner yet
+        self._confirmed: list[tuple[int, int, LoopMatch]] = []  # recent ones in the graph
+        self._last_solve = 0  # the keyframe count at the last optimisation
+        # (stamp, keyframe index or -1 for the start pose, offset) of every time stamp.
+        self._stamps: list[float] = [float(dataset.start_time)]
+        self._anchors: list[int] = [-1]
+        self._offsets: list[FloatArray] = [np.zeros(3)]
+
+    # -- the Estimator protocol ---------------------------------------------------------
+
+    def handle(self, event: Event) -> None:
+        super().handle(event)
+        anchor = len(self._keys) - 1
+        offset = self._tracker.offset.copy()
+        if event.t == self._stamps[-1]:  # the latest event of this stamp holds
+            self._anchors[-1], self._offsets[-1] = anchor, offset
+        else:
+            self._stamps.append(float(event.t))
+            self._anchors.append(anchor)
+            self._offsets.append(offset)
+
+    def on_control(self, u: FloatArray, dt: float) -> None:
+        self._tracker.predict(u, dt)
+
+    def on_scan(self, event: LaserScan) -> None:
+        self._counts["scans"] += 1
+        points = scan_points(
+            event.ranges, self._laser.beam_angles, self._max_range, min_range=self._cfg.min_range
+        )
+        if any(self._mounting):
+            points = transform_points(self._mounting, points)
+        if not self._keys:
+            self._add_keyframe(event, points)
+            return
+        reference = self._local if self._local is not None else self._keys[-1].reference
+        self._tracker.match(reference, points)
+        if self._tracker.keyframe_due():
+            self._add_keyframe(event, points)
+
+    def estimate(self) -> PoseEstimate:
+        return PoseEstimate(compose(self._base(), self._tracker.offset))
+
+    def finish(self) -> EstimatorOutput:
+        if len(self._graph) > 1:
+            self._optimize()
+        poses = self._graph.poses
+        anchors = np.asarray(self._anchors)
+        offsets = np.asarray(self._offsets, dtype=np.float64).reshape(-1, 3)
+        bases = np.broadcast_to(self._start, offsets.shape)
+        if len(self._graph):
+            bases = np.where((anchors >= 0)[:, None], poses[np.maximum(anchors, 0)], bases)
+        path = SmoothedTrajectory(np.asarray(self._stamps), compose(bases, offsets))
+        grid = None
+        diagnostics = self._diagnostics()
+        if self._cfg.map.enabled and len(self._graph):
+            mapper = OccupancyMapper(
+                self._laser,
+                OccupancyMappingConfig(
+                    resolution=self._cfg.map.resolution,
+                    bounds="grow",
+                    model=InverseSensorModel(max_range=self._cfg.map.max_range),
+                ),
+                None,
+            )
+            mapper.integrate_many(compose(poses, self._mounting), np.asarray(self._ranges))
+            grid = mapper.occupancy_grid()
+            diagnostics["mapping"] = mapper.stats.as_dict()
+        return EstimatorOutput(
+            grid=grid,
+            diagnostics=diagnostics,
+            trajectory=path,
+            graph=self._graph.graph_data() if len(self._graph) else None,
+        )
+
+    # -- views for tests and plots --------------------------------------------------------
+
+    @property
+    def graph(self) -> PoseGraph:
+        """The pose graph so far."""
+        return self._graph
+
+    @property
+    def keyframes(self) -> tuple[Keyframe, ...]:
+        """The keyframes so far, in the graph's order."""
+        return tuple(self._keys)
+
+    @property
+    def keyframe_times(self) -> FloatArray:
+        """The stamp of every keyframe ``(K,)`` [s]."""
+        return np.array([k.t for k in self._keys], dtype=np.float64)
+
+    def loop_closures(self) -> list[tuple[int, int]]:
+        """The accepted closures ``(j, k)`` (keyframe indices, ``j < k``) in the graph."""
+        i, j, _, _ = self._graph.edges()
+        kinds = self._graph.edge_kinds()
+        return [(int(a), int(b)) for a, b, kind in zip(i, j, kinds, strict=True) if kind == "loop"]
+
+    # -- steps ----------------------------------------------------------------------------
+
+    def _base(self) -> FloatArray:
+        return self._graph.pose(len(self._keys) - 1) if self._keys else self._start
+
+    def _add_keyframe(self, event: LaserScan, points: FloatArray) -> None:
+        try:
+            reference = prepare_scan(points)
+        except MatchError as exc:  # too few points to be a keyframe: keep tracking the old
+            self._counts[f"keyframe_refused:{exc.reason}"] += 1
+            return
+        pose = compose(self._base(), self._tracker.offset)
+        k = self._graph.add_pose(pose)
+        travelled = 0.0
+        if k > 0:
+            z, info, matched = self._tracker.edge()
+            self._graph.add_edge(k - 1, k, z, info, "odometry")
+            self._counts["odometry_edges" if not matched else "matched_edges"] += 1
+            travelled = self._keys[-1].travelled + math.hypot(z[0], z[1])
+            n = self._cfg.frontend.neighbour_edges
+            for i, T_i_k, info_i in match_neighbours(
+                self._keys, self._graph.poses, points, pose, k - 1 - n,
+                self._cfg.frontend, self._cfg.plicp,
+            ):  # fmt: skip
+                self._graph.add_edge(i, k, T_i_k, info_i, "neighbour")
+                self._counts["neighbour_edges"] += 1
+        self._keys.append(Keyframe(event.t, points, reference, travelled))
+        self._ranges.append(np.asarray(event.ranges, dtype=np.float64))
+        self._tracker.reset()
+        if self._cfg.loops.enabled and k > 0:
+            self._close_loops(k)
+        if self._pending and k - self._last_solve >= self._cfg.loops.optimize_every:
+            self._optimize()
+        f = self._cfg.frontend
+        if f.reference == "map":
+            self._local = local_map(
+                self._graph.poses, [kf.points for kf in self._keys], k, f.map_keyframes, f.voxel
+            )
+
+    def _close_loops(self, k: int) -> None:
+        s = self._cfg.loops
+        poses = self._graph.poses
+        travelled = np.array([kf.travelled for kf in self._keys])
+        for j in loop_candidates(poses[:, :2], travelled, k, s):
+            self._counts["loop_candidates"] += 1
+            window = search_window(float(travelled[k] - travelled[j]), s)
+            ref_points, cloud = submap(
+                poses, [kf.points for kf in self._keys], j, s.submap_keyframes // 2
+            )
+            found = verify_closure(
+                ref_points, cloud, self._keys[k].points, between(poses[j], poses[k]),
+                window, s, self._cfg.normal_icp,
+            )  # fmt: skip
+            if isinstance(found, str):
+                self._counts[f"loop_rejected:{found}"] += 1
+                continue
+            self._counts["loops_verified"] += 1
+            self._confirm(poses, (j, k, found))
+
+    def _confirm(self, poses: FloatArray, new: tuple[int, int, LoopMatch]) -> None:
+        """Add ``new`` and its waiting partners once one agrees with it (pairwise
+        consistency, :func:`~slamkit.slam.laser_graph.loops.pair_consistent`)."""
+        s = self._cfg.loops
+        j, k, found = new
+        self._waiting = [w for w in self._waiting if k - w[1] <= s.pair_keyframes]
+        partners = [
+            w
+            for w in [*self._waiting, *self._confirmed]
+            if abs(w[0] - j) <= s.pair_keyframes
+            and 0 < k - w[1] <= s.pair_keyframes
+            and pair_consistent(poses, (j, k, found.pose), (w[0], w[1], w[2].pose), s)
+        ]
+        if not partners:
+            self._waiting.append(new)
+            return
+        for w in [*partners, new]:
+            if w in self._confirmed:
+                continue
+            info = floored_information(w[2].cov, self._cfg.frontend, scale=s.cov_scale)
+            self._graph.add_edge(w[0], w[1], w[2].pose, info, "loop")
+            self._counts["loops_added"] += 1
+            self._pending += 1
+            if w in self._waiting:
+                self._waiting.remove(w)
+        self._confirmed = [*self._confirmed[-4 * s.pair_keyframes :], *partners, new]
+
+    def _optimize(self) -> None:
+        kinds = self._graph.edge_kinds()
+        pending = [e for e in range(len(kinds)) if kinds[e] == "loop"][-self._pending :]
+        if not self._pending:
+            pending = []
+        s = self._cfg.loops
+        removed = optimize_consistent(self._graph, pending, s.max_chi2, s.max_edge_chi2)
+        self._counts["loop_rejected:chi2"] += len(removed)
+        self._counts["solves"] += 1
+        self._pending = 0
+        self._last_solve = len(self._graph)
+
+    def _diagnostics(self) -> dict[str, object]:
+        c = self._counts + self._tracker.counts
+        solves = self._graph.solves
+        return {
+            "scans": c["scans"],
+            "keyframes": len(self._keys),
+            "matched": c["matched"],
+            "unmatched": {k[len("failed:") :]: v for k, v in c.items() if k.startswith("failed:")},
+            "gated": c["gated"],
+            "odometry_edges": c["odometry_edges"],
+            "neighbour_edges": c["neighbour_edges"],
+            "loop_candidates": c["loop_candidates"],
+            "loops_verified": c["loops_verified"],
+            "loops_added": c["loops_added"],
+            "loops_unconfirmed": c["loops_verified"] - c["loops_added"],
+            "loops_kept": len(self.loop_closures()),
+            "loops_rejected": {
+                k[len("loop_rejected:") :]: v
+                for k, v in c.items()
+                if k.startswith("loop_rejected:")
+            },
+            "keyframes_refused": sum(v for k, v in c.items() if k.startswith("keyframe_refused:")),
+            "optimizations": len(solves),
+            "optimization_seconds": float(sum(r.seconds for r in solves)),
+            "final_cost": solves[-1].cost if solves else None,
+        }

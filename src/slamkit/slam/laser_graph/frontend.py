@@ -1,0 +1,193 @@
+"""The front end of graph-based laser SLAM: scan-to-keyframe tracking and the edges between
+neighbouring keyframes.
+
+Every scan is registered by point-to-line ICP to the current keyframe, starting from the
+last match composed with the wheels' motion since,
+
+    T_key_cur⁰ = T_key_prev ⊕ g(u)          (g: the data set's motion model)
+
+so the tracker holds the scan's *offset* ``T_key_cur`` from its keyframe (and the odometry
+covariance of that offset, propagated ``Σ ← G Σ Gᵀ + V Q Vᵀ`` in the keyframe's frame, which
+the motion models allow since they are invariant under a change of world frame). A scan
+becomes a keyframe when the offset reaches the keyframe distance or angle, or its match
+overlaps too little; the edge from the previous keyframe is its offset with the match's
+covariance (floored), or the odometry's covariance when the match failed. With the map
+reference (the default) a scan is matched instead against the local map of the last few
+keyframes in the current keyframe's frame (:func:`local_map`), by point-to-normal ICP with
+the odometry's prediction as a prior, so that a direction the map leaves unconstrained (a
+corridor) keeps the prediction.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+from slamkit._validation import FloatArray
+from slamkit.errors import ConvergenceError, MatchError
+from slamkit.geometry.angles import wrap_angle_float
+from slamkit.geometry.pose2 import between
+from slamkit.models.motion import MotionModel
+from slamkit.scanmatch.icp import PreparedScan
+from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
+from slamkit.scanmatch.plicp import PlIcpConfig, plicp
+from slamkit.scanmatch.point_map import PointMap
+from slamkit.slam.laser_graph.config import FrontEndSettings
+
+__all__ = ["Keyframe", "Tracker", "floored_information", "local_map", "match_neighbours"]
+
+
+@dataclass(frozen=True)
+class Keyframe:
+    """A keyframe: its stamp [s], its scan's points ``(M, 2)`` in the robot frame (beam
+    order), the prepared reference of those points and the path length [m] the front end
+    had travelled when it was taken."""
+
+    t: float
+    points: FloatArray
+    reference: PreparedScan
+    travelled: float
+
+
+def floored_information(
+    cov: FloatArray, settings: FrontEndSettings, scale: float = 1.0
+) -> FloatArray:
+    """The information ``(scale Σ + F)⁻¹`` of a match covariance ``Σ (3, 3)`` with the floor
+    ``F = diag(σ_xy², σ_xy², σ_θ²)`` of ``settings`` (symmetrised)."""
+    s_xy, s_t = settings.cov_floor_xy, math.radians(settings.cov_floor_deg)
+    c = scale * np.asarray(cov, dtype=np.float64) + np.diag([s_xy**2, s_xy**2, s_t**2])
+    c = 0.5 * (c + c.T)
+    info = np.linalg.solve(c, np.eye(3))
+    return 0.5 * (info + info.T)
+
+
+def within_gate(prior: FloatArray, pose: FloatArray, settings: FrontEndSettings) -> bool:
+    """Whether a match ``pose`` stays within the correction gate of ``prior``."""
+    d = between(prior, pose)
+    return math.hypot(d[0], d[1]) <= settings.max_correction_xy and abs(
+        wrap_angle_float(float(d[2]))
+    ) <= math.radians(settings.max_correction_deg)
+
+
+class Tracker:
+    """The current scan's offset from its keyframe and the odometry covariance of that
+    offset (see the module docstring); counts matches and failures in ``counts``."""
+
+    def __init__(
+        self,
+        model: MotionModel,
+        noise_cov: FloatArray,
+        settings: FrontEndSettings,
+        plicp_config: PlIcpConfig,
+        normal_icp_config: NormalIcpConfig,
+    ) -> None:
+        self.model = model
+        self.normal_icp = normal_icp_config
+        self.Q = settings.motion_cov_scale * np.asarray(noise_cov, dtype=np.float64)
+        self.settings = settings
+        self.plicp = plicp_config
+        self.offset: FloatArray = np.zeros(3)
+        self.odometry_cov: FloatArray = np.zeros((3, 3))
+        self.match_cov: FloatArray | None = None  # of the last match, None: it failed
+        self.overlap = 1.0
+        self.counts: Counter[str] = Counter()
+
+    def reset(self) -> None:
+        """A new keyframe: the offset and its uncertainty start again from zero."""
+        self.offset = np.zeros(3)
+        self.odometry_cov = np.zeros((3, 3))
+        self.match_cov = None
+        self.overlap = 1.0
+
+    def predict(self, u: FloatArray, dt: float) -> None:
+        moved = np.asarray(self.model.apply(self.offset, u, dt), dtype=np.float64)
+        if not np.isfinite(moved).all():
+            raise ConvergenceError(f"the control {u} over {dt} s moved the pose to {moved}")
+        G, V = self.model.jacobians(self.offset, u, dt)
+        self.odometry_cov = G @ self.odometry_cov @ G.T + V @ self.Q @ V.T
+        self.offset = moved
+
+    def match(self, reference: PreparedScan | NormalCloud, points: FloatArray) -> bool:
+        """Register ``points`` to the keyframe (its scan, or the local map in its frame:
+        point-to-normal ICP with the odometry prediction as a prior) from the predicted
+        offset; on success the offset becomes the match. Returns whether it matched
+        (failures are counted by reason, gated matches as ``"gated"``)."""
+        try:
+            if isinstance(reference, NormalCloud):
+                s_xy, s_t = self.settings.cov_floor_xy, math.radians(self.settings.cov_floor_deg)
+                prior = self.odometry_cov + np.diag([s_xy**2, s_xy**2, s_t**2])
+                result = normal_icp(
+                    reference, points, self.offset, self.normal_icp,
+                    prior_information=np.linalg.solve(prior, np.eye(3)),
+                )  # fmt: skip
+            else:
+                result = plicp(reference, points, self.offset, self.plicp)
+        except MatchError as exc:
+            self.counts[f"failed:{exc.reason}"] += 1
+            self.match_cov, self.overlap = None, 0.0
+            return False
+        if not within_gate(self.offset, result.pose, self.settings):
+            self.counts["gated"] += 1
+            self.match_cov, self.overlap = None, 0.0
+            return False
+        self.counts["matched"] += 1
+        self.offset = result.pose
+        self.match_cov = result.cov
+        self.overlap = result.inlier_fraction
+        return True
+
+    def keyframe_due(self) -> bool:
+        """Whether the current scan is to become a keyframe."""
+        s = self.settings
+        o = self.offset
+        return (
+            math.hypot(o[0], o[1]) >= s.keyframe_distance
+            or abs(o[2]) >= math.radians(s.keyframe_angle_deg)
+            or self.overlap < s.min_overlap
+        )
+
+    def edge(self) -> tuple[FloatArray, FloatArray, bool]:
+        """The edge from the keyframe to the current scan: measurement, information, and
+        whether it came from the scan match (else the odometry)."""
+        if self.match_cov is not None:
+            return self.offset.copy(), floored_information(self.match_cov, self.settings), True
+        return self.offset.copy(), floored_information(self.odometry_cov, self.settings), False
+
+
+def match_neighbours(
+    keyframes: list[Keyframe],
+    poses: FloatArray,
+    points: FloatArray,
+    pose: FloatArray,
+    first: int,
+    settings: FrontEndSettings,
+    plicp_config: PlIcpConfig,
+) -> list[tuple[int, FloatArray, FloatArray]]:
+    """Edges ``(i, T_i_new, Ω)`` from the keyframes ``first, ..., first + n - 1`` (those that
+    exist, ``n = settings.neighbour_edges``) to a new keyframe at ``pose`` with ``points``:
+    point-to-line ICP from the current estimate; failed or gated matches give no edge."""
+    edges = []
+    for i in range(max(first, 0), min(first + settings.neighbour_edges, len(keyframes))):
+        prior = between(poses[i], pose)
+        try:
+            result = plicp(keyframes[i].reference, points, prior, plicp_config)
+        except MatchError:
+            continue
+        if within_gate(prior, result.pose, settings):
+            edges.append((i, result.pose, floored_information(result.cov, settings)))
+    return edges
+
+
+def local_map(
+    poses: FloatArray, points: list[FloatArray], k: int, count: int, voxel: float
+) -> NormalCloud:
+    """The points of keyframes ``k - count + 1, ..., k`` (``points[i]`` in keyframe ``i``'s
+    frame, ``poses (K, 3)``) in keyframe ``k``'s frame, newest first, one per ``voxel``."""
+    cloud = PointMap(voxel)
+    for i in range(k, max(k - count, -1), -1):
+        cloud.insert(between(poses[k], poses[i]), points[i])
+    pts, normals = cloud.arrays()
+    return NormalCloud.build(pts, normals)

@@ -1,0 +1,198 @@
+"""Loop closures: candidates from a search region grown with the path travelled, matched by
+the correlative matcher against a candidate's submap, verified, refined.
+
+**Search region.** The front end's drift grows with the path it has integrated, so the
+estimate of the new keyframe relative to an old keyframe ``j`` is uncertain by about
+
+    r(j) = min(r₀ + k_r · s(j), r_max),     α(j) = min(α₀ + k_α · s(j), α_max)
+
+where ``s(j)`` is the path length travelled since ``j`` [m] (a linear bound, chosen over
+marginal covariances because it costs nothing and holds for the scan-matching drift of
+indoor logs, which grows about linearly with distance). Keyframes with ``s(j) ≥
+min_travel`` whose estimated position lies within ``r(j)`` of the new keyframe's are
+candidates, nearest first.
+
+**Verification.** The new keyframe's scan is matched against the candidate's submap (its
+scan and its neighbours', in its frame) by Olson's correlative search over the window
+``±r(j)``, ``±α(j)`` around the current estimate; the match must reach ``min_score``. The
+optimum, when it lies farther than ``near_window`` from the estimate, must also score
+clearly better (by ``1 / ambiguity_ratio``) than the best pose within ``near_window``: an
+aliased match along a corridor scores about as well as the true one. The optimum is
+refined by point-to-normal ICP against the same submap, which must pair
+``min_inliers`` of the scan and may move the optimum only a few cells (a refinement that
+walks away means the correlative peak was not a real alignment). The back end then checks
+consistency (:mod:`slamkit.slam.laser_graph.backend`: a closure whose residual stays large
+after optimisation is removed).
+
+**Pairwise consistency.** A verified closure enters the graph only once another closure
+nearby (both ends within ``pair_keyframes`` keyframes of its own) agrees with it: the cycle
+``T_j_k`` vs ``T_j_j' ⊕ T_j'_k' ⊕ T_k'_k`` (the short chains from the current estimate)
+must close within ``pair_xy`` / ``pair_deg``. Aliased matches in a corridor or between
+look-alike rooms land at poses that do not agree from one keyframe to the next.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from slamkit._validation import FloatArray
+from slamkit.errors import MatchError
+from slamkit.geometry.angles import wrap_angle_float
+from slamkit.geometry.pose2 import between, compose, transform_points
+from slamkit.scanmatch.correlative import CorrelativeConfig, CorrelativeReference, correlative_match
+from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
+from slamkit.scanmatch.point_map import PointMap
+from slamkit.scanmatch.result import MatchResult
+from slamkit.slam.laser_graph.config import LoopSettings
+
+__all__ = [
+    "LoopMatch",
+    "loop_candidates",
+    "pair_consistent",
+    "search_window",
+    "submap",
+    "verify_closure",
+]
+
+
+@dataclass(frozen=True)
+class LoopMatch:
+    """A verified closure ``T_j_k`` with its covariance ``(3, 3)``, the correlative score and
+    the refinement's inlier fraction."""
+
+    pose: FloatArray
+    cov: FloatArray
+    score: float
+    inliers: float
+
+
+def search_window(travel: float, settings: LoopSettings) -> tuple[float, float]:
+    """The search radius [m] and rotation half-window [rad] after ``travel`` metres."""
+    r = min(settings.radius + settings.radius_per_metre * travel, settings.max_radius)
+    a = min(settings.angle_deg + settings.angle_per_metre_deg * travel, settings.max_angle_deg)
+    return r, math.radians(a)
+
+
+def loop_candidates(
+    positions: FloatArray, travelled: FloatArray, k: int, settings: LoopSettings
+) -> list[int]:
+    """The candidates for keyframe ``k``: keyframes ``j < k`` with ``travelled[k] -
+    travelled[j] ≥ min_travel`` within the search radius of ``positions[k]`` (``(K, 2)``
+    estimated positions, ``(K,)`` path lengths), nearest first, at most ``max_candidates``,
+    at least ``submap_keyframes`` apart in index."""
+    travel = travelled[k] - travelled[:k]
+    eligible = np.flatnonzero(travel >= settings.min_travel)
+    if eligible.size == 0:
+        return []
+    d = np.hypot(*(positions[eligible] - positions[k]).T)
+    radius = np.minimum(
+        settings.radius + settings.radius_per_metre * travel[eligible], settings.max_radius
+    )
+    inside = d <= radius
+    order = eligible[inside][np.argsort(d[inside], kind="stable")]
+    chosen: list[int] = []
+    for j in order:
+        if all(abs(int(j) - c) >= settings.submap_keyframes for c in chosen):
+            chosen.append(int(j))
+            if len(chosen) == settings.max_candidates:
+                break
+    return chosen
+
+
+def submap(
+    poses: FloatArray, points: list[FloatArray], j: int, half: int
+) -> tuple[FloatArray, NormalCloud]:
+    """Keyframe ``j``'s submap in its own frame: the points of keyframes ``j - half, ...,
+    j + half`` (those that exist, ``points[i]`` in keyframe ``i``'s frame, ``poses (K, 3)``),
+    concatenated in keyframe and beam order, and the same points with normals as a
+    :class:`NormalCloud` (one per 2.5 cm voxel)."""
+    lo, hi = max(j - half, 0), min(j + half + 1, len(points))
+    cloud = PointMap(0.025)
+    parts = []
+    for i in range(lo, hi):
+        T_j_i = between(poses[j], poses[i])
+        parts.append(transform_points(T_j_i, points[i]))
+        cloud.insert(T_j_i, points[i])
+    pts, normals = cloud.arrays()
+    return np.concatenate(parts), NormalCloud.build(pts, normals)
+
+
+def verify_closure(
+    reference_points: FloatArray,
+    reference_cloud: NormalCloud,
+    points: FloatArray,
+    initial: FloatArray,
+    window: tuple[float, float],
+    settings: LoopSettings,
+    icp_config: NormalIcpConfig,
+) -> LoopMatch | str:
+    """Match ``points (N, 2)`` (the new keyframe, its frame) to a candidate's submap from
+    ``initial = T_j_k`` over ``window = (radius [m], angle [rad])``; the verified
+    :class:`LoopMatch`, or the reason it was refused (``"low_score"``, ``"degenerate"``,
+    ``"too_few_points"``, ``"ambiguous"``, ``"refine:<reason>"``, ``"inliers"``,
+    ``"refinement"``)."""
+    radius, angle = window
+    cfg = CorrelativeConfig(
+        window_xy=radius,
+        window_theta=angle,
+        resolution=settings.resolution,
+        sigma=settings.sigma,
+        levels=5,
+        min_score=settings.min_score,
+    )
+    try:
+        reference = CorrelativeReference.from_points(reference_points, cfg)
+        coarse = correlative_match(reference, points, initial, cfg)
+    except MatchError as exc:
+        return exc.reason
+    shift = between(initial, coarse.pose)
+    if math.hypot(shift[0], shift[1]) > settings.near_window:
+        # A far optimum must beat the best pose near the estimate clearly: along a corridor
+        # or between look-alike rooms the two score alike (an aliased match).
+        near = dataclasses.replace(cfg, window_xy=settings.near_window, min_score=0.0)
+        try:
+            close = correlative_match(reference, points, initial, near)
+        except MatchError:
+            close = None
+        # A near optimum on the window's edge is the far peak's flank, not a peak of its own.
+        inner = settings.near_window - 2.0 * settings.resolution
+        if (
+            close is not None
+            and np.abs(close.pose[:2] - initial[:2]).max() < inner
+            and close.score >= settings.ambiguity_ratio * coarse.score
+        ):
+            return "ambiguous"
+    try:
+        fine: MatchResult = normal_icp(reference_cloud, points, coarse.pose, icp_config)
+    except MatchError as exc:
+        return f"refine:{exc.reason}"
+    if fine.inlier_fraction < settings.min_inliers:
+        return "inliers"
+    step = between(coarse.pose, fine.pose)
+    if math.hypot(step[0], step[1]) > settings.max_refinement_xy or abs(
+        wrap_angle_float(float(step[2]))
+    ) > math.radians(settings.max_refinement_deg):
+        return "refinement"
+    return LoopMatch(fine.pose, fine.cov, coarse.score, fine.inlier_fraction)
+
+
+def pair_consistent(
+    poses: FloatArray,
+    a: tuple[int, int, FloatArray],
+    b: tuple[int, int, FloatArray],
+    settings: LoopSettings,
+) -> bool:
+    """Whether closures ``a = (j, k, T_j_k)`` and ``b = (j', k', T_j'_k')`` agree: the cycle
+    ``between(T_j_k, T_j_j' ⊕ T_j'_k' ⊕ T_k'_k)`` (chains at ``poses (K, 3)``) within
+    ``pair_xy`` [m] and ``pair_deg``."""
+    j, k, z = a
+    j2, k2, z2 = b
+    via = compose(compose(between(poses[j], poses[j2]), z2), between(poses[k2], poses[k]))
+    e = between(z, via)
+    return math.hypot(e[0], e[1]) <= settings.pair_xy and abs(
+        wrap_angle_float(float(e[2]))
+    ) <= math.radians(settings.pair_deg)

@@ -1,0 +1,247 @@
+"""Graph-based laser SLAM (``graph-slam``): keyframes, loop closures, the pose graph."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from slamkit.app import RunRequest, run_job
+from slamkit.config import config_from_mapping
+from slamkit.datasets import load_dataset
+from slamkit.errors import ConfigError, InputError
+from slamkit.geometry.pose2 import between, interpolate_poses
+from slamkit.io.posegraph import read_graph
+from slamkit.pipeline import run
+from slamkit.pipeline.evaluate import evaluate
+from slamkit.slam.laser_graph import (
+    LaserGraphConfig,
+    LaserGraphSlam,
+    LoopMatch,
+    LoopSettings,
+    PoseGraph,
+    default_optimizer,
+    edge_chi2,
+    loop_candidates,
+    search_window,
+    submap,
+    verify_closure,
+)
+from slamkit.slam.laser_graph.backend import optimize_consistent
+from slamkit.slam.laser_graph.loops import pair_consistent
+
+
+@pytest.fixture(scope="module")
+def loop_world():
+    return load_dataset("corridor-loop-laser", seed=0)
+
+
+@pytest.fixture(scope="module")
+def slam(loop_world):
+    """The estimator after the whole drive round the ring (its graph and keyframes)."""
+    est = LaserGraphSlam(loop_world, LaserGraphConfig(), np.random.default_rng(0))
+    for event in loop_world.events:
+        est.handle(event)
+    output = est.finish()
+    truth = interpolate_poses(loop_world.truth.times, loop_world.truth.poses, est.keyframe_times)
+    return est, output, truth
+
+
+@pytest.fixture(scope="module")
+def result(loop_world):
+    return run("graph-slam", loop_world, seed=0)
+
+
+def test_the_loop_is_closed_and_no_closure_is_false(slam) -> None:
+    """Driving round the 100 m ring and on: about 20 closures where the robot re-enters the
+    first corridor (measured 20), each within 7 cm and 0.3° of the true relative pose
+    (measured at most 6.7 cm); every scan matched but a few in bare corridor stretches."""
+    est, output, truth = slam
+    closures = est.loop_closures()
+    assert len(closures) >= 10
+    i, j, z, _ = est.graph.edges()
+    kinds = est.graph.edge_kinds()
+    for e, kind in enumerate(kinds):
+        if kind != "loop":
+            continue
+        err = between(z[e], between(truth[i[e]], truth[j[e]]))
+        assert math.hypot(err[0], err[1]) < 0.1 and abs(math.degrees(err[2])) < 1.0
+        # a closure ties the end of the drive to its start: a long way round in between
+        assert est.keyframe_times[j[e]] - est.keyframe_times[i[e]] > 60.0
+    d = output.diagnostics
+    assert d["loops_kept"] == len(closures) and d["keyframes"] == len(est.graph)
+    assert d["matched"] >= 0.95 * d["scans"]
+    assert output.grid is not None and output.graph is not None
+    assert output.graph.poses.shape == (len(est.graph), 3)
+
+
+def test_graph_slam_beats_dead_reckoning_and_scan_to_keyframe_odometry(loop_world, result) -> None:
+    """ATE (SE(2)-aligned RMSE) on the ring, seed 0: dead reckoning 0.93 m, scan-to-keyframe
+    laser odometry 0.26 m, graph SLAM 0.066 m (seeds 1, 2: 0.84 / 0.19 / 0.067 and
+    1.56 / 0.33 / 0.077 m). Laser odometry against its point map scores 0.067 m here: on a
+    ring this small its 20 m map reaches back to the first corridor, a closure of its own."""
+    graph = evaluate(result, loop_world).scores.ate.rmse
+    dead = evaluate(run("dead-reckoning", loop_world), loop_world).scores.ate.rmse
+    keyframe = run("laser-odometry", loop_world, config={"reference": "keyframe"})
+    lo = evaluate(keyframe, loop_world).scores.ate.rmse
+    assert graph < 0.1
+    assert graph < 0.15 * dead
+    assert graph < 0.5 * lo
+
+
+def test_the_runner_reports_the_optimised_path(slam, result, loop_world) -> None:
+    """The recorded path is the final graph's (keyframe pose ⊕ offset at every stamp), the
+    online estimates kept beside it; closing the loop moved the path, and for the better."""
+    est, output, _ = slam
+    assert result.online_poses is not None
+    assert result.poses.shape == result.online_poses.shape
+    at_keys = interpolate_poses(result.times, result.poses, est.keyframe_times)
+    assert np.allclose(at_keys, output.graph.poses, atol=1e-9)
+    moved = np.hypot(*(result.poses[:, :2] - result.online_poses[:, :2]).T)
+    assert moved.max() > 0.05
+    online = dataclasses.replace(result, poses=result.online_poses, online_poses=None)
+    assert (
+        evaluate(result, loop_world).scores.ate.rmse < evaluate(online, loop_world).scores.ate.rmse
+    )
+
+
+def test_a_wrong_candidate_is_refused_by_the_verification(slam) -> None:
+    """The last keyframe's scan against a submap on the far side of the ring, presented as
+    if it were taken there (identity initial guess): refused. The true candidate from the
+    current estimate: accepted, within 5 cm of the truth."""
+    est, _, truth = slam
+    settings = LoopSettings()
+    poses = est.graph.poses
+    points = [kf.points for kf in est.keyframes]
+    k = len(poses) - 1
+    far = int(np.argmax(np.hypot(*(truth[:k, :2] - truth[k, :2]).T)))
+    assert np.hypot(*(truth[far, :2] - truth[k, :2])) > 15.0
+    ref, cloud = submap(poses, points, far, 5)
+    icp = LaserGraphConfig().normal_icp
+    wrong = verify_closure(ref, cloud, points[k], np.zeros(3), (1.0, 0.3), settings, icp)
+    assert isinstance(wrong, str)
+    j, kk = est.loop_closures()[len(est.loop_closures()) // 2]
+    ref, cloud = submap(poses, points, j, 5)
+    right = verify_closure(
+        ref, cloud, points[kk], between(poses[j], poses[kk]), (1.0, 0.3), settings, icp
+    )
+    assert isinstance(right, LoopMatch)
+    err = between(right.pose, between(truth[j], truth[kk]))
+    assert math.hypot(err[0], err[1]) < 0.05
+
+
+def test_pairwise_consistency_refuses_a_closure_shifted_along_the_corridor(slam) -> None:
+    """Two true closures agree (their cycle closes within the 10 cm / 1.5° tolerance); the
+    same closure moved 0.5 m along the corridor does not."""
+    est, _, truth = slam
+    settings = LoopSettings()
+    poses = est.graph.poses
+    (j1, k1), (j2, k2) = est.loop_closures()[:2]
+    z1, z2 = between(truth[j1], truth[k1]), between(truth[j2], truth[k2])
+    assert pair_consistent(poses, (j2, k2, z2), (j1, k1, z1), settings)
+    shifted = z2 + np.array([0.5, 0.0, 0.0])
+    assert not pair_consistent(poses, (j2, k2, shifted), (j1, k1, z1), settings)
+
+
+def test_the_backend_removes_an_injected_inconsistent_closure(slam) -> None:
+    """A closure 1.5 m off the truth, weighted like the real ones, added to the final graph:
+    the Δχ² check removes it and the poses stay where they were (within 1 cm); the true
+    relative pose at the same weight is kept."""
+    est, _, truth = slam
+    i, j, z, info = est.graph.edges()
+    loops = [e for e, kind in enumerate(est.graph.edge_kinds()) if kind == "loop"]
+    a, b = int(i[loops[0]]), int(j[loops[0]])
+    weight = info[loops[0]]
+    for offset, removed in ((1.5, True), (0.0, False)):
+        graph = PoseGraph(default_optimizer())
+        for p in est.graph.poses:
+            graph.add_pose(p)
+        for e, kind in enumerate(est.graph.edge_kinds()):
+            graph.add_edge(int(i[e]), int(j[e]), z[e], info[e], kind)
+        graph.optimize()
+        before = graph.poses
+        wrong = between(truth[a], truth[b]) + np.array([offset, 0.0, 0.0])
+        e = graph.add_edge(a, b, wrong, weight, "loop")
+        out = optimize_consistent(graph, [e], LoopSettings().max_chi2)
+        assert (out == [e]) is removed
+        if removed:
+            assert np.abs(graph.poses[:, :2] - before[:, :2]).max() < 0.01
+
+
+def test_edge_chi2_and_the_search_region_by_hand() -> None:
+    poses = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.1]])
+    chi2 = edge_chi2(
+        poses, np.array([0]), np.array([1]), np.array([[1.0, 0.0, 0.0]]), np.eye(3)[None] * 4.0
+    )
+    assert chi2 == pytest.approx([4.0 * 0.1**2])
+    s = LoopSettings(radius=0.5, radius_per_metre=0.02, max_radius=3.0, angle_deg=10.0)
+    r, a = search_window(50.0, s)
+    assert r == pytest.approx(1.5) and a == pytest.approx(math.radians(10.0 + 0.2 * 50))
+    assert search_window(1000.0, s)[0] == 3.0
+    # keyframes 0..5 at x = 0..5, path lengths 0..5 (m) and keyframe 6 back at x = 0.3
+    positions = np.array([[0.0, 0], [1, 0], [2, 0], [3, 0], [4, 0], [5, 0], [0.3, 0]])
+    travelled = np.array([0.0, 1, 2, 3, 4, 5, 10])
+    s = LoopSettings(min_travel=6.0, radius=0.5, radius_per_metre=0.0, submap_keyframes=1)
+    assert loop_candidates(positions, travelled, 6, s) == [0]  # 1 is 0.7 m away
+    s = dataclasses.replace(s, radius=1.0, max_candidates=3)
+    assert loop_candidates(positions, travelled, 6, s) == [0, 1]  # 2..5 too near in path
+
+
+def test_settings_are_checked_and_a_laser_is_required(loop_world) -> None:
+    with pytest.raises(ConfigError, match="keyframe_distance"):
+        config_from_mapping(LaserGraphConfig, {"frontend": {"keyframe_distance": -1.0}})
+    cfg = config_from_mapping(LaserGraphConfig, {"loops": {"min_score": 0.7}})
+    assert cfg.loops.min_score == 0.7
+    with pytest.raises(InputError, match="laser"):
+        LaserGraphSlam(dataclasses.replace(loop_world, laser=None, events=()), cfg, None)
+
+
+def test_run_job_writes_the_graph_as_g2o(tmp_path) -> None:
+    report = run_job(
+        RunRequest("graph-slam", "rooms-laser", tmp_path / "run", plots=False, preset=None)
+    )
+    assert "graph.g2o" in report.files and "trajectory.tum" in report.files
+    graph = read_graph(tmp_path / "run" / "graph.g2o")
+    out = report.result.output.graph
+    assert graph.poses.shape == out.poses.shape
+    assert np.allclose(graph.poses, out.poses, atol=1e-5)
+    assert graph.n_edges == out.n_edges
+
+
+@pytest.mark.realdata
+@pytest.mark.slow
+def test_aces_first_600_s_relations(data_root) -> None:
+    """The first 600 s of the raw ACES log (748 keyframes): measured 0.034 ± 0.029 m and
+    0.34 ± 0.31° over the 533 relations it covers (published graph mapping over the whole
+    log: 0.044 m); the raw odometry over the same window scores several times worse."""
+    pytest.importorskip("rosbags", reason="the laser extra (rosbags) is not installed")
+    from slamkit.eval.relations import relation_errors
+
+    if not (data_root / "laser/rosbags/aces.bag").exists():
+        pytest.skip(f"laser/rosbags/aces.bag not under {data_root}")
+    data = load_dataset("aces-raw", data_root=data_root)
+    t0 = data.events[0].t
+    data = dataclasses.replace(data, events=tuple(e for e in data.events if e.t <= t0 + 600.0))
+    result = run("graph-slam", data, seed=0)
+    rel = relation_errors(result.times, result.poses, data.truth.relations)
+    assert rel.count >= 500
+    assert rel.translation_mean < 0.045 and rel.rotation_mean_deg < 0.5
+    odometry = run("dead-reckoning", data, seed=0)
+    odo = relation_errors(odometry.times, odometry.poses, data.truth.relations)
+    assert rel.translation_mean < 0.3 * odo.translation_mean
+
+
+def test_a_smoothed_trajectory_is_checked() -> None:
+    from slamkit.errors import NonFiniteError, ShapeError
+    from slamkit.estimation import SmoothedTrajectory
+
+    ok = SmoothedTrajectory(np.array([0.0, 1.0]), np.zeros((2, 3)))
+    assert ok.poses.shape == (2, 3)
+    with pytest.raises(ShapeError, match="poses"):
+        SmoothedTrajectory(np.array([0.0, 1.0]), np.zeros((3, 3)))
+    with pytest.raises(InputError, match="increase"):
+        SmoothedTrajectory(np.array([1.0, 0.0]), np.zeros((2, 3)))
+    with pytest.raises(NonFiniteError):
+        SmoothedTrajectory(np.array([0.0, 1.0]), np.full((2, 3), np.nan))
