@@ -174,6 +174,11 @@ class EstimatorOutput:
     landmark_numbering: LandmarkIds | None = None
     """How the ids of ``landmarks`` and ``reading_landmarks`` relate to the data set's: the
     estimator says (``None``: it has no landmarks)."""
+    trajectory: tuple[FloatArray, FloatArray] | None = None
+    """The estimator's final trajectory ``(times (N,), poses (N, 3))`` when it differs from
+    the online estimates (a particle filter's best path, a smoothed graph): the runner's
+    :class:`~slamkit.pipeline.Result` then carries it instead of the online poses (times
+    strictly increasing, poses finite)."""
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,11 @@ Progress = Callable[[int, int], None]
 class Result:
     """What one run produced: a trajectory (one pose per time stamp of the stream, plus the
     start), its covariances if the estimator has them, per-step timings and the estimator's
-    map and diagnostics. ``config`` is the resolved configuration, JSON-able."""
+    map and diagnostics. ``config`` is the resolved configuration, JSON-able.
+
+    When the estimator returns a final trajectory (:attr:`EstimatorOutput.trajectory`, e.g.
+    a particle filter's best path), ``times``/``poses`` are that trajectory, ``covariances``
+    is None, and ``step_seconds`` still counts the runner's steps."""
 
     estimator: str
     dataset: str
@@ -66,6 +70,24 @@ def _record(est: PoseEstimate, step: int) -> tuple[np.ndarray, np.ndarray | None
     if cov is not None and not np.all(np.isfinite(cov)):
         raise ConvergenceError("the estimator's covariance became non-finite", step)
     return pose, cov
+
+
+def _final_trajectory(trajectory: tuple[Any, Any], steps: int) -> tuple[FloatArray, FloatArray]:
+    """The checked final trajectory of :attr:`EstimatorOutput.trajectory` (``steps``: the
+    number of online records, named in the error)."""
+    t = np.asarray(trajectory[0], dtype=float).reshape(-1)
+    p = np.asarray(trajectory[1], dtype=float)
+    if p.shape != (t.size, 3):
+        raise ConvergenceError(
+            f"the estimator's final trajectory: expected poses ({t.size}, 3) for its "
+            f"{t.size} times, got {p.shape}",
+            steps,
+        )
+    if not (np.isfinite(t).all() and np.isfinite(p).all()):
+        raise ConvergenceError("the estimator's final trajectory is not finite", steps)
+    if t.size > 1 and not np.all(np.diff(t) > 0):
+        raise ConvergenceError("the estimator's final trajectory: times not increasing", steps)
+    return t, p
 
 
 def _frame(est: Estimator, t: float, pose: np.ndarray, cov: np.ndarray | None) -> Frame:
@@ -153,14 +175,20 @@ def run(
         progress(total, total)
     output = est.finish()
     have_cov = all(c is not None for c in covs) and bool(covs)
+    times_out = np.asarray(times, dtype=float)
+    poses_out = np.asarray(poses, dtype=float).reshape(-1, 3)
+    covs_out = np.asarray(covs, dtype=float) if have_cov else None
+    if output.trajectory is not None:
+        times_out, poses_out = _final_trajectory(output.trajectory, len(times))
+        covs_out = None
     return Result(
         estimator=entry.name,
         dataset=dataset.name,
         seed=seed,
         config=config_to_dict(cfg),
-        times=np.asarray(times, dtype=float),
-        poses=np.asarray(poses, dtype=float).reshape(-1, 3),
-        covariances=np.asarray(covs, dtype=float) if have_cov else None,
+        times=times_out,
+        poses=poses_out,
+        covariances=covs_out,
         step_seconds=np.asarray(seconds, dtype=float),
         output=output,
         frames=tuple(snapshots),
