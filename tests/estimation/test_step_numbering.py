@@ -30,7 +30,12 @@ CANNOT_DIVERGE = {
 }
 """Estimators a bad control cannot derail, and why (each is checked to finish finite)."""
 
-DATA = {"mcl": "rooms-laser", "occupancy-mapping": "rooms-laser", "laser-odometry": "rooms-laser"}
+DATA = {
+    "mcl": "rooms-laser",
+    "occupancy-mapping": "rooms-laser",
+    "laser-odometry": "rooms-laser",
+    "grid-rbpf": "rooms-laser",
+}
 """The simulated world each estimator runs on (default: five-features)."""
 
 

@@ -48,10 +48,20 @@ class GridRbpfConfig(Section):
     sigma_hit: float = setting(0.05, finite_above(0.0), "a finite number > 0")
     """Standard deviation of an end point's distance to the nearest wall [m] (likelihood
     field, for the match and the weights)."""
+    match_iterations: int = setting(10, int_at_least(1), "an integer >= 1")
+    """Most Gauss-Newton steps of a particle's scan match (it stops earlier once a step
+    moves less than ``match_tolerance_xy`` and turns less than ``match_tolerance_deg``)."""
+    match_tolerance_xy: float = setting(1e-3, finite_at_least(0.0), "a finite number >= 0")
+    """[m]; a fiftieth of a 5 cm cell: far below the proposal's own spread."""
+    match_tolerance_deg: float = setting(0.02, finite_at_least(0.0), "a finite number >= 0")
+    """[deg]."""
     likelihood_temperature: float = setting(10.0, finite_at_least(1.0), "a number >= 1")
     """``log p(z | x, m)`` is divided by this in the weights and the proposal: the beams of
     one scan are far from independent (neighbouring beams see the same wall), and without
     tempering one particle takes all the weight at every update."""
+    proposal_temperature: float = setting(1.0, finite_at_least(1.0), "a number >= 1")
+    """The same for the Gaussian fitted as the proposal (1: the likelihood as it is, so the
+    draws stay as close to the match as the scan allows)."""
     beam_stride: int = setting(2, int_at_least(1), "an integer >= 1")
     """Every this-th beam is used for matching and weighting."""
     stencil_sigmas: float = setting(1.5, finite_above(0.0), "a finite number > 0")

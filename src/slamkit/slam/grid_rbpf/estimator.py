@@ -102,7 +102,12 @@ class GridRbpf(EstimatorShell):
         self._ism = InverseSensorModel(max_range=cfg.map_range).resolve(
             cfg.resolution, self._angles, self._laser_max
         )
-        self._match_cfg = MapMatchConfig(sigma_hit=cfg.sigma_hit)
+        self._match_cfg = MapMatchConfig(
+            sigma_hit=cfg.sigma_hit,
+            max_iterations=cfg.match_iterations,
+            step_tolerance_xy=cfg.match_tolerance_xy,
+            step_tolerance_theta=math.radians(cfg.match_tolerance_deg),
+        )
         start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
         n = cfg.particles
         self._odom: FloatArray = np.array(start, dtype=np.float64)  # dead-reckoned

@@ -81,7 +81,9 @@ def motion_covariance(delta: FloatArray, cfg: GridRbpfConfig) -> FloatArray:
     s_th = (
         math.radians(cfg.motion_floor_deg) + cfg.motion_rot_per_m * d + cfg.motion_rot_per_rad * a
     )
-    return np.diag([s_xy**2, s_xy**2, s_th**2])
+    sd = np.array([s_xy, s_xy, s_th])
+    with np.errstate(over="ignore"):  # an absurd motion gives inf: the caller checks
+        return np.diag(sd * sd)
 
 
 def motion_log_density(poses: FloatArray, mean: FloatArray, cov: FloatArray) -> FloatArray:
@@ -101,12 +103,29 @@ def _log_f(
     poses: FloatArray,
     predicted: FloatArray,
     motion_cov: FloatArray,
-    cfg: GridRbpfConfig,
+    temperature: float,
 ) -> FloatArray:
     """``log f(x_k) = log p(z | x_k, m) / T + log p(x_k | x', u)``."""
-    return scan.log_likelihood(field, poses, cfg.likelihood_temperature) + motion_log_density(
+    return scan.log_likelihood(field, poses, temperature) + motion_log_density(
         poses, predicted, motion_cov
     )
+
+
+def _stencil(
+    mode: FloatArray,
+    information: FloatArray,
+    motion_cov: FloatArray,
+    temperature: float,
+    sigmas: float,
+) -> tuple[FloatArray, float]:
+    """The stencil poses ``(27, 3)`` around ``mode`` along the principal axes of
+    ``(H/T + Σ_u⁻¹)⁻¹``, ``± sigmas`` standard deviations, and ``log |det B|``."""
+    info = information / temperature + np.linalg.inv(motion_cov)
+    evals, evecs = np.linalg.eigh(0.5 * (info + info.T))
+    scale = sigmas / np.sqrt(evals)
+    poses: FloatArray = mode + STENCIL @ (evecs * scale).T
+    # B's columns are orthogonal: |det B| is the product of their lengths.
+    return poses, float(np.log(scale).sum())
 
 
 def gaussian_proposal(
@@ -120,28 +139,35 @@ def gaussian_proposal(
     rng: np.random.Generator,
 ) -> tuple[FloatArray, float]:
     """The new pose drawn from the Gaussian fitted around the match ``mode``, and
-    ``log η`` (module docstring). ``match_information`` is the match's ``H (3, 3)``."""
-    # The stencil basis: principal axes of (H/T + Σ_u⁻¹)⁻¹, scaled to ± stencil_sigmas.
-    info = match_information / cfg.likelihood_temperature + np.linalg.inv(motion_cov)
-    evals, evecs = np.linalg.eigh(0.5 * (info + info.T))
-    B = evecs * (cfg.stencil_sigmas / np.sqrt(evals))
-    poses = mode + STENCIL @ B.T
-    log_f = _log_f(field, scan, poses, predicted, motion_cov, cfg)
+    ``log η`` (module docstring). ``match_information`` is the match's ``H (3, 3)``.
+
+    The Gaussian is fitted with the likelihood tempered by ``proposal_temperature`` and
+    ``η`` integrated with ``likelihood_temperature``, each on its own stencil (the second
+    is wider): the proposal follows the match as closely as the scan allows, the weights
+    do not let one particle take all the weight."""
+    t_p, t_w = cfg.proposal_temperature, cfg.likelihood_temperature
+    poses, log_det_p = _stencil(mode, match_information, motion_cov, t_p, cfg.stencil_sigmas)
+    log_f = _log_f(field, scan, poses, predicted, motion_cov, t_p)
     top = float(log_f.max())
     if not math.isfinite(top):
         return mode.copy(), -math.inf
     w = np.exp(log_f - top)
-    total = float(w.sum())
-    w /= total
+    w /= w.sum()
     rel = poses - mode
     rel[:, 2] = wrap_angle(rel[:, 2])
     mu_rel = w @ rel
     centred = rel - mu_rel
     cov = (centred * w[:, None]).T @ centred + _COV_FLOOR
-    # η ≈ |det B| Σ_k f(x_k): B's columns are orthogonal, |det B| = Π of their lengths.
-    log_eta = top + math.log(total) + float(np.log(cfg.stencil_sigmas / np.sqrt(evals)).sum())
     draw = mode + mu_rel + np.linalg.cholesky(cov) @ rng.standard_normal(3)
     draw[2] = float(wrap_angle(draw[2]))
+    if t_w == t_p:
+        log_fw, log_det = log_f, log_det_p
+    else:
+        wide, log_det = _stencil(mode, match_information, motion_cov, t_w, cfg.stencil_sigmas)
+        log_fw = _log_f(field, scan, wide, predicted, motion_cov, t_w)
+    # η ≈ |det B| Σ_k f(x_k): the stencil as a quadrature rule of ∫ f.
+    top_w = float(log_fw.max())
+    log_eta = top_w + math.log(float(np.exp(log_fw - top_w).sum())) + log_det
     return draw, log_eta
 
 
@@ -155,7 +181,8 @@ def mode_proposal(
     rng: np.random.Generator,
 ) -> tuple[FloatArray, float]:
     """The match ``mode`` plus small noise, and ``log f(mode)`` as the weight factor."""
-    log_f = float(_log_f(field, scan, mode[None, :], predicted, motion_cov, cfg)[0])
+    t_w = cfg.likelihood_temperature
+    log_f = float(_log_f(field, scan, mode[None, :], predicted, motion_cov, t_w)[0])
     sd = np.array([cfg.mode_noise_xy, cfg.mode_noise_xy, math.radians(cfg.mode_noise_deg)])
     draw = mode + sd * rng.standard_normal(3)
     draw[2] = float(wrap_angle(draw[2]))
