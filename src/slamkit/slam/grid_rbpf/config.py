@@ -42,7 +42,7 @@ class GridRbpfConfig(Section):
     """Cells per side of a shared map tile."""
     map_range: float = setting(20.0, finite_above(0.0), "a finite number > 0")
     """Readings beyond this [m] (and max-range readings) clear free space only up to it."""
-    match_range: float = setting(12.0, finite_above(0.0), "a finite number > 0")
+    match_range: float = setting(20.0, finite_above(0.0), "a finite number > 0")
     """Readings beyond this [m] are left out of matching and weighting; the likelihood field
     of a particle's map is built over the box of the remaining end points (+ 1 m)."""
     sigma_hit: float = setting(0.05, finite_above(0.0), "a finite number > 0")

@@ -5,8 +5,9 @@ With ``x'`` the particle's previous pose, ``u`` the odometry since, ``m`` its ma
 the new scan, the optimal proposal is ``p(x | m, x', z, u) ∝ p(z | x, m) p(x | x', u)``
 and the weight factor its normaliser ``η = ∫ p(z | x, m) p(x | x', u) dx`` (Grisetti,
 Stachniss & Burgard 2007, eqs. 9-11). The scan likelihood is the likelihood field of the
-particle's map, tempered: ``log p(z | x, m) / T`` (:attr:`GridRbpfConfig.
-likelihood_temperature`). Three ways to draw:
+particle's map, tempered: ``log p(z | x, m) / T``, with ``T = likelihood_temperature`` in
+the weights and ``T = proposal_temperature`` (default 1: untempered) in the Gaussian fitted
+as the proposal (:class:`~slamkit.slam.grid_rbpf.GridRbpfConfig`). Three ways to draw:
 
 * :func:`gaussian_proposal` (the paper's): around the scan-match mode ``x*`` evaluate
   ``f(x) = p(z | x, m) p(x | x', u)`` on a 3 × 3 × 3 stencil ``x_k = x* + B s_k``,
@@ -16,7 +17,8 @@ likelihood_temperature`). Three ways to draw:
   ``w_k = f(x_k) / Σ f``, the proposal is ``N(μ, Σ)``, ``μ = Σ w_k x_k``,
   ``Σ = Σ w_k (x_k - μ)(x_k - μ)ᵀ`` (headings relative to ``x*``, wrapped), and
   ``η ≈ |det B| Σ_k f(x_k)`` — the quadrature of the integral on the stencil's cells, so that
-  particles whose stencils differ in size are weighed alike.
+  particles whose stencils differ in size are weighed alike (``η`` on a second stencil,
+  sized with the weights' temperature).
 * :func:`mode_proposal` (GMapping's released code): ``x* + ε``, ``ε ~ N(0, diag(σ²))``
   small, with ``η ≈ f(x*)``.
 * :func:`motion_proposal` (the fallback when the match fails): ``x ~ p(x | x', u)``, weight
