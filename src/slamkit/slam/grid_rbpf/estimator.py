@@ -281,14 +281,12 @@ class GridRbpf(EstimatorShell):
         stride = cfg.beam_stride
         ranges = event.ranges[::stride].copy()
         angles = self._angles[::stride]
-        ranges[ranges <= cfg.min_range] = cfg.match_range  # skipped by the field
+        reach = min(cfg.match_range, self._laser_max)
+        # Too short, no return, or beyond the match range: set to the field's max range,
+        # which the likelihood field skips.
+        ranges[(ranges <= cfg.min_range) | (ranges >= reach)] = cfg.match_range
         scan = Scan(ranges, angles, self._mounting)
-        points = scan_points(
-            event.ranges[::stride],
-            angles,
-            min(cfg.match_range, self._laser_max),
-            min_range=cfg.min_range,
-        )
+        points = scan_points(event.ranges[::stride], angles, reach, min_range=cfg.min_range)
         if self._mounting.any():
             points = transform_points(self._mounting, points)
         motion_cov = motion_covariance(delta, cfg)
