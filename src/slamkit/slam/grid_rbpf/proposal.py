@@ -28,6 +28,7 @@ as the proposal (:class:`~slamkit.slam.grid_rbpf.GridRbpfConfig`). Three ways to
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -55,15 +56,15 @@ STENCIL = np.array(
 _COV_FLOOR = np.diag([1e-8, 1e-8, 1e-10])  # m², m², rad²: keeps a fitted Σ factorizable
 
 
+@dataclass(frozen=True, eq=False)
 class Scan:
-    """One scan as the weights see it: ``ranges (B,)`` at ``angles (B,)`` (every
-    ``beam_stride``-th beam, readings beyond ``match_range`` set to it, which the likelihood
-    field skips) and the laser's ``mounting (3,)``."""
+    """One scan as the weights see it: ``ranges (B,)`` [m] at ``angles (B,)`` [rad] (every
+    ``beam_stride``-th beam; readings to be skipped set to the field's max range, which the
+    likelihood field ignores) and the laser's ``mounting (3,)`` in the robot frame."""
 
-    def __init__(self, ranges: FloatArray, angles: FloatArray, mounting: FloatArray) -> None:
-        self.ranges = ranges
-        self.angles = angles
-        self.mounting = mounting
+    ranges: FloatArray
+    angles: FloatArray
+    mounting: FloatArray
 
     def log_likelihood(
         self, field: LikelihoodField, poses: FloatArray, temperature: float
