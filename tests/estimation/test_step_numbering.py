@@ -35,6 +35,7 @@ DATA = {
     "occupancy-mapping": "rooms-laser",
     "laser-odometry": "rooms-laser",
     "graph-slam": "rooms-laser",
+    "grid-rbpf": "rooms-laser",
 }
 """The simulated world each estimator runs on (default: five-features)."""
 

@@ -183,6 +183,14 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             requires=("motion", "landmark_sensor"),
         ),
         EstimatorEntry(
+            "grid-rbpf",
+            "grid-based Rao-Blackwellized particle filter SLAM (Grisetti et al. 2007): "
+            "per-particle occupancy grids with shared tiles, scan-matching proposal",
+            "slamkit.slam.grid_rbpf:GridRbpf",
+            "slamkit.slam.grid_rbpf:GridRbpfConfig",
+            requires=("motion", "laser"),
+        ),
+        EstimatorEntry(
             "seif",
             "sparse extended information filter SLAM: constant-time motion update, bounded "
             "active landmarks, sparsification, amortised mean recovery",

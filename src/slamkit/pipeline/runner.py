@@ -37,7 +37,11 @@ Progress = Callable[[int, int], None]
 class Result:
     """What one run produced: a trajectory (one pose per time stamp of the stream, plus the
     start), its covariances if the estimator has them, per-step timings and the estimator's
-    map and diagnostics. ``config`` is the resolved configuration, JSON-able."""
+    map and diagnostics. ``config`` is the resolved configuration, JSON-able.
+
+    When the estimator returns a final trajectory (:attr:`EstimatorOutput.trajectory`, e.g.
+    a particle filter's best path), ``times``/``poses`` are that trajectory, ``covariances``
+    is None, and ``step_seconds`` still counts the runner's steps."""
 
     estimator: str
     dataset: str
@@ -176,7 +180,8 @@ def run(
         config=config_to_dict(cfg),
         times=np.asarray(times, dtype=float),
         poses=final,
-        covariances=np.asarray(covs, dtype=float) if have_cov else None,
+        # online covariances do not describe a revised path
+        covariances=np.asarray(covs, dtype=float) if have_cov and online is None else None,
         step_seconds=np.asarray(seconds, dtype=float),
         output=output,
         frames=tuple(snapshots),

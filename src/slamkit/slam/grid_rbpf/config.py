@@ -1,0 +1,100 @@
+"""Settings of the grid-based Rao-Blackwellized particle filter (:mod:`.estimator`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar, Literal
+
+from slamkit.config import (
+    Section,
+    finite_above,
+    finite_at_least,
+    fraction,
+    int_at_least,
+    optional,
+    setting,
+)
+
+__all__ = ["GridRbpfConfig"]
+
+
+@dataclass(frozen=True)
+class GridRbpfConfig(Section):
+    """Settings of :class:`~slamkit.slam.grid_rbpf.GridRbpf`. Metres, degrees where named."""
+
+    SECTION: ClassVar[str] = ""
+
+    particles: int = setting(30, int_at_least(1), "an integer >= 1")
+    """Number of particles (each a pose, a path and a map)."""
+    proposal: Literal["gaussian", "mode"] = "gaussian"
+    """``"gaussian"``: the improved proposal of Grisetti et al. (2007) — a Gaussian fitted
+    to ``p(z | x, m) p(x | x', u)`` at a stencil of poses around the scan-match mode, the
+    weight multiplied by its normaliser ``η``; ``"mode"``: GMapping's released behaviour —
+    the mode plus small noise (``mode_noise_*``), weighted by the likelihood there."""
+    update_distance: float = setting(0.5, finite_at_least(0.0), "a finite number >= 0")
+    """The filter updates once the odometry reports this much travel since the last
+    update [m] ..."""
+    update_angle_deg: float = setting(25.0, finite_at_least(0.0), "a finite number >= 0")
+    """... or this much turning [deg]; scans in between are not used."""
+    resolution: float = setting(0.05, finite_above(0.0), "a finite number > 0")
+    """Grid cell side [m]."""
+    tile_cells: int = setting(64, int_at_least(1), "a power of two")
+    """Cells per side of a shared map tile."""
+    map_range: float = setting(20.0, finite_above(0.0), "a finite number > 0")
+    """Readings beyond this [m] (and max-range readings) clear free space only up to it."""
+    match_range: float = setting(20.0, finite_above(0.0), "a finite number > 0")
+    """Readings beyond this [m] are left out of matching and weighting; the likelihood field
+    of a particle's map is built over the box of the remaining end points (+ 1 m)."""
+    sigma_hit: float = setting(0.05, finite_above(0.0), "a finite number > 0")
+    """Standard deviation of an end point's distance to the nearest wall [m] (likelihood
+    field, for the match and the weights)."""
+    match_iterations: int = setting(10, int_at_least(1), "an integer >= 1")
+    """Most Gauss-Newton steps of a particle's scan match (it stops earlier once a step
+    moves less than ``match_tolerance_xy`` and turns less than ``match_tolerance_deg``)."""
+    match_tolerance_xy: float = setting(1e-3, finite_at_least(0.0), "a finite number >= 0")
+    """[m]; a fiftieth of a 5 cm cell: far below the proposal's own spread."""
+    match_tolerance_deg: float = setting(0.02, finite_at_least(0.0), "a finite number >= 0")
+    """[deg]."""
+    likelihood_temperature: float = setting(10.0, finite_at_least(1.0), "a number >= 1")
+    """``log p(z | x, m)`` is divided by this in the weights and the proposal: the beams of
+    one scan are far from independent (neighbouring beams see the same wall), and without
+    tempering one particle takes all the weight at every update."""
+    proposal_temperature: float = setting(1.0, finite_at_least(1.0), "a number >= 1")
+    """The same for the Gaussian fitted as the proposal (1: the likelihood as it is, so the
+    draws stay as close to the match as the scan allows)."""
+    beam_stride: int = setting(2, int_at_least(1), "an integer >= 1")
+    """Every this-th beam is used for matching and weighting."""
+    stencil_sigmas: float = setting(1.5, finite_above(0.0), "a finite number > 0")
+    """Gaussian proposal: the 3 × 3 × 3 stencil spans ± this many standard deviations of
+    the predicted proposal along each of its principal axes."""
+    mode_noise_xy: float = setting(0.01, finite_at_least(0.0), "a finite number >= 0")
+    """Mode proposal: standard deviation of the noise added to the match [m] ..."""
+    mode_noise_deg: float = setting(0.3, finite_at_least(0.0), "a finite number >= 0")
+    """... and to its heading [deg]."""
+    motion_trans_per_m: float = setting(0.1, finite_at_least(0.0), "a finite number >= 0")
+    """Motion model: position std per metre travelled [m/m] ..."""
+    motion_trans_per_rad: float = setting(0.05, finite_at_least(0.0), "a finite number >= 0")
+    """... per radian turned [m/rad];"""
+    motion_rot_per_m: float = setting(0.05, finite_at_least(0.0), "a finite number >= 0")
+    """heading std per metre travelled [rad/m] ..."""
+    motion_rot_per_rad: float = setting(0.1, finite_at_least(0.0), "a finite number >= 0")
+    """... per radian turned [rad/rad];"""
+    motion_floor_xy: float = setting(0.01, finite_above(0.0), "a finite number > 0")
+    """plus these floors [m] ..."""
+    motion_floor_deg: float = setting(0.5, finite_above(0.0), "a finite number > 0")
+    """... [deg]."""
+    max_correction_xy: float = setting(0.5, finite_above(0.0), "a finite number > 0")
+    """A match farther than this from the particle's prediction [m] counts as failed (the
+    motion model is sampled instead) ..."""
+    max_correction_deg: float = setting(15.0, finite_above(0.0), "a finite number > 0")
+    """... or turned more than this [deg]."""
+    resample_threshold: float = setting(0.5, fraction(), "a fraction in [0, 1]")
+    """Resample (low variance) when ``N_eff < threshold · N``."""
+    min_range: float = setting(0.05, finite_at_least(0.0), "a finite number >= 0")
+    """Readings at or below this [m] are dropped."""
+    mounting: tuple[float, float, float] | None = None
+    """The laser's pose in the robot frame; None: the data set's."""
+    snapshots: int = setting(10, int_at_least(0), "an integer >= 0")
+    """Particle snapshots kept for plots (spread over the run)."""
+    max_updates: int | None = setting(None, optional(int_at_least(1)), "None or an integer >= 1")
+    """Stop updating after this many filter updates (the odometry carries on); None: never."""

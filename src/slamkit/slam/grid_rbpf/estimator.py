@@ -1,0 +1,376 @@
+"""Grid-based Rao-Blackwellized particle filter SLAM (Grisetti, Stachniss & Burgard, IEEE
+T-RO 2007, "Improved techniques for grid mapping with Rao-Blackwellized particle filters").
+
+Every particle carries a pose, the path that led to it and an occupancy grid built from
+that path (:class:`~slamkit.slam.grid_rbpf.maps.TiledMap`: tiles shared between particles,
+copied on write). The filter updates only after the odometry reports ``update_distance``
+of travel or ``update_angle_deg`` of turning since the last update (the scans between are
+not used; the odometry accumulates into one motion ``Δ`` in the frame of the last update).
+At an update, for every particle:
+
+1. predict ``x̂ = x' ⊕ Δ``;
+2. build the likelihood field of the particle's own map over the box of the scan's end
+   points seen from ``x̂`` (+ 1 m) and register the scan to it from ``x̂``
+   (:func:`~slamkit.scanmatch.to_map.match_to_map`);
+3. draw the new pose from the improved proposal around the match
+   (:mod:`.proposal`: ``"gaussian"``, the paper's, or ``"mode"``, GMapping's released one)
+   and multiply the weight by the proposal's ``η``; a match that fails, or lands farther from
+   ``x̂`` than the gate, falls back to the motion model (counted);
+4. integrate the scan into the particle's map from the drawn pose.
+
+Weights are kept as logarithms and normalised with log-sum-exp; when ``N_eff = 1/Σ w²``
+drops below ``resample_threshold · N`` the set is resampled (low variance), which only
+shares map tiles and copies poses. Paths are a parent-pointer tree: each update stores the
+drawn poses and, per particle, the slot of its ancestor at the previous update, so
+resampling copies nothing and the best particle's path is read back at the end.
+
+The runner records the best particle's current pose after every time stamp (the online
+estimate); the answer of an RBPF is the best particle's whole path, returned as
+:attr:`EstimatorOutput.trajectory` (every time stamp: the pose of the path at the last
+update before it, moved by the odometry since), with that particle's map as the grid.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from typing import Any
+
+import numpy as np
+
+from slamkit._validation import FloatArray
+from slamkit.datasets.stream import Dataset, Event, LaserScan
+from slamkit.errors import ConvergenceError, InputError, MatchError
+from slamkit.estimation.contract import (
+    EstimatorOutput,
+    ParticleSnapshot,
+    PoseEstimate,
+    SmoothedTrajectory,
+    SpreadSnapshots,
+)
+from slamkit.estimation.shell import EstimatorShell
+from slamkit.geometry.angles import wrap_angle_float
+from slamkit.geometry.pose2 import between, compose, transform_points
+from slamkit.localization.likelihood_field import LikelihoodField
+from slamkit.localization.particles import (
+    low_variance_resample_unchecked,
+    normalize_log_weights,
+)
+from slamkit.mapping.grid import lattice_cells
+from slamkit.mapping.inverse_model import InverseSensorModel
+from slamkit.mapping.logodds import expit
+from slamkit.maps import OccupancyGrid
+from slamkit.scanmatch.result import scan_points
+from slamkit.scanmatch.to_map import MapMatchConfig, match_to_map
+from slamkit.slam.grid_rbpf.config import GridRbpfConfig
+from slamkit.slam.grid_rbpf.maps import TiledMap, TilePool, scan_cells
+from slamkit.slam.grid_rbpf.proposal import (
+    Scan,
+    gaussian_proposal,
+    mode_proposal,
+    motion_covariance,
+    motion_proposal,
+)
+
+__all__ = ["FIELD_MARGIN", "GridRbpf"]
+
+FIELD_MARGIN = 1.0
+"""The likelihood field covers the box of the predicted end points plus this [m] on each
+side (more than the match gate, so a matched scan stays on the field)."""
+
+
+class GridRbpf(EstimatorShell):
+    """Grid RBPF SLAM (registered as ``grid-rbpf``); see the module docstring. Needs a laser
+    and odometry (or controls)."""
+
+    name = "grid RBPF"
+
+    def __init__(self, dataset: Dataset, config: GridRbpfConfig, rng: np.random.Generator):
+        if dataset.laser is None:
+            raise InputError(f"grid RBPF needs laser scans; {dataset.name!r} has none")
+        if dataset.motion is None:
+            raise InputError(f"grid RBPF needs odometry or controls; {dataset.name!r} has none")
+        super().__init__()
+        cfg = self._cfg = config
+        self._rng = rng
+        laser = dataset.laser
+        self._model = dataset.motion.model
+        self._angles = laser.beam_angles
+        self._laser_max = float(laser.max_range)
+        mounting = laser.mounting if cfg.mounting is None else cfg.mounting
+        self._mounting = np.asarray(mounting, dtype=np.float64)
+        self._ism = InverseSensorModel(max_range=cfg.map_range).resolve(
+            cfg.resolution, self._angles, self._laser_max
+        )
+        self._match_cfg = MapMatchConfig(
+            sigma_hit=cfg.sigma_hit,
+            max_iterations=cfg.match_iterations,
+            step_tolerance_xy=cfg.match_tolerance_xy,
+            step_tolerance_theta=math.radians(cfg.match_tolerance_deg),
+        )
+        start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
+        n = cfg.particles
+        self._odom: FloatArray = np.array(start, dtype=np.float64)  # dead-reckoned
+        self._odom_at_update = self._odom.copy()
+        self._poses: FloatArray = np.tile(self._odom, (n, 1))
+        self._logw: FloatArray = np.full(n, -math.log(n))
+        self._pool = TilePool(cfg.resolution, cfg.tile_cells, self._ism.l0)
+        self._maps: list[TiledMap] = [self._pool.new_map() for _ in range(n)]
+        # The path tree: poses (P, 3) of every update, each particle's ancestor slot.
+        self._hist_poses: list[FloatArray] = [self._poses.copy()]
+        self._hist_parent: list[np.ndarray] = [np.arange(n)]
+        self._parent = np.arange(n)
+        self._started = False
+        # One record per time stamp: the update it follows and the odometry since.
+        self._track_t: list[float] = []
+        self._track_u: list[int] = []
+        self._track_delta: list[FloatArray] = []
+        self._counts: Counter[str] = Counter()
+        self._neff: list[float] = []
+        self._seconds: dict[str, float] = dict.fromkeys(
+            ("field", "match", "proposal", "integrate"), 0.0
+        )
+        self._snapshots = SpreadSnapshots(cfg.snapshots)
+        self._last_t = dataset.start_time
+
+    # -- the Estimator protocol ---------------------------------------------------------
+
+    def handle(self, event: Event) -> None:
+        super().handle(event)
+        delta = between(self._odom_at_update, self._odom)
+        u = len(self._hist_poses) - 1
+        if self._track_t and self._track_t[-1] == event.t:
+            self._track_u[-1], self._track_delta[-1] = u, delta
+        else:
+            self._track_t.append(float(event.t))
+            self._track_u.append(u)
+            self._track_delta.append(delta)
+        self._last_t = event.t
+
+    def on_control(self, u: FloatArray, dt: float) -> None:
+        moved = np.asarray(self._model.apply(self._odom, u, dt), dtype=np.float64)
+        if not np.isfinite(moved).all():
+            raise ConvergenceError(f"the control {u} over {dt} s moved the odometry to {moved}")
+        self._odom = moved
+
+    def on_scan(self, event: LaserScan) -> None:
+        self._counts["scans"] += 1
+        cfg = self._cfg
+        delta = between(self._odom_at_update, self._odom)
+        if not self._started:
+            self._first_scan(event, delta)
+            return
+        moved = math.hypot(delta[0], delta[1]) >= cfg.update_distance or abs(
+            wrap_angle_float(float(delta[2]))
+        ) >= math.radians(cfg.update_angle_deg)
+        if not moved or (cfg.max_updates is not None and self.updates >= cfg.max_updates):
+            return
+        self._update(event, delta)
+
+    def estimate(self) -> PoseEstimate:
+        best = int(np.argmax(self._logw))
+        return PoseEstimate(compose(self._poses[best], between(self._odom_at_update, self._odom)))
+
+    def particle_poses(self) -> FloatArray:
+        """The particles' current poses ``(P, 3)`` (their last update moved by the odometry
+        since)."""
+        out: FloatArray = compose(self._poses, between(self._odom_at_update, self._odom))
+        return out
+
+    @property
+    def updates(self) -> int:
+        """Filter updates so far (the first scan, mapped from the start, included)."""
+        return len(self._hist_poses) - 1
+
+    def best_path(self) -> FloatArray:
+        """The poses ``(U + 1, 3)`` of the most likely particle at the start and after every
+        update, read back through the parent pointers."""
+        slot = int(self._parent[int(np.argmax(self._logw))])
+        path = np.empty((len(self._hist_poses), 3))
+        for u in range(len(self._hist_poses) - 1, -1, -1):
+            path[u] = self._hist_poses[u][slot]
+            slot = int(self._hist_parent[u][slot])
+        return path
+
+    def finish(self) -> EstimatorOutput:
+        best = int(np.argmax(self._logw))
+        path = self.best_path()
+        times = np.asarray(self._track_t, dtype=np.float64)
+        if times.size:
+            deltas = np.asarray(self._track_delta).reshape(-1, 3)
+            poses = compose(path[np.asarray(self._track_u)], deltas)
+        else:
+            poses = np.zeros((0, 3))
+        grid = self._maps[best].to_log_odds_grid()
+        c = self._counts
+        neff = np.asarray(self._neff)
+        diagnostics: dict[str, Any] = {
+            "particles": self._cfg.particles,
+            "proposal": self._cfg.proposal,
+            "scans": c["scans"],
+            "updates": self.updates,
+            "resamplings": c["resamplings"],
+            "matched": c["matched"],
+            "proposal_failures": {
+                k[len("failed:") :]: v for k, v in c.items() if k.startswith("failed:")
+            },
+            "dead_particles": c["dead"],
+            "neff_mean": float(neff.mean()) if neff.size else None,
+            "neff_min": float(neff.min()) if neff.size else None,
+            "maps": self._pool.stats(),
+            "seconds": {k: round(v, 3) for k, v in self._seconds.items()},
+        }
+        snapshot = ParticleSnapshot(self._last_t, self.particle_poses(), self._weights())
+        return EstimatorOutput(
+            grid=None if grid is None else grid.to_occupancy_grid(),
+            diagnostics=diagnostics,
+            particle_snapshots=self._snapshots.pick(snapshot),
+            trajectory=SmoothedTrajectory(times, poses),
+        )
+
+    # -- steps ----------------------------------------------------------------------------
+
+    def _weights(self) -> FloatArray:
+        w: FloatArray = np.exp(self._logw - self._logw.max())
+        return w / w.sum()
+
+    def _sensor(self, poses: FloatArray) -> FloatArray:
+        out: FloatArray = compose(poses, self._mounting)
+        return out
+
+    def _integrate(self, k: int, pose: FloatArray, ranges: FloatArray) -> None:
+        tic = time.perf_counter()
+        rows, cols, regions = scan_cells(
+            self._sensor(pose), ranges, self._angles, self._ism, self._cfg.resolution
+        )
+        self._maps[k].integrate(rows, cols, regions, self._ism)
+        self._seconds["integrate"] += time.perf_counter() - tic
+
+    def _first_scan(self, event: LaserScan, delta: FloatArray) -> None:
+        """Every particle maps the first scan from the same pose: one map, shared."""
+        self._started = True
+        pose = compose(self._poses[0], delta)
+        self._integrate(0, pose, event.ranges)
+        for k in range(1, len(self._maps)):
+            self._maps[k].release()
+            self._maps[k] = self._maps[0].share()
+        self._store(np.tile(pose, (len(self._maps), 1)), event.t)
+
+    def _field(self, tiled: TiledMap, predicted: FloatArray, points: FloatArray) -> LikelihoodField:
+        """The likelihood field of ``tiled`` over the end points seen from ``predicted``."""
+        tic = time.perf_counter()
+        world = transform_points(predicted, points)
+        res = self._cfg.resolution
+        lo = lattice_cells(world.min(axis=0) - FIELD_MARGIN, res)
+        hi = lattice_cells(world.max(axis=0) + FIELD_MARGIN, res)
+        rows, cols = int(hi[0] - lo[0]) + 1, int(hi[1] - lo[1]) + 1
+        window = tiled.window(int(lo[0]), int(lo[1]), rows, cols)
+        grid = OccupancyGrid(
+            expit(window), res, np.array([lo[1] * res, lo[0] * res], dtype=np.float64)
+        )
+        # Every cell that is not an obstacle counts as free: the distance to the nearest wall
+        # is what the match descends, also across cells the particle has not seen yet.
+        field = LikelihoodField.from_grid(
+            grid, self._cfg.sigma_hit, max_range=self._cfg.match_range, free_threshold=1.0
+        )
+        self._seconds["field"] += time.perf_counter() - tic
+        return field
+
+    def _update(self, event: LaserScan, delta: FloatArray) -> None:
+        cfg = self._cfg
+        stride = cfg.beam_stride
+        ranges = event.ranges[::stride].copy()
+        angles = self._angles[::stride]
+        reach = min(cfg.match_range, self._laser_max)
+        # Too short, no return, or beyond the match range: set to the field's max range,
+        # which the likelihood field skips.
+        ranges[(ranges <= cfg.min_range) | (ranges >= reach)] = cfg.match_range
+        scan = Scan(ranges, angles, self._mounting)
+        points = scan_points(event.ranges[::stride], angles, reach, min_range=cfg.min_range)
+        if self._mounting.any():
+            points = transform_points(self._mounting, points)
+        motion_cov = motion_covariance(delta, cfg)
+        finite_motion = bool(np.isfinite(motion_cov).all() and np.isfinite(delta).all())
+        n = len(self._maps)
+        drawn = np.empty((n, 3))
+        gate_xy, gate_th = cfg.max_correction_xy, math.radians(cfg.max_correction_deg)
+        for k in range(n):
+            predicted = compose(self._poses[k], delta)
+            if not (finite_motion and np.isfinite(predicted).all()):
+                self._counts["dead"] += 1
+                drawn[k] = predicted
+                self._logw[k] = -math.inf
+                continue
+            field = self._field(self._maps[k], predicted, points) if points.shape[0] else None
+            tic = time.perf_counter()
+            result = None
+            if field is not None:
+                try:
+                    result = match_to_map(field, points, predicted, self._match_cfg)
+                except MatchError as exc:
+                    self._counts[f"failed:{exc.reason}"] += 1
+            if result is not None:
+                corr = between(predicted, result.pose)
+                if math.hypot(corr[0], corr[1]) > gate_xy or abs(corr[2]) > gate_th:
+                    self._counts["failed:gated"] += 1
+                    result = None
+            self._seconds["match"] += time.perf_counter() - tic
+            tic = time.perf_counter()
+            if result is None or field is None:
+                if field is None:
+                    self._counts["failed:no_points"] += 1
+                pose, factor = motion_proposal(
+                    field, scan, self._poses[k], delta, motion_cov, cfg, self._rng
+                )
+            else:
+                self._counts["matched"] += 1
+                if cfg.proposal == "gaussian":
+                    info = np.asarray(np.linalg.inv(result.cov), dtype=np.float64)
+                    pose, factor = gaussian_proposal(
+                        field, scan, predicted, result.pose, info, motion_cov, cfg, self._rng
+                    )
+                else:
+                    pose, factor = mode_proposal(
+                        field, scan, predicted, result.pose, motion_cov, cfg, self._rng
+                    )
+            self._seconds["proposal"] += time.perf_counter() - tic
+            drawn[k] = pose
+            if not (np.isfinite(pose).all() and math.isfinite(factor)):
+                self._counts["dead"] += 1
+                self._logw[k] = -math.inf
+                continue
+            self._logw[k] += factor
+        # Normalise (ConvergenceError when every particle died), then map from the draws.
+        logw, _ = normalize_log_weights(self._logw)
+        for k in range(n):
+            if np.isfinite(logw[k]):
+                self._integrate(k, drawn[k], event.ranges)
+        self._logw = logw
+        self._store(drawn, event.t)
+
+    def _store(self, drawn: FloatArray, t: float) -> None:
+        """Record the drawn poses in the path tree, resample when ``N_eff`` is low."""
+        self._hist_poses.append(drawn.copy())
+        self._hist_parent.append(self._parent)
+        n = drawn.shape[0]
+        self._poses = drawn
+        self._parent = np.arange(n)
+        self._odom_at_update = self._odom.copy()
+        w = self._weights()
+        neff = float(1.0 / np.sum(w * w))
+        self._neff.append(neff)
+        if neff < self._cfg.resample_threshold * n:
+            idx = low_variance_resample_unchecked(w, self._rng, n)
+            maps = [self._maps[int(i)].share() for i in idx]
+            for m in self._maps:
+                m.release()
+            self._maps = maps
+            self._poses = drawn[idx]
+            self._parent = idx
+            self._logw = np.full(n, -math.log(n))
+            self._counts["resamplings"] += 1
+        self._snapshots.offer(
+            self.updates,
+            lambda: ParticleSnapshot(float(t), self._poses.copy(), self._weights()),
+        )
