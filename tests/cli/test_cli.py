@@ -102,6 +102,13 @@ def test_demo_writes_results(tmp_path):
     res = runner.invoke(app, ["demo", "--out", str(tmp_path / "demo")])
     assert res.exit_code == 0, res.output
     assert (tmp_path / "demo" / "metrics.json").exists()
+    # the demo is SLAM: a map, a pose graph and a trajectory error well below the drift
+    import json
+
+    for name in ("map.png", "graph.g2o", "trajectory.tum", "trajectory.png"):
+        assert (tmp_path / "demo" / name).exists(), name
+    metrics = json.loads((tmp_path / "demo" / "metrics.json").read_text())
+    assert metrics["estimator"] == "graph-slam" and metrics["ate"]["rmse"] < 0.2
     assert str(tmp_path / "demo") in res.output.replace("\n", "")
 
 
