@@ -49,8 +49,9 @@ def corridor_loop_world() -> SegmentMap:
 def build_corridor_loop(
     options: Mapping[str, Any], *, seed: int, data_root: Path | None = None
 ) -> Dataset:
-    """The ring of corridors driven once round and 15 m on (a :class:`LaserScenarioConfig`
-    in ``options``; the true occupancy grid is the walls rasterised)."""
+    """The ring of corridors driven once round and 10 m on past the start (a
+    :class:`LaserScenarioConfig` in ``options``; the true occupancy grid is the walls
+    rasterised)."""
     cfg = config_from_mapping(LaserScenarioConfig, options, "scenario")
     rng = np.random.default_rng(seed)
     walls = corridor_loop_world()
