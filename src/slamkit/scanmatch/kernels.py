@@ -12,7 +12,9 @@ only load them (a fraction of a second).
 
 **What is compiled.** One call runs the whole PLICP loop (correspondences, trimming, the
 closed-form step, the stopping rules and both degeneracy checks), one call prepares a
-reference scan (segment normals, gaps, point normals) and one computes the covariance. The
+reference scan (segment normals, gaps, point normals) and one computes the covariance
+(:mod:`slamkit.scanmatch.kernel_covariance`; the switch and the small numeric helpers are in
+:mod:`slamkit.scanmatch.compiled`, re-exported here). The
 arithmetic of each line is that of the NumPy twin, written as scalar loops over the points,
 so there are no temporaries and no per-call Python overhead per iteration.
 
@@ -40,15 +42,22 @@ evaluations per query on a 180-beam scan instead of a tree descent.
 
 from __future__ import annotations
 
-import importlib
 import math
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
-from typing import Any, TypeVar, cast
 
 import numpy as np
 
 from slamkit._validation import FloatArray
+from slamkit.scanmatch.compiled import (
+    AVAILABLE,
+    enabled,
+    ieee_remainder,
+    jit,
+    min_eigenvalue_sym3,
+    select_kth,
+    use_numpy,
+    writable,
+)
+from slamkit.scanmatch.kernel_covariance import point_to_line_cov
 
 __all__ = [
     "AVAILABLE",
@@ -71,58 +80,6 @@ __all__ = [
     "writable",
 ]
 
-F = TypeVar("F", bound=Callable[..., Any])
-
-
-def _import_numba() -> Any:
-    try:  # numba is optional: without it the NumPy twins run
-        return importlib.import_module("numba")
-    except ImportError:  # pragma: no cover - depends on the environment
-        return None
-
-
-_NUMBA = _import_numba()
-AVAILABLE: bool = _NUMBA is not None
-"""numba could be imported: the matchers use the compiled kernels (unless :func:`use_numpy`)."""
-
-
-def _jit(fn: F) -> F:
-    """``numba.njit(cache=True)`` when numba is installed, else ``fn`` itself (the matchers
-    never call it then, but the module stays importable)."""
-    if _NUMBA is None:  # pragma: no cover - depends on the environment
-        return fn
-    return cast(F, _NUMBA.njit(cache=True)(fn))
-
-
-_STATE = {"enabled": AVAILABLE}
-
-
-def enabled() -> bool:
-    """True when the matchers use these compiled kernels: numba is installed and no
-    :func:`use_numpy` block is active."""
-    return _STATE["enabled"]
-
-
-@contextmanager
-def use_numpy() -> Iterator[None]:
-    """Run the NumPy twins instead of the kernels inside the block (for tests and benchmarks
-    comparing the two; not thread-safe)."""
-    before = _STATE["enabled"]
-    _STATE["enabled"] = False
-    try:
-        yield
-    finally:
-        _STATE["enabled"] = before
-
-
-def writable(a: np.ndarray) -> np.ndarray:
-    """``a`` itself when C-contiguous and writable, else a copy that is: the kernels are
-    compiled once per array type, and a read-only or strided array is another type."""
-    if a.flags.c_contiguous and a.flags.writeable:
-        return a
-    return np.array(a, order="C")
-
-
 # Status codes of plicp_loop.
 CONVERGED = 0
 """The loop stopped on a small step or a repeated correspondence set."""
@@ -140,24 +97,7 @@ DEGENERATE_END = 5
 _TWO_PI = 2.0 * math.pi
 
 
-@_jit
-def ieee_remainder(x: float, y: float) -> float:
-    """``math.remainder(x, y)`` (the IEEE remainder ``x - n y``, ``n`` the integer nearest
-    ``x / y``, ties to even), exact, for finite ``x`` and ``y != 0``: ``fmod`` is exact, and so
-    is the choice between ``m`` and ``m - |y|``."""
-    ax, ay = abs(x), abs(y)
-    m = np.fmod(ax, ay)
-    c = ay - m
-    if m < c:
-        r = m
-    elif m > c:
-        r = -c
-    else:  # half-way: keep the even multiple
-        r = m - 2.0 * np.fmod(0.5 * (ax - m), ay)
-    return math.copysign(1.0, x) * r
-
-
-@_jit
+@jit
 def root_of_multiplier(s11: float, s12: float, s22: float, h1: float, h2: float) -> float:
     """Compiled twin of :func:`slamkit.scanmatch.plicp.largest_real_root` (the same Newton
     iteration, operation for operation)."""
@@ -191,7 +131,7 @@ def root_of_multiplier(s11: float, s12: float, s22: float, h1: float, h2: float)
 # --- the reference ---------------------------------------------------------------------------
 
 
-@_jit
+@jit
 def scan_tables(
     points: FloatArray, window: int, max_spacing: float
 ) -> tuple[FloatArray, np.ndarray, FloatArray, FloatArray]:
@@ -257,41 +197,7 @@ def scan_tables(
 # --- nearest neighbours by bearing -----------------------------------------------------------
 
 
-@_jit
-def select_kth(a: FloatArray, k: int) -> float:
-    """The ``k``-th smallest entry of ``a`` (0-based; ``np.sort(a)[k]``), by quickselect
-    (Hoare partitions around a median of three): ``a`` is permuted so that ``a[:k] <= a[k] <=
-    a[k + 1:]``. Expected time linear, no sort needed for an order statistic."""
-    lo, hi = 0, a.shape[0] - 1
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if a[mid] < a[lo]:
-            a[mid], a[lo] = a[lo], a[mid]
-        if a[hi] < a[lo]:
-            a[hi], a[lo] = a[lo], a[hi]
-        if a[hi] < a[mid]:
-            a[hi], a[mid] = a[mid], a[hi]
-        pivot = a[mid]
-        i, j = lo, hi
-        while i <= j:
-            while a[i] < pivot:
-                i += 1
-            while a[j] > pivot:
-                j -= 1
-            if i <= j:
-                a[i], a[j] = a[j], a[i]
-                i += 1
-                j -= 1
-        if k <= j:
-            hi = j
-        elif k >= i:
-            lo = i
-        else:
-            break  # a[j + 1 : i] all equal the pivot
-    return a[k]
-
-
-@_jit
+@jit
 def _sift_down(keys: FloatArray, idx: np.ndarray, root: int, end: int) -> None:
     while True:
         child = 2 * root + 1
@@ -305,7 +211,7 @@ def _sift_down(keys: FloatArray, idx: np.ndarray, root: int, end: int) -> None:
         root = child
 
 
-@_jit
+@jit
 def _argsort(keys: FloatArray) -> np.ndarray:
     """Indices that sort ``keys`` (ties in any order). A scan's bearings are sorted already,
     or a rotation of sorted ones (a full turn starting anywhere): found in one pass; anything
@@ -331,7 +237,7 @@ def _argsort(keys: FloatArray) -> np.ndarray:
     return idx
 
 
-@_jit
+@jit
 def _count_below(ascending: FloatArray, value: float) -> int:
     """How many entries of ``ascending`` are below ``value`` (bisection;
     ``np.searchsorted(ascending, value, side="left")``)."""
@@ -345,42 +251,7 @@ def _count_below(ascending: FloatArray, value: float) -> int:
     return lo
 
 
-@_jit
-def min_eigenvalue_sym3(h: FloatArray) -> float:
-    """The smallest eigenvalue of a symmetric ``h (3, 3)`` by cyclic Jacobi rotations (each
-    zeroes one off-diagonal entry; convergence is quadratic, a few sweeps), accurate to
-    rounding of ``|h|`` like ``np.linalg.eigvalsh(h)[0]``."""
-    a = h.copy()
-    scale = 0.0
-    for row in range(3):
-        for col in range(3):
-            scale += a[row, col] * a[row, col]
-    for _ in range(30):
-        off = a[0, 1] ** 2 + a[0, 2] ** 2 + a[1, 2] ** 2
-        if off <= 1e-34 * scale:
-            break
-        for p, q in ((0, 1), (0, 2), (1, 2)):
-            apq = a[p, q]
-            if apq == 0.0:
-                continue
-            theta = (a[q, q] - a[p, p]) / (2.0 * apq)
-            if abs(theta) > 1e150:
-                t = 0.5 / theta
-            else:
-                t = math.copysign(1.0, theta) / (abs(theta) + math.sqrt(theta * theta + 1.0))
-            c = 1.0 / math.sqrt(t * t + 1.0)
-            s = t * c
-            a[p, p] -= t * apq
-            a[q, q] += t * apq
-            a[p, q] = a[q, p] = 0.0
-            r = 3 - p - q  # the third index
-            arp, arq = a[r, p], a[r, q]
-            a[r, p] = a[p, r] = c * arp - s * arq
-            a[r, q] = a[q, r] = s * arp + c * arq
-    return min(a[0, 0], a[1, 1], a[2, 2])
-
-
-@_jit
+@jit
 def _pseudo_bearing(x: float, y: float) -> float:
     """A cheap strictly increasing function of ``atan2(y, x)``, in ``(-2, 2]`` (0 at the
     origin): ``±(1 - x / (|x| + |y|))`` with the sign of ``y``. Sorting by it is sorting by
@@ -392,7 +263,7 @@ def _pseudo_bearing(x: float, y: float) -> float:
     return t if y >= 0.0 else -t
 
 
-@_jit
+@jit
 def _bearing_index(points: FloatArray) -> tuple[np.ndarray, FloatArray, FloatArray]:
     """``(order, key, table)``: the points sorted by bearing from the origin (``key`` their
     :func:`_pseudo_bearing`), and per sorted point ``(x, y, u_x, u_y)`` with ``u`` its unit
@@ -414,7 +285,7 @@ def _bearing_index(points: FloatArray) -> tuple[np.ndarray, FloatArray, FloatArr
     return order, key, table
 
 
-@_jit
+@jit
 def _nearest(
     order: np.ndarray,
     key: FloatArray,
@@ -468,7 +339,7 @@ def _nearest(
     return best_j
 
 
-@_jit
+@jit
 def nearest_points(points: FloatArray, queries: FloatArray, max_distance: float) -> np.ndarray:
     """For each of ``queries (K, 2)``, the index of the nearest of ``points (M, 2)`` closer
     than ``max_distance`` (ties: the smaller index), else ``M``: what
@@ -497,7 +368,7 @@ def nearest_points(points: FloatArray, queries: FloatArray, max_distance: float)
 # --- the PLICP loop --------------------------------------------------------------------------
 
 
-@_jit
+@jit
 def _min_eigenvalue(
     q: FloatArray,
     normals: FloatArray,
@@ -538,7 +409,7 @@ def _min_eigenvalue(
     return min_eigenvalue_sym3(h)
 
 
-@_jit
+@jit
 def plicp_loop(
     points: FloatArray,
     segment_normals: FloatArray,
@@ -751,118 +622,3 @@ def plicp_loop(
 
 
 # --- the covariance --------------------------------------------------------------------------
-
-
-@_jit
-def point_to_line_cov(
-    current: FloatArray,
-    ref_a: FloatArray,
-    ref_b: FloatArray,
-    index_a: np.ndarray,
-    index_b: np.ndarray,
-    n_reference: int,
-    pose: FloatArray,
-    kept: np.ndarray,
-) -> FloatArray:
-    """Compiled twin of :func:`slamkit.scanmatch.covariance.point_to_line_covariance` (same
-    arguments, same formulas; see there)."""
-    m = current.shape[0]
-    tx, ty, th = pose[0], pose[1], pose[2]
-    c, s = np.cos(th), np.sin(th)
-    ratio = np.empty(m)
-    h = np.zeros((3, 3))
-    gram = np.zeros((3, 3))
-    g_ref = np.zeros((n_reference, 3))
-    e2_nrq = 0.0
-    for i in range(m):
-        qx, qy = current[i, 0], current[i, 1]
-        rqx, rqy = qx * c + qy * -s, qx * s + qy * c  # R q
-        drqx, drqy = qx * -s + qy * -c, qx * c + qy * -s  # R' q
-        ax, ay = ref_a[i, 0], ref_a[i, 1]
-        bx, by = ref_b[i, 0], ref_b[i, 1]
-        dx, dy = bx - ax, by - ay
-        seg_len = math.hypot(dx, dy)
-        taux, tauy = dx / seg_len, dy / seg_len
-        nx, ny = -tauy, taux  # τ turned by +90°
-        relx, rely = rqx + tx - ax, rqy + ty - ay
-        e = nx * relx + ny * rely
-        s_along = (taux * relx + tauy * rely) / seg_len
-        n_drq = nx * drqx + ny * drqy
-        tau_drq = taux * drqx + tauy * drqy
-        rr = math.hypot(qx, qy)
-        ux, uy = qx / rr, qy / rr
-        n_ru = nx * (ux * c + uy * -s) + ny * (ux * s + uy * c)
-        n_dru = nx * (ux * -s + uy * -c) + ny * (ux * c + uy * -s)
-        n_wa = (nx * ax + ny * ay) / math.hypot(ax, ay)
-        n_wb = (nx * bx + ny * by) / math.hypot(bx, by)
-        de_a, de_b = (1.0 - s_along) * n_wa, s_along * n_wb  # -∂e/∂ρ
-        dn_a, dn_b = n_wa / seg_len, -n_wb / seg_len  # ∂n/∂ρ = dn τ
-        ratio[i] = abs(e) / math.sqrt(n_ru**2 + (de_a**2 + de_b**2))
-        if not kept[i]:
-            continue
-        jac0, jac1, jac2 = nx, ny, n_drq
-        h[0, 0] += jac0 * jac0
-        h[0, 1] += jac0 * jac1
-        h[0, 2] += jac0 * jac2
-        h[1, 1] += jac1 * jac1
-        h[1, 2] += jac1 * jac2
-        h[2, 2] += jac2 * jac2
-        e2_nrq += e * (nx * rqx + ny * rqy)
-        g0, g1 = 2.0 * n_ru * jac0, 2.0 * n_ru * jac1
-        g2 = 2.0 * n_ru * jac2 + 2.0 * e * n_dru
-        gram[0, 0] += g0 * g0
-        gram[0, 1] += g0 * g1
-        gram[0, 2] += g0 * g2
-        gram[1, 1] += g1 * g1
-        gram[1, 2] += g1 * g2
-        gram[2, 2] += g2 * g2
-        for end in range(2):
-            de, dn, idx = (de_a, dn_a, index_a[i]) if end == 0 else (de_b, dn_b, index_b[i])
-            e_dn = 2.0 * e * dn
-            g_ref[idx, 0] += -2.0 * de * jac0 + e_dn * taux
-            g_ref[idx, 1] += -2.0 * de * jac1 + e_dn * tauy
-            g_ref[idx, 2] += -2.0 * de * jac2 + e_dn * tau_drq
-    mid = m // 2
-    upper = select_kth(ratio, mid)  # the median: the middle one, or the mean of the middle two
-    if m % 2:
-        median = upper
-    else:
-        lower = ratio[0]
-        for i in range(1, mid):
-            lower = max(lower, ratio[i])  # after the selection, ratio[:mid] <= upper
-        median = 0.5 * (lower + upper)
-    sigma = 1.4826 * median
-    for j in range(n_reference):
-        g0, g1, g2 = g_ref[j, 0], g_ref[j, 1], g_ref[j, 2]
-        gram[0, 0] += g0 * g0
-        gram[0, 1] += g0 * g1
-        gram[0, 2] += g0 * g2
-        gram[1, 1] += g1 * g1
-        gram[1, 2] += g1 * g2
-        gram[2, 2] += g2 * g2
-    h *= 2.0
-    h[2, 2] -= 2.0 * e2_nrq  # ∂²e/∂θ² = -nᵀ R q
-    for a in range(3):
-        for b in range(a):
-            h[a, b] = h[b, a]
-            gram[a, b] = gram[b, a]
-    # H⁻¹ = adj(H) / det H (3×3, symmetric, non-singular after the degeneracy test).
-    inv = np.empty((3, 3))
-    inv[0, 0] = h[1, 1] * h[2, 2] - h[1, 2] * h[2, 1]
-    inv[0, 1] = h[0, 2] * h[2, 1] - h[0, 1] * h[2, 2]
-    inv[0, 2] = h[0, 1] * h[1, 2] - h[0, 2] * h[1, 1]
-    inv[1, 1] = h[0, 0] * h[2, 2] - h[0, 2] * h[2, 0]
-    inv[1, 2] = h[0, 2] * h[1, 0] - h[0, 0] * h[1, 2]
-    inv[2, 2] = h[0, 0] * h[1, 1] - h[0, 1] * h[1, 0]
-    inv[1, 0], inv[2, 0], inv[2, 1] = inv[0, 1], inv[0, 2], inv[1, 2]
-    det = h[0, 0] * inv[0, 0] + h[0, 1] * inv[1, 0] + h[0, 2] * inv[2, 0]
-    cov = np.empty((3, 3))
-    s2 = sigma * sigma / (det * det)
-    for a in range(3):  # σ² H⁻¹ G H⁻ᵀ, symmetric to rounding
-        for b in range(a, 3):
-            acc = 0.0
-            for k in range(3):
-                for l in range(3):
-                    acc += inv[a, k] * gram[k, l] * inv[b, l]
-            cov[a, b] = cov[b, a] = s2 * acc
-    return cov

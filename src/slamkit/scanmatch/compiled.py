@@ -1,0 +1,168 @@
+"""numba on or off for the compiled scan-matching kernels, and the small compiled numeric
+helpers they share (:mod:`slamkit.scanmatch.kernels`, :mod:`~slamkit.scanmatch.
+kernel_covariance`).
+
+numba is optional (``pip install slamkit[fast]``): :data:`AVAILABLE` says whether it could
+be imported; :func:`jit` compiles with ``numba.njit(cache=True)`` when it is there and leaves
+a function as it is otherwise; :func:`use_numpy` turns the compiled path off inside a block.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any, TypeVar, cast
+
+import numpy as np
+
+from slamkit._validation import FloatArray
+
+__all__ = [
+    "AVAILABLE",
+    "enabled",
+    "ieee_remainder",
+    "jit",
+    "min_eigenvalue_sym3",
+    "select_kth",
+    "use_numpy",
+    "writable",
+]
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def _import_numba() -> Any:
+    try:  # numba is optional: without it the NumPy twins run
+        return importlib.import_module("numba")
+    except ImportError:  # pragma: no cover - depends on the environment
+        return None
+
+
+_NUMBA = _import_numba()
+AVAILABLE: bool = _NUMBA is not None
+"""numba could be imported: the matchers use the compiled kernels (unless :func:`use_numpy`)."""
+
+
+def jit(fn: F) -> F:
+    """``numba.njit(cache=True)`` when numba is installed, else ``fn`` itself (the matchers
+    never call it then, but the module stays importable)."""
+    if _NUMBA is None:  # pragma: no cover - depends on the environment
+        return fn
+    return cast(F, _NUMBA.njit(cache=True)(fn))
+
+
+_STATE = {"enabled": AVAILABLE}
+
+
+def enabled() -> bool:
+    """True when the matchers use these compiled kernels: numba is installed and no
+    :func:`use_numpy` block is active."""
+    return _STATE["enabled"]
+
+
+@contextmanager
+def use_numpy() -> Iterator[None]:
+    """Run the NumPy twins instead of the kernels inside the block (for tests and benchmarks
+    comparing the two; not thread-safe)."""
+    before = _STATE["enabled"]
+    _STATE["enabled"] = False
+    try:
+        yield
+    finally:
+        _STATE["enabled"] = before
+
+
+def writable(a: np.ndarray) -> np.ndarray:
+    """``a`` itself when C-contiguous and writable, else a copy that is: the kernels are
+    compiled once per array type, and a read-only or strided array is another type."""
+    if a.flags.c_contiguous and a.flags.writeable:
+        return a
+    return np.array(a, order="C")
+
+
+@jit
+def ieee_remainder(x: float, y: float) -> float:
+    """``math.remainder(x, y)`` (the IEEE remainder ``x - n y``, ``n`` the integer nearest
+    ``x / y``, ties to even), exact, for finite ``x`` and ``y != 0``: ``fmod`` is exact, and so
+    is the choice between ``m`` and ``m - |y|``."""
+    ax, ay = abs(x), abs(y)
+    m = np.fmod(ax, ay)
+    c = ay - m
+    if m < c:
+        r = m
+    elif m > c:
+        r = -c
+    else:  # half-way: keep the even multiple
+        r = m - 2.0 * np.fmod(0.5 * (ax - m), ay)
+    return math.copysign(1.0, x) * r
+
+
+@jit
+def select_kth(a: FloatArray, k: int) -> float:
+    """The ``k``-th smallest entry of ``a`` (0-based; ``np.sort(a)[k]``), by quickselect
+    (Hoare partitions around a median of three): ``a`` is permuted so that ``a[:k] <= a[k] <=
+    a[k + 1:]``. Expected time linear, no sort needed for an order statistic."""
+    lo, hi = 0, a.shape[0] - 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if a[mid] < a[lo]:
+            a[mid], a[lo] = a[lo], a[mid]
+        if a[hi] < a[lo]:
+            a[hi], a[lo] = a[lo], a[hi]
+        if a[hi] < a[mid]:
+            a[hi], a[mid] = a[mid], a[hi]
+        pivot = a[mid]
+        i, j = lo, hi
+        while i <= j:
+            while a[i] < pivot:
+                i += 1
+            while a[j] > pivot:
+                j -= 1
+            if i <= j:
+                a[i], a[j] = a[j], a[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break  # a[j + 1 : i] all equal the pivot
+    return a[k]
+
+
+@jit
+def min_eigenvalue_sym3(h: FloatArray) -> float:
+    """The smallest eigenvalue of a symmetric ``h (3, 3)`` by cyclic Jacobi rotations (each
+    zeroes one off-diagonal entry; convergence is quadratic, a few sweeps), accurate to
+    rounding of ``|h|`` like ``np.linalg.eigvalsh(h)[0]``."""
+    a = h.copy()
+    scale = 0.0
+    for row in range(3):
+        for col in range(3):
+            scale += a[row, col] * a[row, col]
+    for _ in range(30):
+        off = a[0, 1] ** 2 + a[0, 2] ** 2 + a[1, 2] ** 2
+        if off <= 1e-34 * scale:
+            break
+        for p, q in ((0, 1), (0, 2), (1, 2)):
+            apq = a[p, q]
+            if apq == 0.0:
+                continue
+            theta = (a[q, q] - a[p, p]) / (2.0 * apq)
+            if abs(theta) > 1e150:
+                t = 0.5 / theta
+            else:
+                t = math.copysign(1.0, theta) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+            c = 1.0 / math.sqrt(t * t + 1.0)
+            s = t * c
+            a[p, p] -= t * apq
+            a[q, q] += t * apq
+            a[p, q] = a[q, p] = 0.0
+            r = 3 - p - q  # the third index
+            arp, arq = a[r, p], a[r, q]
+            a[r, p] = a[p, r] = c * arp - s * arq
+            a[r, q] = a[q, r] = s * arp + c * arq
+    return min(a[0, 0], a[1, 1], a[2, 2])
