@@ -176,8 +176,9 @@ class LaserOdometry(EstimatorShell):
         moved = np.asarray(self._model.apply(self._pose, u, dt), dtype=np.float64)
         if not np.isfinite(moved).all():
             raise ConvergenceError(f"the control {u} over {dt} s moved the pose to {moved}")
-        G, V = self._model.jacobians(self._pose, u, dt)
-        self._cov = G @ self._cov @ G.T + V @ self._Q @ V.T
+        if self._points is not None and self._cfg.odometry_prior:  # only the map prior reads Σ
+            G, V = self._model.jacobians(self._pose, u, dt)
+            self._cov = G @ self._cov @ G.T + V @ self._Q @ V.T
         self._pose = moved
 
     def on_scan(self, event: LaserScan) -> None:
