@@ -181,6 +181,23 @@ def test_missing_topic_and_wrong_type_name_the_topic_and_list_the_bag(bags, tmp_
     assert info.value.path == path and "/odom (nav_msgs/msg/Odometry)" in str(info.value)
 
 
+def test_a_bag_without_odometry_is_read_as_scans_alone_and_says_so(bags, tmp_path):
+    """No odometry topic at all (and the default topic asked): the scans only, no motion
+    model, the description and metadata say so; explicitly asking for none does the same on
+    a bag that has odometry; a named topic that is absent stays an error."""
+    bare = _write(bags, tmp_path, _spec(bags, odometry=[]))
+    ds = read_rosbag(bare)
+    assert ds.motion is None and not _odometry(ds) and len(_scans(ds)) == len(SCAN_NS)
+    assert ds.metadata["odometry_topic"] is None
+    assert "no odometry (scan matching alone)" in ds.description
+    (tmp_path / "f").mkdir()
+    full = _write(bags, tmp_path / "f", _spec(bags))
+    none = read_rosbag(full, {"odom_topic": None})
+    assert none.motion is None and len(_scans(none)) == len(SCAN_NS)
+    with pytest.raises(DatasetFormatError, match=r"no topic '/wheels'"):
+        read_rosbag(bare, {"odom_topic": "/wheels"})
+
+
 @pytest.mark.parametrize("bad", [math.nan, -0.5])
 def test_nan_or_negative_range_is_an_error_or_lenient_no_return(bags, tmp_path, bad):
     ranges = [list(r) for r in RANGES]

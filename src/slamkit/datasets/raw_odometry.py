@@ -166,7 +166,7 @@ def raw_laser_dataset(
     *,
     name: str,
     times: FloatArray,
-    odometry: FloatArray,
+    odometry: FloatArray | None,
     ranges: FloatArray,
     laser: LaserSpec,
     motion_cov: FloatArray,
@@ -177,18 +177,24 @@ def raw_laser_dataset(
     """The :class:`Dataset` of a raw log: per scan an :class:`Odometry` event (the robot's
     pose in the odometry frame) and a :class:`LaserScan` at the same stamp, in that order;
     an odometry :class:`MotionSpec` with the nominal ``motion_cov``; the prior around the
-    first odometry pose (:data:`RAW_INITIAL_COV`); ``relations`` as the ground truth."""
+    first odometry pose (:data:`RAW_INITIAL_COV`); ``relations`` as the ground truth.
+    ``odometry=None`` (a log without it): scans only, no motion model, the prior at the
+    origin."""
     events: list[Event] = []
     t_list = np.asarray(times, dtype=np.float64).tolist()
     for k, t in enumerate(t_list):
-        events.append(Odometry(t, odometry[k]))
+        if odometry is not None:
+            events.append(Odometry(t, odometry[k]))
         events.append(LaserScan(t, ranges[k]))
+    start = np.zeros(3) if odometry is None else np.array(odometry[0], dtype=np.float64)
     return Dataset(
         name=name,
         events=tuple(events),
-        motion=MotionSpec(OdometryModel(), motion_cov, source="odometry"),
+        motion=None
+        if odometry is None
+        else MotionSpec(OdometryModel(), motion_cov, source="odometry"),
         laser=laser,
-        initial_pose=np.array(odometry[0], dtype=np.float64) if len(t_list) else None,
+        initial_pose=start if len(t_list) else None,
         initial_cov=RAW_INITIAL_COV.copy() if len(t_list) else None,
         truth=GroundTruth(relations=relations),
         description=description,

@@ -115,6 +115,9 @@ def _check_nonneg(value: float, name: str) -> None:
         raise ConfigError(f"{name}: expected a finite number >= 0, got {value!r}")
 
 
+DEFAULT_ODOM_TOPIC = "/odom"
+
+
 @dataclass(frozen=True)
 class RosbagOptions:
     """How to read a ROS bag of laser scans and odometry. Units: metres, seconds, radians
@@ -122,8 +125,10 @@ class RosbagOptions:
 
     scan_topic: str = "/scan"
     """Topic of the ``sensor_msgs/msg/LaserScan`` messages."""
-    odom_topic: str = "/odom"
-    """Topic of the ``nav_msgs/msg/Odometry`` messages (the robot's raw odometry)."""
+    odom_topic: str | None = DEFAULT_ODOM_TOPIC
+    """Topic of the ``nav_msgs/msg/Odometry`` messages (the robot's raw odometry); None: read
+    no odometry. Left at the default on a bag without any odometry topic, the bag is read
+    without it (scans only; the description says so) instead of being refused."""
     max_odom_gap: float = DEFAULT_MAX_ODOM_GAP
     """A scan between two odometry messages further apart than this [s] is an error
     (lenient: dropped); ``inf``: no limit."""
@@ -148,8 +153,9 @@ class RosbagOptions:
 
     def __post_init__(self) -> None:
         for name in ("scan_topic", "odom_topic"):
-            if not getattr(self, name):
-                raise ConfigError(f"{name}: expected a topic name, got an empty string")
+            value = getattr(self, name)
+            if (value is not None and not value) or (name == "scan_topic" and value is None):
+                raise ConfigError(f"{name}: expected a topic name, got {value!r}")
         check_gap_option(self.max_odom_gap)
         mr = self.max_range
         if mr is not None and not (math.isfinite(mr) and mr > 0):
@@ -270,7 +276,7 @@ def _odometry(
 ) -> tuple[FloatArray, FloatArray, int]:
     """Odometry stamps ``(M,)`` and poses ``(M, 3)``, checked; and the repeats dropped."""
     o = bag.odometry
-    topic = opts.odom_topic
+    topic = str(bag.odometry_topic)
     t = o.bag_times if opts.stamps == "bag" else _stamps(o.sec, o.nsec)
     q = o.orientation  # (M, 4) x y z w
     norm = np.linalg.norm(q, axis=1)
@@ -296,6 +302,38 @@ def _odometry(
     return t[order], poses[order], int(np.count_nonzero(repeats))
 
 
+def _odometry_at_scans(
+    bag: BagContents,
+    opts: RosbagOptions,
+    t: FloatArray,
+    index: NDArray[np.int64],
+    problems: _Problems,
+) -> tuple[FloatArray | None, NDArray[np.bool_], dict[str, int], int]:
+    """The odometry at the scan stamps ``t`` (None without odometry), which scans to keep,
+    the dropped counts, the repeated odometry messages dropped."""
+    if bag.odometry_topic is None:
+        return None, np.ones(t.size, dtype=bool), {}, 0
+    topic = bag.odometry_topic
+    odom_t, odom_poses, repeats = _odometry(bag, opts, problems)
+    at = odometry_at_scans(t, odom_t, odom_poses, opts.max_odom_gap)
+    if at.in_gap.any():
+        i = int(np.argmax(at.in_gap))
+        problems.report(
+            "odometry_gap",
+            opts.scan_topic,
+            index[at.in_gap],
+            f"scan at t={t[i]:.9f} lies in a {at.gap[i]:.3f} s gap of {topic} "
+            f"(max_odom_gap {opts.max_odom_gap} s; raise it or set lenient)",
+        )
+    if not at.keep.any():
+        raise DatasetFormatError(
+            f"no scan on {opts.scan_topic} lies within the odometry on {topic} "
+            f"({odom_t[0]:.3f}..{odom_t[-1]:.3f} s)",
+            problems.path,
+        )
+    return at.poses, at.keep, at.dropped, repeats
+
+
 def _convert(
     bag: BagContents, opts: RosbagOptions, path: Path, name: str, relations: Relations | None
 ) -> Dataset:
@@ -304,8 +342,8 @@ def _convert(
     topic = opts.scan_topic
     if s.beam_counts.size == 0:
         raise DatasetFormatError(f"no messages on {topic}", path)
-    if bag.odometry.sec.size == 0:
-        raise DatasetFormatError(f"no messages on {opts.odom_topic}", path)
+    if bag.odometry_topic is not None and bag.odometry.sec.size == 0:
+        raise DatasetFormatError(f"no messages on {bag.odometry_topic}", path)
     ok = _check_geometry(bag, topic, problems)
     index = np.flatnonzero(ok)
     n_beams = int(s.beam_counts[index[0]]) if index.size else 0
@@ -327,24 +365,7 @@ def _convert(
     ranges, reading_counts = _clean_ranges(
         raw, s.range_min[index], s.range_max[index], max_range, index, topic, problems
     )
-    odom_t, odom_poses, repeats = _odometry(bag, opts, problems)
-    at = odometry_at_scans(t, odom_t, odom_poses, opts.max_odom_gap)
-    if at.in_gap.any():
-        i = int(np.argmax(at.in_gap))
-        problems.report(
-            "odometry_gap",
-            topic,
-            index[at.in_gap],
-            f"scan at t={t[i]:.9f} lies in a {at.gap[i]:.3f} s gap of {opts.odom_topic} "
-            f"(max_odom_gap {opts.max_odom_gap} s; raise it or set lenient)",
-        )
-    keep = at.keep
-    if not keep.any():
-        raise DatasetFormatError(
-            f"no scan on {topic} lies within the odometry on {opts.odom_topic} "
-            f"({odom_t[0]:.3f}..{odom_t[-1]:.3f} s)",
-            path,
-        )
+    odometry, keep, dropped, repeats = _odometry_at_scans(bag, opts, t, index, problems)
     angles = s.angle_min[index[0]] + np.arange(n_beams) * s.angle_increment[index[0]]
     mounting, mounting_from = _mounting(bag, opts, path)
     laser = LaserSpec(angles, max_range, opts.range_sigma, mounting=mounting)
@@ -352,7 +373,12 @@ def _convert(
     n_kept = int(keep.sum())
     description = (
         f"{'ROS 1' if bag.ros1 else 'ROS 2'} bag {path.name}: {n_kept} scans × {n_beams} beams "
-        f"({topic}), raw odometry ({opts.odom_topic})"
+        f"({topic}), "
+        + (
+            f"raw odometry ({bag.odometry_topic})"
+            if odometry is not None
+            else "no odometry (scan matching alone)"
+        )
     )
     metadata: dict[str, Any] = {
         "kind": "real",
@@ -361,6 +387,7 @@ def _convert(
         "config": config_to_dict(opts),
         "scans": n_kept,
         "scan_messages": int(s.beam_counts.size),
+        "odometry_topic": bag.odometry_topic,
         "odometry_messages": int(bag.odometry.sec.size),
         "odometry_repeats_dropped": repeats,
         "beams": n_beams,
@@ -368,7 +395,7 @@ def _convert(
         "laser_frame": bag.scan_frame,
         "mounting": list(laser.mounting),
         "mounting_from": mounting_from,
-        "dropped": at.dropped,
+        "dropped": dropped,
         "readings": reading_counts,
         "lenient": {"counts": dict(problems.counts), "first": list(problems.first)},
         "topics": dict(bag.topics),
@@ -376,7 +403,7 @@ def _convert(
     return raw_laser_dataset(
         name=name,
         times=t[keep],
-        odometry=at.poses,
+        odometry=odometry,
         ranges=ranges[keep],
         laser=laser,
         motion_cov=raw_odometry_cov(opts.odometry_sigma_trans, opts.odometry_sigma_rot_deg),
@@ -427,7 +454,9 @@ def read_rosbag(
     ground truth."""
     opts = _options(options, "rosbag options")
     p = Path(path)
-    bag = read_bag(p, opts.scan_topic, opts.odom_topic)
+    bag = read_bag(
+        p, opts.scan_topic, opts.odom_topic, odom_optional=opts.odom_topic == DEFAULT_ODOM_TOPIC
+    )
     return _convert(bag, opts, p, name or p.name, relations)
 
 

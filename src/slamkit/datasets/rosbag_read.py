@@ -96,6 +96,8 @@ class BagContents:
     odom_child_frame: str
     topics: dict[str, str]
     edges: dict[str, _Edge] = field(default_factory=dict)
+    odometry_topic: str | None = None
+    """The odometry topic read; None: none (the bag has no odometry, or none was asked)."""
 
     def transform(
         self, base: str, child: str
@@ -159,10 +161,16 @@ def _add_edges(msg: Any, edges: dict[str, _Edge], source: str) -> None:
         edges[child] = _Edge(parent, (float(t.x), float(t.y), yaw), tilt, source)
 
 
-def _read_messages(reader: Any, path: Path, scan_topic: str, odom_topic: str) -> BagContents:
+def _read_messages(
+    reader: Any, path: Path, scan_topic: str, odom_topic: str | None, odom_optional: bool
+) -> BagContents:
     topics = {t: str(info.msgtype) for t, info in reader.topics.items()}
     scan_conns = _connections(reader, scan_topic, LASER_SCAN, topics, path)
-    odom_conns = _connections(reader, odom_topic, ODOMETRY, topics, path)
+    if odom_optional and odom_topic not in topics and ODOMETRY not in topics.values():
+        odom_topic = None  # a bag without odometry: the scans alone
+    odom_conns = (
+        [] if odom_topic is None else _connections(reader, odom_topic, ODOMETRY, topics, path)
+    )
     s_int: list[tuple[int, int, int]] = []
     s_geo: list[tuple[float, float, float, float, float]] = []
     s_ranges: list[NDArray[np.float32]] = []
@@ -225,6 +233,7 @@ def _read_messages(reader: Any, path: Path, scan_topic: str, odom_topic: str) ->
         odom_child_frame=odom_child,
         topics=topics,
         edges=edges,
+        odometry_topic=odom_topic,
     )
 
 
@@ -234,9 +243,13 @@ def _ns_seconds(ns: NDArray[np.int64]) -> FloatArray:
     return sec.astype(np.float64) + nsec.astype(np.float64) * 1e-9
 
 
-def read_bag(path: Path, scan_topic: str, odom_topic: str) -> BagContents:
+def read_bag(
+    path: Path, scan_topic: str, odom_topic: str | None, odom_optional: bool = False
+) -> BagContents:
     """Open the bag at ``path`` (ROS 1 ``.bag``; ROS 2 folder, ``.db3`` or ``.mcap``) and
-    read the two topics and the tf tree (see the module docstring)."""
+    read the two topics and the tf tree (see the module docstring); ``odom_topic=None``:
+    the scans only; ``odom_optional``: a bag with no odometry topic at all is read as
+    scans only rather than refused."""
     try:
         from rosbags.highlevel import AnyReader, AnyReaderError
         from rosbags.rosbag1 import ReaderError as Reader1Error
@@ -267,7 +280,7 @@ def read_bag(path: Path, scan_topic: str, odom_topic: str) -> BagContents:
     try:
         reader = AnyReader([path], default_typestore=get_typestore(Stores.LATEST))
         with reader:
-            return _read_messages(reader, path, scan_topic, odom_topic)
+            return _read_messages(reader, path, scan_topic, odom_topic, odom_optional)
     except DatasetFormatError:
         raise
     except failures as exc:

@@ -138,7 +138,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "verified and refined, the pose graph optimised; the map from the optimised poses",
             "slamkit.slam.laser_graph:LaserGraphSlam",
             "slamkit.slam.laser_graph:LaserGraphConfig",
-            requires=("motion", "laser"),
+            requires=("laser",),  # without odometry: scan matching alone
         ),
         EstimatorEntry(
             "occupancy-mapping",

@@ -17,7 +17,7 @@ from slamkit.slam.laser_graph.config import (
     LoopSettings,
     default_optimizer,
 )
-from slamkit.slam.laser_graph.estimator import LaserGraphSlam
+from slamkit.slam.laser_graph.estimator import NO_ODOMETRY, LaserGraphSlam
 from slamkit.slam.laser_graph.frontend import Keyframe, Tracker, floored_information
 from slamkit.slam.laser_graph.loops import (
     LoopMatch,
@@ -28,6 +28,7 @@ from slamkit.slam.laser_graph.loops import (
 )
 
 __all__ = [
+    "NO_ODOMETRY",
     "FrontEndSettings",
     "Keyframe",
     "LaserGraphConfig",

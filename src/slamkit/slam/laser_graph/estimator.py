@@ -52,19 +52,22 @@ from slamkit.slam.laser_graph.loops import (
     verify_closure,
 )
 
-__all__ = ["LaserGraphSlam"]
+__all__ = ["NO_ODOMETRY", "LaserGraphSlam"]
+
+NO_ODOMETRY = "none: scan matching alone (constant-velocity prediction)"
+"""What the diagnostics say of a run on a log without odometry."""
 
 
 class LaserGraphSlam(EstimatorShell):
-    """Graph-based laser SLAM (see the module docstring). Needs a laser and odometry."""
+    """Graph-based laser SLAM (see the module docstring). Needs a laser; without odometry
+    (no motion model) the scans are tracked by scan matching alone from a constant-velocity
+    prediction, and the diagnostics say so (``"odometry"``)."""
 
     name = "graph SLAM"
 
     def __init__(self, dataset: Dataset, config: LaserGraphConfig, rng: np.random.Generator):
         if dataset.laser is None:
             raise InputError(f"graph SLAM needs laser scans; {dataset.name!r} has none")
-        if dataset.motion is None:
-            raise InputError(f"graph SLAM needs odometry; {dataset.name!r} has none")
         super().__init__()
         self._cfg = config
         self._laser = dataset.laser
@@ -73,9 +76,10 @@ class LaserGraphSlam(EstimatorShell):
         self._mounting = np.asarray(mounting, dtype=np.float64)
         start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
         self._start: FloatArray = np.array(start, dtype=np.float64)
+        motion = dataset.motion
         self._tracker = Tracker(
-            dataset.motion.model,
-            dataset.motion.noise_cov,
+            None if motion is None else motion.model,
+            None if motion is None else motion.noise_cov,
             config.frontend,
             config.plicp,
             config.normal_icp,
@@ -91,6 +95,7 @@ class LaserGraphSlam(EstimatorShell):
         self._last_solve = 0  # the keyframe count at the last optimisation
         # (stamp, keyframe index or -1 for the start pose, offset) of every time stamp.
         self._stamps: list[float] = [float(dataset.start_time)]
+        self._last_scan: float | None = None  # stamp of the last scan (for coasting)
         self._anchors: list[int] = [-1]
         self._offsets: list[FloatArray] = [np.zeros(3)]
 
@@ -117,9 +122,12 @@ class LaserGraphSlam(EstimatorShell):
         )
         if any(self._mounting):
             points = transform_points(self._mounting, points)
+        last, self._last_scan = self._last_scan, float(event.t)
         if not self._keys:
             self._add_keyframe(event, points)
             return
+        if last is not None:
+            self._tracker.coast(event.t - last)  # only without odometry
         reference = self._local if self._local is not None else self._keys[-1].reference
         self._tracker.match(reference, points)
         if self._tracker.keyframe_due():
@@ -285,6 +293,7 @@ class LaserGraphSlam(EstimatorShell):
         c = self._counts + self._tracker.counts
         solves = self._graph.solves
         return {
+            "odometry": "wheels" if self._tracker.velocity is None else NO_ODOMETRY,
             "scans": c["scans"],
             "keyframes": len(self._keys),
             "matched": c["matched"],

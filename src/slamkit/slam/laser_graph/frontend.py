@@ -27,17 +27,39 @@ from dataclasses import dataclass
 import numpy as np
 
 from slamkit._validation import FloatArray
-from slamkit.errors import ConvergenceError, MatchError
+from slamkit.errors import ConvergenceError, InputError, MatchError
 from slamkit.geometry.angles import wrap_angle_float
 from slamkit.geometry.pose2 import between
+from slamkit.models.constant_velocity import ConstantVelocity
 from slamkit.models.motion import MotionModel
+from slamkit.scanmatch.correlative import (
+    CorrelativeConfig,
+    CorrelativeReference,
+    correlative_match,
+)
 from slamkit.scanmatch.icp import PreparedScan
 from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
 from slamkit.scanmatch.plicp import PlIcpConfig, plicp
 from slamkit.scanmatch.point_map import PointMap
 from slamkit.slam.laser_graph.config import FrontEndSettings
 
-__all__ = ["Keyframe", "Tracker", "floored_information", "local_map", "match_neighbours"]
+__all__ = [
+    "COAST_SEARCH",
+    "Keyframe",
+    "Tracker",
+    "floored_information",
+    "local_map",
+    "match_neighbours",
+]
+
+
+COAST_SEARCH = CorrelativeConfig(
+    window_xy=0.2, window_theta=math.radians(15.0), resolution=0.03, sigma=0.05, levels=4
+)
+"""Without odometry, each scan is first placed by this correlative search around the
+constant-velocity prediction (±0.2 m, ±15°: about two standard deviations of the prediction at
+the velocity's random walk of 0.5 m/s² and 45°/s² over a fifth of a second, a little more at
+slower scan rates), then refined by point-to-line ICP."""
 
 
 @dataclass(frozen=True)
@@ -74,19 +96,28 @@ def within_gate(prior: FloatArray, pose: FloatArray, settings: FrontEndSettings)
 
 class Tracker:
     """The current scan's offset from its keyframe and the odometry covariance of that
-    offset (see the module docstring); counts matches and failures in ``counts``."""
+    offset (see the module docstring); counts matches and failures in ``counts``.
+
+    Without a motion model (``model=None``: a log without odometry) the prediction is the
+    last scan-to-scan velocity held (:class:`~slamkit.models.constant_velocity.
+    ConstantVelocity`, applied by :meth:`coast` before each scan)."""
 
     def __init__(
         self,
-        model: MotionModel,
-        noise_cov: FloatArray,
+        model: MotionModel | None,
+        noise_cov: FloatArray | None,
         settings: FrontEndSettings,
         plicp_config: PlIcpConfig,
         normal_icp_config: NormalIcpConfig,
     ) -> None:
         self.model = model
         self.normal_icp = normal_icp_config
-        self.Q = settings.motion_cov_scale * np.asarray(noise_cov, dtype=np.float64)
+        self.Q = settings.motion_cov_scale * np.asarray(
+            np.zeros((3, 3)) if noise_cov is None else noise_cov, dtype=np.float64
+        )
+        self.velocity = ConstantVelocity() if model is None else None
+        self._coasted: tuple[FloatArray, float] | None = None  # offset before, dt
+        self._coarse: tuple[PreparedScan, CorrelativeReference] | None = None
         self.settings = settings
         self.plicp = plicp_config
         self.offset: FloatArray = np.zeros(3)
@@ -102,7 +133,16 @@ class Tracker:
         self.match_cov = None
         self.overlap = 1.0
 
+    def coast(self, dt: float) -> None:
+        """No odometry: move the offset by the held velocity over ``dt`` seconds."""
+        if self.velocity is None:
+            return
+        self._coasted = (self.offset.copy(), float(dt))
+        self.offset, self.odometry_cov = self.velocity.propagate(self.offset, self.odometry_cov, dt)
+
     def predict(self, u: FloatArray, dt: float) -> None:
+        if self.model is None:
+            raise InputError("a control reached a tracker without a motion model")
         moved = np.asarray(self.model.apply(self.offset, u, dt), dtype=np.float64)
         if not np.isfinite(moved).all():
             raise ConvergenceError(f"the control {u} over {dt} s moved the pose to {moved}")
@@ -124,20 +164,38 @@ class Tracker:
                     prior_information=np.linalg.solve(prior, np.eye(3)),
                 )  # fmt: skip
             else:
-                result = plicp(reference, points, self.offset, self.plicp)
+                start = self.offset if self.velocity is None else self._search(reference, points)
+                result = plicp(reference, points, start, self.plicp)
         except MatchError as exc:
             self.counts[f"failed:{exc.reason}"] += 1
-            self.match_cov, self.overlap = None, 0.0
-            return False
+            return self._unmatched()
         if not within_gate(self.offset, result.pose, self.settings):
             self.counts["gated"] += 1
-            self.match_cov, self.overlap = None, 0.0
-            return False
+            return self._unmatched()
         self.counts["matched"] += 1
         self.offset = result.pose
         self.match_cov = result.cov
         self.overlap = result.inlier_fraction
+        if self.velocity is not None and self._coasted is not None:
+            before, dt = self._coasted
+            self.velocity.observe(between(before, self.offset), dt)
         return True
+
+    def _search(self, reference: PreparedScan, points: FloatArray) -> FloatArray:
+        """Without odometry: the correlative optimum (:data:`COAST_SEARCH`) of ``points``
+        against the keyframe around the coasted prediction, where point-to-line ICP starts
+        (from a prediction this rough, ICP alone often settles in a local minimum)."""
+        if self._coarse is None or self._coarse[0] is not reference:
+            coarse = CorrelativeReference.from_points(reference.points, COAST_SEARCH)
+            self._coarse = (reference, coarse)
+        try:
+            return correlative_match(self._coarse[1], points, self.offset, COAST_SEARCH).pose
+        except MatchError:
+            return self.offset
+
+    def _unmatched(self) -> bool:
+        self.match_cov, self.overlap = None, 0.0
+        return False
 
     def keyframe_due(self) -> bool:
         """Whether the current scan is to become a keyframe."""
