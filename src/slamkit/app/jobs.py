@@ -68,7 +68,8 @@ class RunReport:
 def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
     """Load the data set, run the estimator, evaluate, and write into ``request.out_dir``:
     ``trajectory.tum``, ``metrics.json``, ``config.json`` (the resolved configuration),
-    ``graph.g2o`` when the estimator built a pose graph, and PNG plots. The folder is
+    ``graph.g2o`` when the estimator built a pose graph, ``map.pgm`` + ``map.yaml`` (ROS
+    ``map_server``) when it built an occupancy grid, and PNG plots. The folder is
     written completely or not at all."""
     entry = get_estimator_entry(request.estimator)
     config, preset = resolve_preset(
@@ -113,6 +114,10 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         write_tum(tmp / "trajectory.tum", result.times, result.poses)
         write_json(tmp / "metrics.json", evaluation.metrics)
         write_json(tmp / "config.json", resolved)
+        if result.output.grid is not None:  # the map for ROS's map_server
+            from slamkit.io.rosmap import write_ros_map
+
+            write_ros_map(result.output.grid, tmp / "map.pgm", tmp / "map.yaml")
         if result.output.graph is not None:  # a pose-graph estimator's graph, for other tools
             from slamkit.io.posegraph import write_graph
 

@@ -112,6 +112,13 @@ DATASETS: dict[str, DatasetEntry] = {
             "slamkit.sim.loop_world:build_corridor_loop",
         ),
         DatasetEntry(
+            "long-hallway-laser",
+            "simulated",
+            "laser drive down a bare 50 m hallway between two rooms and back (degenerate "
+            "matching along it, loop closure on return), walls as ground truth",
+            "slamkit.sim.loop_world:build_long_hallway",
+        ),
+        DatasetEntry(
             "rooms-laser-global",
             "simulated",
             "the laser tour of four rooms with no prior pose (global localization)",

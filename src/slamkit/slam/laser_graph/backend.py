@@ -123,6 +123,14 @@ class PoseGraph:
     def edge_kinds(self) -> list[EdgeKind]:
         return list(self._kind)
 
+    def loop_pairs(self) -> list[tuple[int, int]]:
+        """The ends ``(i, j)`` of every loop-closure edge."""
+        return [
+            (a, b)
+            for a, b, kind in zip(self._i, self._j, self._kind, strict=True)
+            if kind == "loop"
+        ]
+
     def edges(self) -> tuple[np.ndarray, np.ndarray, FloatArray, FloatArray]:
         """``i (E,)``, ``j (E,)``, measurements ``(E, 3)``, information ``(E, 3, 3)``."""
         return (

@@ -45,6 +45,7 @@ from slamkit.slam.laser_graph.frontend import (
 )
 from slamkit.slam.laser_graph.loops import (
     LoopMatch,
+    drift_distances,
     loop_candidates,
     pair_consistent,
     search_window,
@@ -187,9 +188,7 @@ class LaserGraphSlam(EstimatorShell):
 
     def loop_closures(self) -> list[tuple[int, int]]:
         """The accepted closures ``(j, k)`` (keyframe indices, ``j < k``) in the graph."""
-        i, j, _, _ = self._graph.edges()
-        kinds = self._graph.edge_kinds()
-        return [(int(a), int(b)) for a, b, kind in zip(i, j, kinds, strict=True) if kind == "loop"]
+        return self._graph.loop_pairs()
 
     # -- steps ----------------------------------------------------------------------------
 
@@ -234,9 +233,12 @@ class LaserGraphSlam(EstimatorShell):
         s = self._cfg.loops
         poses = self._graph.poses
         travelled = np.array([kf.travelled for kf in self._keys])
-        for j in loop_candidates(poses[:, :2], travelled, k, s):
+        drift = None if s.closure_travel is None else self._drift(travelled, k)
+        for j in loop_candidates(poses[:, :2], travelled, k, s, drift):
             self._counts["loop_candidates"] += 1
-            window = search_window(float(travelled[k] - travelled[j]), s)
+            window = search_window(
+                float(travelled[k] - travelled[j] if drift is None else drift[j]), s
+            )
             ref_points, cloud = submap(
                 poses, [kf.points for kf in self._keys], j, s.submap_keyframes // 2
             )
@@ -249,6 +251,9 @@ class LaserGraphSlam(EstimatorShell):
                 continue
             self._counts["loops_verified"] += 1
             self._confirm(poses, (j, k, found))
+
+    def _drift(self, travelled: FloatArray, k: int) -> FloatArray:
+        return drift_distances(travelled, self.loop_closures(), k, self._cfg.loops)
 
     def _confirm(self, poses: FloatArray, new: tuple[int, int, LoopMatch]) -> None:
         """Add ``new`` and its waiting partners once one agrees with it (pairwise
@@ -299,6 +304,7 @@ class LaserGraphSlam(EstimatorShell):
             "matched": c["matched"],
             "unmatched": {k[len("failed:") :]: v for k, v in c.items() if k.startswith("failed:")},
             "gated": c["gated"],
+            "degenerate_fused": c["degenerate_fused"],
             "odometry_edges": c["odometry_edges"],
             "neighbour_edges": c["neighbour_edges"],
             "loop_candidates": c["loop_candidates"],

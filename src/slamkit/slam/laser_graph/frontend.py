@@ -41,6 +41,7 @@ from slamkit.scanmatch.icp import PreparedScan
 from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
 from slamkit.scanmatch.plicp import PlIcpConfig, plicp
 from slamkit.scanmatch.point_map import PointMap
+from slamkit.scanmatch.result import MatchResult
 from slamkit.slam.laser_graph.config import FrontEndSettings
 
 __all__ = [
@@ -118,6 +119,10 @@ class Tracker:
         self.velocity = ConstantVelocity() if model is None else None
         self._coasted: tuple[FloatArray, float] | None = None  # offset before, dt
         self._coarse: tuple[PreparedScan, CorrelativeReference] | None = None
+        self._cloud: tuple[PreparedScan, NormalCloud] | None = None  # the keyframe's
+        self.track_cov: FloatArray = np.zeros((3, 3))
+        """Covariance of the current offset: the last match's, propagated by the motion
+        since (the prior of a degenerate scan's fused match)."""
         self.settings = settings
         self.plicp = plicp_config
         self.offset: FloatArray = np.zeros(3)
@@ -130,6 +135,7 @@ class Tracker:
         """A new keyframe: the offset and its uncertainty start again from zero."""
         self.offset = np.zeros(3)
         self.odometry_cov = np.zeros((3, 3))
+        self.track_cov = np.zeros((3, 3))
         self.match_cov = None
         self.overlap = 1.0
 
@@ -147,7 +153,9 @@ class Tracker:
         if not np.isfinite(moved).all():
             raise ConvergenceError(f"the control {u} over {dt} s moved the pose to {moved}")
         G, V = self.model.jacobians(self.offset, u, dt)
-        self.odometry_cov = G @ self.odometry_cov @ G.T + V @ self.Q @ V.T
+        step = V @ self.Q @ V.T
+        self.odometry_cov = G @ self.odometry_cov @ G.T + step
+        self.track_cov = G @ self.track_cov @ G.T + step
         self.offset = moved
 
     def match(self, reference: PreparedScan | NormalCloud, points: FloatArray) -> bool:
@@ -167,19 +175,48 @@ class Tracker:
                 start = self.offset if self.velocity is None else self._search(reference, points)
                 result = plicp(reference, points, start, self.plicp)
         except MatchError as exc:
-            self.counts[f"failed:{exc.reason}"] += 1
-            return self._unmatched()
+            fused = None
+            if exc.reason == "degenerate" and isinstance(reference, PreparedScan):
+                fused = self._fuse_degenerate(reference, points)
+            if fused is None:
+                self.counts[f"failed:{exc.reason}"] += 1
+                return self._unmatched()
+            self.counts["degenerate_fused"] += 1
+            result = fused
         if not within_gate(self.offset, result.pose, self.settings):
             self.counts["gated"] += 1
             return self._unmatched()
         self.counts["matched"] += 1
         self.offset = result.pose
         self.match_cov = result.cov
+        self.track_cov = np.asarray(result.cov, dtype=np.float64)
         self.overlap = result.inlier_fraction
         if self.velocity is not None and self._coasted is not None:
             before, dt = self._coasted
             self.velocity.observe(between(before, self.offset), dt)
         return True
+
+    def _fuse_degenerate(self, reference: PreparedScan, points: FloatArray) -> MatchResult | None:
+        """A scan that leaves a direction unconstrained (a corridor): point-to-normal ICP
+        against the keyframe with the prediction as a prior (its covariance ``track_cov``:
+        the last match's and the motion's since, plus the floor), so the match fixes what the
+        scan sees and the prediction the rest; the covariance is the posterior's. None when
+        that fails too, or there is no prediction to lean on (no odometry)."""
+        if self.model is None:
+            return None
+        if self._cloud is None or self._cloud[0] is not reference:
+            keep = reference.has_normal
+            cloud = NormalCloud.build(reference.points[keep], reference.normals[keep])
+            self._cloud = (reference, cloud)
+        s_xy, s_t = self.settings.cov_floor_xy, math.radians(self.settings.cov_floor_deg)
+        prior = self.track_cov + np.diag([s_xy**2, s_xy**2, s_t**2])
+        try:
+            return normal_icp(
+                self._cloud[1], points, self.offset, self.normal_icp,
+                prior_information=np.linalg.solve(prior, np.eye(3)),
+            )  # fmt: skip
+        except MatchError:
+            return None
 
     def _search(self, reference: PreparedScan, points: FloatArray) -> FloatArray:
         """Without odometry: the correlative optimum (:data:`COAST_SEARCH`) of ``points``
