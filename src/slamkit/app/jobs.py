@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from slamkit.app.outputs import check_formats, write_result_files
 from slamkit.app.presets import resolve_preset
 from slamkit.datasets.files import load_data
 from slamkit.errors import ConfigError
@@ -44,6 +45,8 @@ class RunRequest:
     """Settings measured for this estimator on this data set (:mod:`slamkit.app.presets`),
     laid under ``estimator_config``: ``"auto"`` the matching preset if there is one, a
     preset's name, or ``None`` for none."""
+    formats: tuple[str, ...] = ()
+    """Trajectory formats besides TUM (``"kitti"``: :mod:`slamkit.app.outputs`)."""
 
 
 @dataclass(frozen=True)
@@ -68,7 +71,8 @@ class RunReport:
 def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
     """Load the data set, run the estimator, evaluate, and write into ``request.out_dir``:
     ``trajectory.tum``, ``metrics.json``, ``config.json`` (the resolved configuration),
-    ``graph.g2o`` when the estimator built a pose graph, and PNG plots. The folder is
+    the files of :func:`slamkit.app.outputs.write_result_files` (``landmarks.csv``,
+    ``groundtruth.tum``, ``graph.g2o``, KITTI on request) and PNG plots. The folder is
     written completely or not at all."""
     entry = get_estimator_entry(request.estimator)
     config, preset = resolve_preset(
@@ -77,6 +81,7 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
     entry.make_config(config)  # fail on bad config before loading
     if isinstance(request.seed, bool) or not isinstance(request.seed, int) or request.seed < 0:
         raise ConfigError(f"seed: expected an integer >= 0, got {request.seed!r}")
+    check_formats(request.formats)
     check_output_folder(request.out_dir, overwrite=request.overwrite)  # before the work
     dataset = load_data(
         request.dataset,
@@ -113,10 +118,7 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         write_tum(tmp / "trajectory.tum", result.times, result.poses)
         write_json(tmp / "metrics.json", evaluation.metrics)
         write_json(tmp / "config.json", resolved)
-        if result.output.graph is not None:  # a pose-graph estimator's graph, for other tools
-            from slamkit.io.posegraph import write_graph
-
-            write_graph(result.output.graph, tmp / "graph.g2o", family="g2o")
+        write_result_files(tmp, result, dataset, request.formats)  # landmarks, truth, graph
         if figures:
             from slamkit.viz import save_figure
 
