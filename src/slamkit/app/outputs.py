@@ -3,8 +3,8 @@
 
 * ``landmarks.csv`` — the estimated landmark map (id, x, y, covariance entries;
   :mod:`slamkit.io.landmarks`) of every run that has one;
-* ``groundtruth.tum`` — the data set's true path, when it has one (and
-  ``groundtruth_landmarks.csv``, its true landmarks);
+* ``groundtruth.tum`` — the data set's true path, when it has one (and, beside a
+  ``landmarks.csv``, ``groundtruth_landmarks.csv``: its true landmarks);
 * ``trajectory.kitti`` + ``times.txt`` — the trajectory in KITTI format, on request
   (``formats`` holds ``"kitti"``);
 * ``graph.g2o`` — the pose graph of a graph run.
@@ -48,7 +48,7 @@ def write_result_files(
     truth = dataset.truth
     if truth is not None and truth.times is not None and truth.poses is not None:
         write_tum(folder / "groundtruth.tum", truth.times, truth.poses)
-    if truth is not None and truth.landmarks is not None:
+    if estimate is not None and truth is not None and truth.landmarks is not None:
         write_landmarks_csv(folder / "groundtruth_landmarks.csv", truth.landmarks)
     if "kitti" in formats:
         write_kitti(
