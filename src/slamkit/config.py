@@ -11,6 +11,7 @@ from __future__ import annotations
 import ast
 import dataclasses
 import inspect
+import itertools
 import json
 import math
 import tomllib
@@ -28,8 +29,8 @@ from slamkit.errors import ConfigError
 __all__ = [
     "Check",
     "Section",
-    "config_from_mapping",
     "SettingDoc",
+    "config_from_mapping",
     "config_to_dict",
     "describe_settings",
     "finite_above",
@@ -334,7 +335,7 @@ def _attribute_docs(cls: type) -> dict[str, str]:
         except (OSError, TypeError, SyntaxError):  # no source (frozen app, REPL class)
             continue
         body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
-        for node, after in zip(body, body[1:], strict=False):
+        for node, after in itertools.pairwise(body):
             if (
                 isinstance(node, ast.AnnAssign)
                 and isinstance(node.target, ast.Name)

@@ -19,7 +19,7 @@ from slamkit.cli.main import app
 from slamkit.config import Section, config_from_mapping, config_to_dict, describe_settings, setting
 from slamkit.errors import ConfigError
 from slamkit.localization.mcl.config import MclConfig
-from slamkit.pipeline import get_estimator_entry, list_estimators
+from slamkit.pipeline import list_estimators
 
 runner = CliRunner()
 
@@ -32,7 +32,11 @@ def _run(*args: str) -> str:
 
 @pytest.mark.parametrize(
     ("estimator", "data"),
-    [("ekf-slam", "landmark-clutter"), ("mcl", "rooms-laser-global"), ("fastslam2", "five-features")],
+    [
+        ("ekf-slam", "landmark-clutter"),
+        ("mcl", "rooms-laser-global"),
+        ("fastslam2", "five-features"),
+    ],
 )
 def test_a_runs_config_json_reruns_it_byte_for_byte(tmp_path, estimator, data):
     first, second = tmp_path / "a", tmp_path / "b"

@@ -34,7 +34,9 @@ def read_trajectory(
             return None, read_kitti_matrices(path)
         return read_tum_matrices(path)
     except UnicodeDecodeError:
-        raise DatasetFormatError("not a text file (expected a TUM or KITTI trajectory)", path) from None
+        raise DatasetFormatError(
+            "not a text file (expected a TUM or KITTI trajectory)", path
+        ) from None
 
 
 def _looks_like_kitti(path: Path) -> bool:

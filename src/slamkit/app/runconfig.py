@@ -182,7 +182,8 @@ def apply_overrides(config: RunConfig, assignments: Iterable[str], main_table: s
                 config = replace(config, data=str(value))
             else:
                 config = replace(
-                    config, dataset_options=_set_dotted(config.dataset_options, keys[1:], value, key)
+                    config,
+                    dataset_options=_set_dotted(config.dataset_options, keys[1:], value, key),
                 )
         else:
             if keys[0] == main_table and len(keys) > 1:

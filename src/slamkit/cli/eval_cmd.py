@@ -177,7 +177,9 @@ def _pose_error_command(
 
 _REF_HELP = "Reference trajectory (TUM: 'time x y z qx qy qz qw'; KITTI: 12 numbers a line)."
 _EST_HELP = "Estimated trajectory, same format."
-_FMT = typer.Option("--format", help="File format: auto (KITTI when 12 numbers a line), tum, kitti.")
+_FMT = typer.Option(
+    "--format", help="File format: auto (KITTI when 12 numbers a line), tum, kitti."
+)
 _ALIGN = typer.Option(
     help="Umeyama alignment of the estimate: se3, sim3 (with scale), se2 (planar: rotation "
     "about z), none."

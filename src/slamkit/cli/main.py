@@ -17,7 +17,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from slamkit.cli._common import console, known_errors, progress_bar, split_config, terminate
+from slamkit.cli._common import console, known_errors, progress_bar, terminate
 from slamkit.cli.config_cmd import config_app
 from slamkit.cli.eval_cmd import eval_app
 from slamkit.cli.map_cmd import map_app

@@ -129,7 +129,9 @@ def associate_stamps(
     return (idx_short, idx_long) if est_longer else (idx_long, idx_short)
 
 
-def _nearest(short: FloatArray, long_: FloatArray, max_diff: float) -> tuple[IndexArray, IndexArray]:
+def _nearest(
+    short: FloatArray, long_: FloatArray, max_diff: float
+) -> tuple[IndexArray, IndexArray]:
     if long_.size == 0 or short.size == 0:
         empty = np.zeros(0, dtype=np.int64)
         return empty, empty.copy()
