@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -68,12 +68,18 @@ class RunReport:
         return self.scores.as_dict()
 
 
-def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
+def run_job(
+    request: RunRequest,
+    progress: Progress | None = None,
+    stage: Callable[[str], None] | None = None,
+) -> RunReport:
     """Load the data set, run the estimator, evaluate, and write into ``request.out_dir``:
     ``trajectory.tum``, ``metrics.json``, ``config.json`` (the resolved configuration),
     the files of :func:`slamkit.app.outputs.write_result_files` (``landmarks.csv``,
     ``groundtruth.tum``, ``graph.g2o``, KITTI on request) and PNG plots. The folder is
-    written completely or not at all."""
+    written completely or not at all. ``stage(text)`` is told of the steps after the run
+    (plots, the animation), which take long on big data sets."""
+    say = stage if stage is not None else (lambda text: None)
     entry = get_estimator_entry(request.estimator)
     config, preset = resolve_preset(
         entry.name, request.dataset, request.estimator_config, request.preset
@@ -98,11 +104,13 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         progress=progress,
         frames=frames,
     )
+    say("scoring the run")
     evaluation = evaluate(result, dataset)
     figures = {}
     if request.plots:
         from slamkit.viz.report import run_figures  # plotting only when asked for
 
+        say("drawing the plots")
         figures = run_figures(result, dataset, evaluation)
     resolved = {
         "estimator": {"name": entry.name, **result.config},
@@ -122,10 +130,14 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         if figures:
             from slamkit.viz import save_figure
 
+            say(f"writing {len(figures)} plots")
+
             for name, fig in figures.items():
                 save_figure(fig, tmp / name)
         if request.animate:
             from slamkit.viz.animation import save_animation
+
+            say(f"writing animation.gif ({ANIMATION_FRAMES} frames)")
             from slamkit.viz.report import gps_alignment
 
             save_animation(

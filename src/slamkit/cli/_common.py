@@ -12,6 +12,8 @@ from typing import Any, ParamSpec, TypeVar
 import typer
 from rich.console import Console
 from rich.markup import escape
+from rich.progress import ProgressColumn, Task
+from rich.text import Text
 
 from slamkit.errors import SlamkitError
 
@@ -20,6 +22,35 @@ R = TypeVar("R")
 
 console = Console()
 err_console = Console(stderr=True)
+
+
+def _quiet_types() -> None:
+    """Help screens without type noise: typer (0.2x) prints a type after every option —
+    ``<bool>`` after each flag and ``--help``, ``<str>`` after every free-text option — which
+    says nothing the option's name and help do not. Flags and plain strings are shown
+    without one; choices (``<lm|gn|dogleg>``), numbers and paths keep theirs. Applied once,
+    to typer's option class (a no-op on versions without ``display_type_rich``)."""
+    from typer.core import TyperArgument, TyperOption
+
+    for cls in (TyperOption, TyperArgument):
+        original = getattr(cls, "display_type_rich", None)
+        if original is None or getattr(original, "slamkit_quiet", False):
+            continue
+        cls.display_type_rich = _quiet(original)  # type: ignore[method-assign, assignment]
+
+
+def _quiet(original: Callable[[Any, Any], str | None]) -> Callable[[Any, Any], str | None]:
+    def display_type_rich(self: Any, ctx: Any) -> str | None:
+        if self.metavar is None and getattr(self, "is_flag", False):
+            return None
+        shown = original(self, ctx)
+        return None if shown == "<str>" else shown
+
+    display_type_rich.slamkit_quiet = True  # type: ignore[attr-defined]
+    return display_type_rich
+
+
+_quiet_types()
 
 
 class Terminated(KeyboardInterrupt):
@@ -55,27 +86,68 @@ def known_errors(fn: Callable[P, R]) -> Callable[P, R]:
     return wrapper
 
 
+class RateColumn(ProgressColumn):
+    """Items per second of a progress bar (blank until there is a rate)."""
+
+    def __init__(self, unit: str) -> None:
+        super().__init__()
+        self.unit = unit
+
+    def render(self, task: Task) -> Text:
+        speed = task.finished_speed or task.speed
+        text = "" if speed is None else f"{speed:,.0f} {self.unit}/s"
+        return Text(text, style="progress.data.speed")
+
+
+class ProgressHandle:
+    """What :func:`progress_bar` yields: call it as ``progress(done, total)``; ``stage(text)``
+    names a step without a count (writing plots), shown with the spinner and elapsed time."""
+
+    def __init__(self, update: Callable[..., None]) -> None:
+        self.update = update
+
+    def __call__(self, done: int, total: int) -> None:
+        self.update(completed=done, total=total if total and total > 0 else None)
+
+    def stage(self, text: str) -> None:
+        self.update(description=text, completed=0, total=None)
+
+
 @contextmanager
-def progress_bar(label: str, unit: str = "events") -> Iterator[Callable[[int, int], None]]:
-    """A transient rich progress bar on stderr (silent when stderr is not a terminal);
-    yields the ``progress(done, total)`` callback the library functions take."""
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+def progress_bar(label: str, unit: str = "events") -> Iterator[ProgressHandle]:
+    """A transient rich progress bar on stderr (silent when stderr is not a terminal) with
+    the count, the rate and the time left; yields the ``progress(done, total)`` callback the
+    library functions take. Until the first call (total unknown) it shows a spinner and the
+    elapsed time, never "0/None"."""
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        SpinnerColumn,
+        TaskProgressColumn,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     with Progress(
+        SpinnerColumn(),
         TextColumn("{task.description}"),
         BarColumn(),
-        TextColumn("{task.completed}/{task.total} " + unit),
+        TaskProgressColumn(),
+        MofNCompleteColumn(),
+        TextColumn(unit),
+        RateColumn(unit),
+        TextColumn("elapsed"),
         TimeElapsedColumn(),
+        TextColumn("left"),
+        TimeRemainingColumn(),
         console=err_console,
         transient=True,
         disable=not err_console.is_terminal,
     ) as bar:
         task = bar.add_task(label, total=None)
-
-        def update(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total)
-
-        yield update
+        yield ProgressHandle(lambda **kw: bar.update(task, **kw))
 
 
 def split_config(

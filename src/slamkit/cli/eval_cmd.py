@@ -178,11 +178,14 @@ def _pose_error_command(
 _REF_HELP = "Reference trajectory (TUM: 'time x y z qx qy qz qw'; KITTI: 12 numbers a line)."
 _EST_HELP = "Estimated trajectory, same format."
 _FMT = typer.Option(
-    "--format", help="File format: auto (KITTI when 12 numbers a line), tum, kitti."
+    "--format",
+    metavar="auto|tum|kitti",
+    help="File format: auto (KITTI when 12 numbers a line), tum, kitti.",
 )
 _ALIGN = typer.Option(
+    metavar="se3|sim3|se2|none",
     help="Umeyama alignment of the estimate: se3, sim3 (with scale), se2 (planar: rotation "
-    "about z), none."
+    "about z), none.",
 )
 _N_ALIGN = typer.Option(help="Align on the first N pairs only (default: all).", show_default=False)
 _MAX_DIFF = typer.Option(help=escape("Largest stamp difference of a pair [s] (TUM)."))

@@ -165,7 +165,7 @@ def _run(
         formats=tuple(f for f in (formats or []) if f != "tum"),
     )
     with progress_bar(f"{estimator} on {data}") as progress:
-        report = run_job(request, progress)
+        report = run_job(request, progress, progress.stage)
     if report.preset_settings:
         used = ", ".join(f"{k}={v}" for k, v in report.preset_settings.items())
         console.print(f"preset {report.preset} (config.json has every setting): {used}")
@@ -182,6 +182,7 @@ def run_command(
         typer.Option(
             "--data",
             "-d",
+            metavar="NAME|PATH",
             help="Data set name (see `slamkit data list`), or the path of a laser log: ROS 1 "
             ".bag, ROS 2 bag folder, .db3, .mcap, CARMEN .clf/.log/.log.gz (reader options in "
             r"the config file's \[dataset] table). Default: the config file's \[dataset] "
@@ -202,6 +203,7 @@ def run_command(
         list[str] | None,
         typer.Option(
             "--set",
+            metavar="KEY=VALUE",
             help="Override one setting: KEY=VALUE, KEY dotted into sections (kld.epsilon=0.1), "
             "dataset.KEY for a data set option, seed=N; repeatable.",
             show_default=False,
@@ -228,6 +230,7 @@ def run_command(
         list[str] | None,
         typer.Option(
             "--format",
+            metavar="kitti",
             help="Also write the trajectory in this format: kitti (trajectory.kitti + "
             "times.txt); tum is always written. Repeatable.",
             show_default=False,
@@ -236,6 +239,7 @@ def run_command(
     preset: Annotated[
         str | None,
         typer.Option(
+            metavar="auto|none|NAME",
             help="Settings measured for this estimator on this data set: 'auto' (the matching "
             "preset, if any; the default), 'none', or a preset's name.",
             show_default=False,
