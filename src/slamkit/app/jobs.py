@@ -10,6 +10,7 @@ from typing import Any
 from slamkit.app.outputs import check_formats, write_result_files
 from slamkit.app.presets import resolve_preset
 from slamkit.datasets.files import load_data
+from slamkit.datasets.stream import Dataset
 from slamkit.errors import ConfigError
 from slamkit.eval.records import RunScores
 from slamkit.io import atomic_folder, write_json, write_tum
@@ -29,9 +30,10 @@ class RunRequest:
     mappings (from a config file's ``[estimator]`` and ``[dataset]`` tables)."""
 
     estimator: str
-    dataset: str
-    """A registered data set's name, or the path of a laser log
-    (:func:`slamkit.datasets.files.load_data`)."""
+    dataset: str | Dataset
+    """A registered data set's name, the path of a file (:func:`slamkit.datasets.files.
+    load_data`), or a :class:`~slamkit.datasets.Dataset` built in Python (its
+    ``dataset_options`` and ``seed`` then do not apply to it; ``config.json`` names it)."""
     out_dir: Path
     seed: int = 0
     estimator_config: Mapping[str, Any] = field(default_factory=dict)
@@ -81,16 +83,20 @@ def run_job(
     (plots, the animation), which take long on big data sets."""
     say = stage if stage is not None else (lambda text: None)
     entry = get_estimator_entry(request.estimator)
+    given = request.dataset if isinstance(request.dataset, Dataset) else None
     config, preset = resolve_preset(
-        entry.name, request.dataset, request.estimator_config, request.preset
+        entry.name,
+        given.name if given is not None else str(request.dataset),
+        request.estimator_config,
+        request.preset,
     )
     entry.make_config(config)  # fail on bad config before loading
     if isinstance(request.seed, bool) or not isinstance(request.seed, int) or request.seed < 0:
         raise ConfigError(f"seed: expected an integer >= 0, got {request.seed!r}")
     check_formats(request.formats)
     check_output_folder(request.out_dir, overwrite=request.overwrite)  # before the work
-    dataset = load_data(
-        request.dataset,
+    dataset = given or load_data(
+        str(request.dataset),
         seed=request.seed,
         options=request.dataset_options,
         data_root=request.data_root,
