@@ -25,7 +25,7 @@ def test_the_docs_example_runs_and_the_csv_run_equals_the_simulated_run(tmp_path
     assert len(blocks) == 2
     scope: dict = {}
     for code in blocks:
-        exec(compile(code, str(DOC), "exec"), scope)  # noqa: S102 - the doc's own example
+        exec(compile(code, str(DOC), "exec"), scope)  # the doc's own example
     sim, report, from_arrays = scope["sim"], scope["report"], scope["from_arrays"]
     direct = run_job(RunRequest("ekf-slam", "five-features", tmp_path / "direct", seed=1,
                                 plots=False))  # fmt: skip

@@ -139,7 +139,8 @@ def read_landmark_csv(path: str | Path, options: Any = None, *, name: str | None
 
     def table(kind: str, cols: int) -> np.ndarray:
         out = [
-            [_cell(c[1], p, n, "t")] + [_cell(v, p, n, h) for v, h in zip(c[2 : 2 + cols], "abc")]
+            [_cell(c[1], p, n, "t")]
+            + [_cell(v, p, n, h) for v, h in zip(c[2 : 2 + cols], "abc"[:cols], strict=True)]
             for n, c in rows[kind]
         ]
         return np.asarray(out, dtype=float).reshape(-1, 1 + cols)
@@ -194,7 +195,10 @@ def read_landmark_csv(path: str | Path, options: Any = None, *, name: str | None
     landmarks = None
     if rows["landmark"]:
         lm = np.asarray(
-            [[_cell(v, p, n, h) for v, h in zip(c[2:5], "abc")] for n, c in rows["landmark"]]
+            [
+                [_cell(v, p, n, h) for v, h in zip(c[2:5], "abc", strict=True)]
+                for n, c in rows["landmark"]
+            ]
         )
         landmarks = LandmarkMap(lm[:, :2], lm[:, 2].astype(np.int64))
     s, st = opts.initial_sigma_xy, math.radians(opts.initial_sigma_theta_deg)
