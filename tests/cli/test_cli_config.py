@@ -19,7 +19,7 @@ from slamkit.cli.main import app
 from slamkit.config import Section, config_from_mapping, config_to_dict, describe_settings, setting
 from slamkit.errors import ConfigError
 from slamkit.localization.mcl.config import MclConfig
-from slamkit.pipeline import list_estimators
+from slamkit.pipeline import get_estimator_entry, list_estimators
 
 runner = CliRunner()
 
@@ -164,3 +164,20 @@ def test_run_without_data_runs_the_default_data_set(tmp_path):
     _run("run", "dead-reckoning", "--out", str(out), "--no-plots")
     assert json.loads((out / "config.json").read_text())["dataset"]["name"] == "five-features"
     assert np.isfinite(json.loads((out / "metrics.json").read_text())["ate"]["rmse"])
+
+
+def test_the_readme_sample_config_is_valid_and_asks_for_snapshots(tmp_path):
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    (block,) = re.findall(r"```toml\n(.*?)```", readme, re.S)
+    path = tmp_path / "sample.toml"
+    path.write_text(block)
+    cfg = read_run_config(path)
+    assert resolve_data(None, cfg) == "rooms-laser-global" and cfg.seed == 3
+    mcl = get_estimator_entry("mcl").make_config(cfg.settings)
+    assert mcl.snapshots.every == 25 and mcl.snapshots.times == (0.5, 5.0, 30.0)
+    from slamkit.datasets import load_dataset
+
+    assert load_dataset("rooms-laser-global", options=cfg.dataset_options).initial_pose is None
