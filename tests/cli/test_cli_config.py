@@ -181,3 +181,15 @@ def test_the_readme_sample_config_is_valid_and_asks_for_snapshots(tmp_path):
     from slamkit.datasets import load_dataset
 
     assert load_dataset("rooms-laser-global", options=cfg.dataset_options).initial_pose is None
+
+
+def test_map_occupancy_honours_the_config_files_data_set(tmp_path):
+    cfg = tmp_path / "m.toml"
+    cfg.write_text('[dataset]\nname = "corridor-loop-laser"\n')
+    out = tmp_path / "m"
+    _run("map", "occupancy", "--config", str(cfg), "--no-agreement", "--out", str(out))
+    written = json.loads((out / "config.json").read_text())
+    assert "corridor-loop-laser" in json.dumps(written)
+    res = runner.invoke(app, ["map", "occupancy", "--config", str(cfg), "--data", "rooms-laser",
+                              "--out", str(tmp_path / "n")])  # fmt: skip
+    assert res.exit_code == 1 and "conflicts" in res.output

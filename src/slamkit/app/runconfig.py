@@ -121,9 +121,9 @@ def _same_data(a: str, b: str) -> bool:
     return pa.exists() and pb.exists() and pa.resolve() == pb.resolve()
 
 
-def resolve_data(cli_data: str | None, config: RunConfig) -> str:
+def resolve_data(cli_data: str | None, config: RunConfig, default: str = DEFAULT_DATA) -> str:
     """The data set a run reads: ``--data`` (``cli_data``), else the file's, else
-    :data:`DEFAULT_DATA`. Both given and different: :class:`~slamkit.errors.ConfigError`
+    ``default``. Both given and different: :class:`~slamkit.errors.ConfigError`
     (a configuration's data set is never silently replaced)."""
     if cli_data is not None and config.data is not None and not _same_data(cli_data, config.data):
         raise ConfigError(
@@ -132,7 +132,7 @@ def resolve_data(cli_data: str | None, config: RunConfig) -> str:
         )
     if cli_data is not None:
         return cli_data
-    return config.data if config.data is not None else DEFAULT_DATA
+    return config.data if config.data is not None else default
 
 
 def parse_value(text: str) -> Any:

@@ -153,29 +153,10 @@ def progress_bar(label: str, unit: str = "events") -> Iterator[ProgressHandle]:
 def split_config(
     path: Path | None, main_table: str
 ) -> tuple[dict[str, Any], dict[str, Any], int | None]:
-    """Read a TOML/JSON configuration file into its ``[main_table]`` and ``[dataset]`` tables
-    and an optional top-level integer ``seed``; any other top-level key is an error. A
-    ``name`` key in either table, and a ``path`` key in ``[dataset]``, are informational (as
-    written in ``config.json``) and dropped."""
-    if path is None:
-        return {}, {}, None
-    from slamkit.config import load_config_file
-    from slamkit.errors import ConfigError
+    """A TOML/JSON configuration file's ``[main_table]`` and ``[dataset]`` options and its
+    ``seed`` (:func:`slamkit.app.runconfig.read_run_config`, which also gives the data set the
+    file names and its preset)."""
+    from slamkit.app.runconfig import read_run_config
 
-    raw = load_config_file(path)
-    unknown = sorted(set(raw) - {main_table, "dataset", "seed"})
-    if unknown:
-        raise ConfigError(
-            f"{path}: unknown section(s) {', '.join(unknown)}; expected {main_table}, dataset, seed"
-        )
-    seed = raw.get("seed")
-    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
-        raise ConfigError(f"{path}: seed must be an integer, got {seed!r}")
-    tables = []
-    for name in (main_table, "dataset"):
-        table = raw.get(name, {})
-        if not isinstance(table, dict):
-            raise ConfigError(f"{path}: [{name}] must be a table of settings")
-        dropped = {"name", "path"} if name == "dataset" else {"name"}
-        tables.append({k: v for k, v in table.items() if k not in dropped})
-    return tables[0], tables[1], seed
+    cfg = read_run_config(path, main_table)
+    return dict(cfg.settings), dict(cfg.dataset_options), cfg.seed

@@ -19,7 +19,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from slamkit.cli._common import console, known_errors, progress_bar, split_config
+from slamkit.cli._common import console, known_errors, progress_bar
 
 __all__ = ["DEFAULT_MAX_RANGE", "map_app"]
 
@@ -79,7 +79,19 @@ def _table(quality: dict[str, Any], stats: dict[str, Any]) -> Table:
 @map_app.command("occupancy")
 @known_errors
 def occupancy_command(
-    data: Annotated[str, typer.Option("--data", "-d", help="Data set name.")] = "rooms-laser",
+    data: Annotated[
+        str | None,
+        typer.Option(
+            "--data",
+            "-d",
+            metavar="NAME|PATH",
+            help=escape(
+                "Data set name or laser log (default: the config file's [dataset], else "
+                "rooms-laser; a different one in both is an error)."
+            ),
+            show_default=False,
+        ),
+    ] = None,
     resolution: Annotated[
         float | None,
         typer.Option(help=escape("Cell size [m] (default: the config file's, else 0.05).")),
@@ -147,7 +159,7 @@ def _usable_range(value: str | None) -> float | None:
 
 
 def _occupancy(
-    data: str,
+    data: str | None,
     resolution: float | None,
     out: Path | None,
     config: Path | None,
@@ -160,9 +172,12 @@ def _occupancy(
     overwrite: bool,
 ) -> None:
     from slamkit.app.mapping import occupancy_map_job
+    from slamkit.app.runconfig import read_run_config, resolve_data
     from slamkit.errors import ConfigError
 
-    mapping, ds_options, cfg_seed = split_config(config, "mapping")
+    cfg = read_run_config(config, "mapping")
+    mapping, ds_options, cfg_seed = dict(cfg.settings), cfg.dataset_options, cfg.seed
+    data = resolve_data(data, cfg, default="rooms-laser")
     if method is not None:  # options given on the command line win over the config file
         if method not in ("ray", "cell"):
             raise ConfigError(f"--method: expected 'ray' or 'cell', got {method!r}")

@@ -110,7 +110,11 @@ def _rows(path: Path) -> dict[str, list[tuple[int, list[str]]]]:
     body = [(n, ln.strip()) for n, ln in enumerate(lines, 1) if ln.strip() and ln[:1] != "#"]
     if not body or tuple(c.strip() for c in body[0][1].split(",")) != CSV_HEADER:
         line = body[0][0] if body else 1
-        raise DatasetFormatError(f"expected the header {','.join(CSV_HEADER)}", path, line)
+        raise DatasetFormatError(
+            f"expected the header {','.join(CSV_HEADER)} of a landmark CSV file (docs/own-data.md)",
+            path,
+            line,
+        )
     rows: dict[str, list[tuple[int, list[str]]]] = {k: [] for k in _KINDS}
     for n, text in body[1:]:
         cells = [c.strip() for c in text.split(",")]
