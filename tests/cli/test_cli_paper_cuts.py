@@ -11,8 +11,8 @@ import pytest
 from rich.console import Console
 from typer.testing import CliRunner
 
-from slamkit.cli import _common
 from slamkit.cli.main import app
+from slamkit.cli.progress import progress_bar
 
 runner = CliRunner()
 
@@ -55,10 +55,9 @@ def test_optimize_finds_a_bare_path_under_the_data_folder_and_writes_a_default_f
     assert str(data) in res.output
 
 
-def test_the_progress_bar_shows_count_rate_and_time_left_never_none(monkeypatch):
+def test_the_progress_bar_shows_count_rate_and_time_left_never_none():
     console = Console(stderr=True, force_terminal=True, width=160, record=True)
-    monkeypatch.setattr(_common, "err_console", console)
-    with _common.progress_bar("job", "events") as progress:
+    with progress_bar("job", "events", console) as progress:
         before = console.export_text(clear=False)
         progress(0, 0)  # a library that does not know its total yet
         for k in range(1, 40):

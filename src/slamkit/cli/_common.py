@@ -4,24 +4,32 @@ bar and the splitting of a configuration file into its tables."""
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, ParamSpec, TypeVar
 
 import typer
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import ProgressColumn, Task
-from rich.text import Text
 
+from slamkit.cli.progress import ERR_CONSOLE, ProgressHandle, progress_bar
 from slamkit.errors import SlamkitError
+
+__all__ = [
+    "ProgressHandle",
+    "console",
+    "err_console",
+    "known_errors",
+    "progress_bar",
+    "split_config",
+    "terminate",
+]
 
 P = ParamSpec("P")
 R = TypeVar("R")
 
 console = Console()
-err_console = Console(stderr=True)
+err_console = ERR_CONSOLE
 
 
 def _quiet_types() -> None:
@@ -84,70 +92,6 @@ def known_errors(fn: Callable[P, R]) -> Callable[P, R]:
             raise typer.Exit(1) from None
 
     return wrapper
-
-
-class RateColumn(ProgressColumn):
-    """Items per second of a progress bar (blank until there is a rate)."""
-
-    def __init__(self, unit: str) -> None:
-        super().__init__()
-        self.unit = unit
-
-    def render(self, task: Task) -> Text:
-        speed = task.finished_speed or task.speed
-        text = "" if speed is None else f"{speed:,.0f} {self.unit}/s"
-        return Text(text, style="progress.data.speed")
-
-
-class ProgressHandle:
-    """What :func:`progress_bar` yields: call it as ``progress(done, total)``; ``stage(text)``
-    names a step without a count (writing plots), shown with the spinner and elapsed time."""
-
-    def __init__(self, update: Callable[..., None]) -> None:
-        self.update = update
-
-    def __call__(self, done: int, total: int) -> None:
-        self.update(completed=done, total=total if total and total > 0 else None)
-
-    def stage(self, text: str) -> None:
-        self.update(description=text, completed=0, total=None)
-
-
-@contextmanager
-def progress_bar(label: str, unit: str = "events") -> Iterator[ProgressHandle]:
-    """A transient rich progress bar on stderr (silent when stderr is not a terminal) with
-    the count, the rate and the time left; yields the ``progress(done, total)`` callback the
-    library functions take. Until the first call (total unknown) it shows a spinner and the
-    elapsed time, never "0/None"."""
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        SpinnerColumn,
-        TaskProgressColumn,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    with Progress(
-        SpinnerColumn(),
-        TextColumn("{task.description}"),
-        BarColumn(),
-        TaskProgressColumn(),
-        MofNCompleteColumn(),
-        TextColumn(unit),
-        RateColumn(unit),
-        TextColumn("elapsed"),
-        TimeElapsedColumn(),
-        TextColumn("left"),
-        TimeRemainingColumn(),
-        console=err_console,
-        transient=True,
-        disable=not err_console.is_terminal,
-    ) as bar:
-        task = bar.add_task(label, total=None)
-        yield ProgressHandle(lambda **kw: bar.update(task, **kw))
 
 
 def split_config(
