@@ -118,11 +118,17 @@ def occupancy_command(
     ] = None,
     method: Annotated[
         str | None,
-        typer.Option(help="Update path: 'ray' (Bresenham, default) or 'cell' (per-cell model)."),
+        typer.Option(
+            metavar="ray|cell",
+            help="Update path: 'ray' (Bresenham, default) or 'cell' (per-cell model).",
+        ),
     ] = None,
     poses: Annotated[
         str | None,
-        typer.Option(help="Known poses: 'truth' (default) or 'odometry' (logs without truth)."),
+        typer.Option(
+            metavar="truth|odometry",
+            help="Known poses: 'truth' (default) or 'odometry' (logs without truth).",
+        ),
     ] = None,
     seed: Annotated[int | None, typer.Option(help="Seed (simulated data, odometry noise).")] = None,
     data_root: Annotated[
