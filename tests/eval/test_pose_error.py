@@ -178,3 +178,10 @@ def test_numbers_equal_evos_on_the_same_files(files, kind, ref, est, alignment, 
             )
     if alignment == "none":
         assert ours.ape.rmse > 1.0  # the estimate's frame is rotated, scaled, shifted
+
+
+def test_unsorted_stamps_are_matched_by_a_full_search():
+    ref = np.array([3.0, 1.0, 2.0, 0.0])  # the shorter one is walked in its order
+    est = np.array([2.996, 0.0, 5.0, 1.004, 2.0])  # the longer one is searched: unsorted
+    i_ref, i_est = associate_stamps(ref, est, max_diff=0.01)
+    assert i_ref.tolist() == [0, 1, 2, 3] and i_est.tolist() == [0, 3, 4, 1]

@@ -135,11 +135,12 @@ def _nearest(
     if long_.size == 0 or short.size == 0:
         empty = np.zeros(0, dtype=np.int64)
         return empty, empty.copy()
-    if np.any(np.diff(long_) < 0):  # unsorted: the first nearest stamp by a full search
-        d = np.abs(long_[None, :] - short[:, None])
-        best = np.argmin(d, axis=1)
-        keep = d[np.arange(short.size), best] <= max_diff
-        return np.flatnonzero(keep).astype(np.int64), best[keep].astype(np.int64)
+    if np.any(np.diff(long_) < 0):  # unsorted: the first nearest stamp, by a full search
+        best = np.fromiter(
+            (np.argmin(np.abs(long_ - t)) for t in short), dtype=np.int64, count=short.size
+        )  # one row at a time: O(M) memory, not an (N, M) matrix
+        keep = np.abs(long_[best] - short) <= max_diff
+        return np.flatnonzero(keep).astype(np.int64), best[keep]
     inside = (short >= long_[0] - max_diff) & (short <= long_[-1] + max_diff)
     upper = np.minimum(np.searchsorted(long_, short, side="right"), long_.size - 1)
     diff_ub = long_[upper] - short
