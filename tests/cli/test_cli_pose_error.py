@@ -46,7 +46,7 @@ def test_rpe_on_kitti_files_pairs_by_index(run_dir, tmp_path):
                               "--out", str(tmp_path / "r")])  # fmt: skip
     assert res.exit_code == 0, res.output
     got = json.loads((tmp_path / "r" / "metrics.json").read_text())
-    assert got["rpe_translation_m"]["max"] < 1e-9 and got["rpe_delta_frames"] == 5
+    assert got["rpe_translation_m"]["max"] < 1e-9 and got["rpe_delta"] == 5
 
 
 @pytest.mark.parametrize(

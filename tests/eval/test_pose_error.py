@@ -116,7 +116,8 @@ def test_rpe_by_hand_and_rotation_angles_near_zero():
         compare_trajectories(ref, est[:2])
 
 
-def _evo_numbers(ref_path, est_path, kind, alignment, *, max_diff, offset, delta, all_pairs):
+def _evo_numbers(ref_path, est_path, kind, alignment, *, max_diff, offset, delta, all_pairs,
+                 unit="frames"):  # fmt: skip
     from evo.core import metrics, sync
     from evo.tools import file_interface
 
@@ -130,13 +131,14 @@ def _evo_numbers(ref_path, est_path, kind, alignment, *, max_diff, offset, delta
     if alignment != "none":
         est.align(ref, correct_scale=alignment == "sim3")
     out = {}
+    evo_unit = metrics.Unit.frames if unit == "frames" else metrics.Unit.meters
     for name, metric in (
         ("ape", metrics.APE(metrics.PoseRelation.translation_part)),
         ("ape_rot", metrics.APE(metrics.PoseRelation.rotation_angle_deg)),
-        ("rpe", metrics.RPE(metrics.PoseRelation.translation_part, delta, metrics.Unit.frames,
+        ("rpe", metrics.RPE(metrics.PoseRelation.translation_part, delta, evo_unit,
                             all_pairs=all_pairs)),
         ("rpe_rot", metrics.RPE(metrics.PoseRelation.rotation_angle_deg, delta,
-                                metrics.Unit.frames, all_pairs=all_pairs)),
+                                evo_unit, all_pairs=all_pairs)),
     ):  # fmt: skip
         metric.process_data((ref, est))
         out[name] = metric.get_all_statistics()
@@ -144,17 +146,21 @@ def _evo_numbers(ref_path, est_path, kind, alignment, *, max_diff, offset, delta
 
 
 @pytest.mark.parametrize(
-    ("kind", "ref", "est", "alignment", "delta", "all_pairs"),
+    ("kind", "ref", "est", "alignment", "delta", "all_pairs", "unit"),
     [
-        ("tum", "ref.tum", "est.tum", "se3", 1, False),
-        ("tum", "ref.tum", "est.tum", "sim3", 5, True),
-        ("tum", "ref.tum", "est.tum", "none", 3, False),
-        ("tum", "ref3.tum", "est3.tum", "se3", 1, False),
-        ("tum", "ref3.tum", "est3.tum", "sim3", 4, False),
-        ("kitti", "ref.kitti", "est.kitti", "sim3", 2, True),
+        ("tum", "ref.tum", "est.tum", "se3", 1, False, "frames"),
+        ("tum", "ref.tum", "est.tum", "sim3", 5, True, "frames"),
+        ("tum", "ref.tum", "est.tum", "none", 3, False, "frames"),
+        ("tum", "ref3.tum", "est3.tum", "se3", 1, False, "frames"),
+        ("tum", "ref3.tum", "est3.tum", "sim3", 4, False, "frames"),
+        ("kitti", "ref.kitti", "est.kitti", "sim3", 2, True, "frames"),
+        ("tum", "ref.tum", "est.tum", "se3", 5.0, False, "m"),
+        ("tum", "ref3.tum", "est3.tum", "sim3", 8.0, True, "m"),
     ],
 )
-def test_numbers_equal_evos_on_the_same_files(files, kind, ref, est, alignment, delta, all_pairs):
+def test_numbers_equal_evos_on_the_same_files(
+    files, kind, ref, est, alignment, delta, all_pairs, unit
+):
     pytest.importorskip("evo", reason="evo is an optional peer: pip install 'slamkit[evo]'")
     max_diff, offset = 0.01, -0.5
     if kind == "tum":
@@ -162,13 +168,13 @@ def test_numbers_equal_evos_on_the_same_files(files, kind, ref, est, alignment, 
         t_est, p = read_tum_matrices(files / est)
         ours = compare_trajectories(q, p, times_ref=t_ref, times_est=t_est, alignment=alignment,
                                     max_diff=max_diff, offset=offset, delta=delta,
-                                    all_pairs=all_pairs)  # fmt: skip
+                                    all_pairs=all_pairs, delta_unit=unit)  # fmt: skip
         assert 0 < ours.matched < ours.estimate_poses  # some stamps have no partner
     else:
         q, p = read_kitti_matrices(files / ref), read_kitti_matrices(files / est)
         ours = compare_trajectories(q, p, alignment=alignment, delta=delta, all_pairs=all_pairs)
     theirs = _evo_numbers(files / ref, files / est, kind, alignment, max_diff=max_diff,
-                          offset=offset, delta=delta, all_pairs=all_pairs)  # fmt: skip
+                          offset=offset, delta=delta, all_pairs=all_pairs, unit=unit)  # fmt: skip
     for name, stats in (("ape", ours.ape), ("ape_rot", ours.ape_rotation_deg),
                         ("rpe", ours.rpe), ("rpe_rot", ours.rpe_rotation_deg)):  # fmt: skip
         for key in ("rmse", "mean", "median", "std", "min", "max", "sse"):

@@ -9,7 +9,7 @@ from typing import Literal
 
 from slamkit._validation import FloatArray
 from slamkit.errors import ConfigError, DataNotFoundError, DatasetFormatError
-from slamkit.eval.pose_error import Alignment, PoseErrorResult, compare_trajectories
+from slamkit.eval.pose_error import Alignment, DeltaUnit, PoseErrorResult, compare_trajectories
 from slamkit.io import atomic_folder, read_kitti_matrices, read_tum_matrices, write_json
 
 __all__ = ["EvalFilesReport", "EvalFilesRequest", "TrajectoryFormat", "evaluate_files",
@@ -61,8 +61,10 @@ class EvalFilesRequest:
     n_align: int | None = None
     max_diff: float = 0.01
     offset: float = 0.0
-    delta: int = 1
+    delta: float = 1
+    delta_unit: DeltaUnit = "frames"
     all_pairs: bool = False
+    pairs_from_reference: bool = False
     out_dir: Path | None = None
     """Where ``metrics.json`` and the figures go (``None``: nothing is written)."""
     plots: bool = True
@@ -85,7 +87,8 @@ def evaluate_files(request: EvalFilesRequest) -> EvalFilesReport:
     result = compare_trajectories(
         ref, est, times_ref=t_ref, times_est=t_est, alignment=request.alignment,
         n_align=request.n_align, max_diff=request.max_diff, offset=request.offset,
-        delta=request.delta, all_pairs=request.all_pairs,
+        delta=request.delta, all_pairs=request.all_pairs, delta_unit=request.delta_unit,
+        pairs_from_reference=request.pairs_from_reference,
     )  # fmt: skip
     if request.out_dir is None:
         return EvalFilesReport(result, None, ())

@@ -1,7 +1,7 @@
 """``slamkit eval …``: score a trajectory file. The main app adds :data:`eval_app` as ``eval``.
 
 ``slamkit eval ape|rpe REFERENCE ESTIMATE [--align se3|sim3|se2|none] [--max-diff S]
-[--offset S] [--delta N] [--all-pairs] [--out DIR]`` compares two TUM or KITTI files by evo's
+[--offset S] [--delta N] [--delta-unit frames|m] [--all-pairs] [--out DIR]`` compares two TUM or KITTI files by evo's
 rules (:func:`slamkit.app.evaluate_files.evaluate_files`) and prints evo's statistics.
 
 ``slamkit eval relations TRAJ.tum RELATIONS [--max-gap S] [--max-duration S] [--json OUT]``
@@ -146,8 +146,10 @@ def _pose_error_command(
     n_align: int | None,
     max_diff: float,
     offset: float,
-    delta: int,
+    delta: float,
+    delta_unit: str,
     all_pairs: bool,
+    pairs_from_reference: bool,
     out: Path | None,
     plots: bool,
     overwrite: bool,
@@ -159,7 +161,8 @@ def _pose_error_command(
         EvalFilesRequest(
             reference, estimate, kind=kind, fmt=fmt, alignment=align,  # type: ignore[arg-type]
             n_align=n_align, max_diff=max_diff, offset=offset, delta=delta,
-            all_pairs=all_pairs, out_dir=target, plots=plots, overwrite=overwrite,
+            delta_unit=delta_unit,  # type: ignore[arg-type]
+            all_pairs=all_pairs, pairs_from_reference=pairs_from_reference, out_dir=target, plots=plots, overwrite=overwrite,
         )
     )  # fmt: skip
     r = report.result
@@ -168,7 +171,7 @@ def _pose_error_command(
         f"(of {r.estimate_poses} estimated, {r.reference_poses} reference poses), "
         f"alignment {r.alignment}"
         + ("" if r.similarity is None else f", scale {r.similarity.scale:.6g}")
-        + ("" if kind == "ape" else f"; pairs {r.delta} frames apart"),
+        + ("" if kind == "ape" else f"; {len(r.rpe_pairs)} pairs {r.delta:g} {r.delta_unit} apart"),
         soft_wrap=True,
     )
     console.print(pose_error_table(r, kind))
@@ -190,8 +193,14 @@ _ALIGN = typer.Option(
 _N_ALIGN = typer.Option(help="Align on the first N pairs only (default: all).", show_default=False)
 _MAX_DIFF = typer.Option(help=escape("Largest stamp difference of a pair [s] (TUM)."))
 _OFFSET = typer.Option(help=escape("Added to the estimate's stamps before pairing [s]."))
-_DELTA = typer.Option(help="RPE: pairs this many poses apart.")
+_DELTA = typer.Option(help="RPE: pairs this far apart (in --delta-unit).")
+_DELTA_UNIT = typer.Option(
+    metavar="frames|m", help="RPE: delta in poses, or in metres of travelled path."
+)
 _ALL = typer.Option(help="RPE: every pair i, i+delta (default: i = 0, delta, 2·delta, …).")
+_FROM_REF = typer.Option(
+    help="RPE in metres: measure the path on the reference (default: on the estimate, as evo)."
+)
 _OUT = typer.Option(help="Output folder (default results/KIND-ESTIMATE).", show_default=False)
 
 
@@ -206,15 +215,18 @@ def _make_command(kind: str) -> None:
         n_align: Annotated[int | None, _N_ALIGN] = None,
         max_diff: Annotated[float, _MAX_DIFF] = 0.01,
         offset: Annotated[float, _OFFSET] = 0.0,
-        delta: Annotated[int, _DELTA] = 1,
+        delta: Annotated[float, _DELTA] = 1,
+        delta_unit: Annotated[str, _DELTA_UNIT] = "frames",
         all_pairs: Annotated[bool, _ALL] = False,
+        pairs_from_reference: Annotated[bool, _FROM_REF] = False,
         out: Annotated[Path | None, _OUT] = None,
         plots: Annotated[bool, typer.Option(help="Write PNG plots.")] = True,
         overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
     ) -> None:
         _pose_error_command(
             kind, reference, estimate, fmt=fmt, align=align, n_align=n_align,
-            max_diff=max_diff, offset=offset, delta=delta, all_pairs=all_pairs, out=out,
+            max_diff=max_diff, offset=offset, delta=delta, delta_unit=delta_unit,
+            all_pairs=all_pairs, pairs_from_reference=pairs_from_reference, out=out,
             plots=plots, overwrite=overwrite,
         )  # fmt: skip
 

@@ -17,9 +17,10 @@ those of evo's ``evo_ape`` / ``evo_rpe`` on the same files (a test checks 1e-6):
   followed by the rigid motion (evo's order).
 * **APE** (:func:`absolute_pose_error`): translation ``‖t(P_i) − t(Q_i)‖`` and rotation
   angle ``∠(Q_i⁻¹ P_i)`` per pair.
-* **RPE** (:func:`relative_pose_error_se3`): for index pairs ``(i, j = i + Δ)`` — consecutive
-  (``i = 0, Δ, 2Δ, …``) or all — ``E = (Q_i⁻¹ Q_j)⁻¹ (P_i⁻¹ P_j)``, its translation norm and
-  rotation angle.
+* **RPE** (:func:`relative_pose_error_se3`): for index pairs ``(i, j)`` ``Δ`` apart — in
+  frames (``j = i + Δ``, consecutive ``i = 0, Δ, 2Δ, …`` or all) or in metres of path
+  (:func:`path_pairs`, on the estimate's positions as evo does by default) —
+  ``E = (Q_i⁻¹ Q_j)⁻¹ (P_i⁻¹ P_j)``, its translation norm and rotation angle.
 
 Statistics (:class:`ErrorStatistics`) are those evo prints: rmse, mean, median, std
 (population), min, max, sse. Arrays in, result records out; nothing here reads files or plots.
@@ -29,6 +30,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Literal
+
+import itertools
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -45,12 +48,15 @@ __all__ = [
     "absolute_pose_error",
     "align_estimate",
     "associate_stamps",
+    "DeltaUnit",
     "compare_trajectories",
+    "path_pairs",
     "relative_pose_error_se3",
     "rotation_angles",
 ]
 
 Alignment = Literal["none", "se2", "se3", "sim3"]
+DeltaUnit = Literal["frames", "m"]
 ALIGNMENTS: tuple[str, ...] = ("none", "se2", "se3", "sim3")
 IndexArray = NDArray[np.int64]
 
@@ -212,20 +218,68 @@ def absolute_pose_error(reference: ArrayLike, estimate: ArrayLike) -> tuple[Floa
     return trans, rotation_angles(rel)
 
 
+def path_pairs(positions: ArrayLike, delta: float, *, all_pairs: bool = False,
+               tol: float = 0.0) -> IndexArray:  # fmt: skip
+    """Index pairs ``(K, 2)`` about ``delta`` metres of travelled path apart (evo's rule):
+    consecutive — a pair closes each time the path since the last one reaches ``delta`` —
+    or all — from every pose, the later pose whose path distance is nearest ``delta``, kept
+    when within ``tol``."""
+    p = as_array(positions, "positions", (None, 3))
+    steps = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    pairs: list[tuple[int, int]] = []
+    if all_pairs:
+        dist = np.concatenate([[0.0], np.cumsum(steps)])
+        for i in range(dist.size - 1):
+            ahead = np.abs(dist[i + 1 :] - dist[i] - delta)
+            k = int(np.argmin(ahead))
+            if ahead[k] <= tol:
+                pairs.append((i, i + 1 + k))
+    else:
+        ids, path = [0], 0.0
+        for k, step in enumerate(steps.tolist(), start=1):
+            path += step
+            if path >= delta:
+                ids.append(k)
+                path = 0.0
+        pairs = list(itertools.pairwise(ids))
+    return np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+
+
 def relative_pose_error_se3(
-    reference: ArrayLike, estimate: ArrayLike, *, delta: int = 1, all_pairs: bool = False
+    reference: ArrayLike,
+    estimate: ArrayLike,
+    *,
+    delta: float = 1,
+    all_pairs: bool = False,
+    delta_unit: DeltaUnit = "frames",
+    pairs_from_reference: bool = False,
+    rel_tol: float = 0.1,
 ) -> tuple[IndexArray, FloatArray, FloatArray]:
-    """Index pairs ``(K, 2)`` ``Δ = delta`` frames apart and, per pair, the translation [m]
-    and rotation [rad] of ``E = (Q_i⁻¹ Q_j)⁻¹ (P_i⁻¹ P_j)``."""
+    """Index pairs ``(K, 2)`` ``Δ = delta`` apart — frames, or metres of path
+    (:func:`path_pairs` on the estimate's positions, or the reference's with
+    ``pairs_from_reference``; all-pairs tolerance ``rel_tol · delta``, evo's defaults) — and,
+    per pair, the translation [m] and rotation [rad] of ``E = (Q_i⁻¹ Q_j)⁻¹ (P_i⁻¹ P_j)``."""
     ref = _poses(reference, "reference poses")
     est = _poses(estimate, "estimated poses")
-    if isinstance(delta, bool) or not isinstance(delta, int | np.integer) or delta < 1:
-        raise ConfigError(f"delta: expected an integer >= 1 frames, got {delta!r}")
     n = ref.shape[0]
-    first = np.arange(n - delta) if all_pairs else np.arange(0, n, delta)[:-1]
-    pairs = np.column_stack([first, first + delta]).astype(np.int64)
+    if delta_unit == "frames":
+        if isinstance(delta, bool) or not float(delta).is_integer() or delta < 1:
+            raise ConfigError(f"delta: expected an integer >= 1 frames, got {delta!r}")
+        step = int(delta)
+        first = np.arange(n - step) if all_pairs else np.arange(0, n, step)[:-1]
+        pairs = np.column_stack([first, first + step]).astype(np.int64)
+    elif delta_unit == "m":
+        if not (np.isfinite(delta) and delta > 0):
+            raise ConfigError(f"delta: expected a distance > 0 m, got {delta!r}")
+        source = ref if pairs_from_reference else est
+        pairs = path_pairs(source[:, :3, 3], float(delta), all_pairs=all_pairs,
+                           tol=rel_tol * float(delta))  # fmt: skip
+    else:
+        raise ConfigError(f"delta_unit: expected 'frames' or 'm', got {delta_unit!r}")
     if pairs.shape[0] == 0:
-        raise InputError(f"relative pose error: {n} poses hold no pair {delta} frames apart")
+        raise InputError(
+            f"relative pose error: {n} poses hold no pair {delta:g} {delta_unit} apart"
+        )
     i, j = pairs[:, 0], pairs[:, 1]
     q_rel = np.einsum("nij,njk->nik", _inverse(ref[i]), ref[j])
     p_rel = np.einsum("nij,njk->nik", _inverse(est[i]), est[j])
@@ -250,7 +304,8 @@ class PoseErrorResult:
     rpe_pairs: IndexArray
     rpe_translation: FloatArray
     rpe_rotation: FloatArray
-    delta: int
+    delta: float
+    delta_unit: DeltaUnit
     all_pairs: bool
     matched: int
     reference_poses: int
@@ -267,7 +322,7 @@ class PoseErrorResult:
 
     @property
     def rpe(self) -> ErrorStatistics:
-        """RPE, translation part [m] per ``delta`` frames."""
+        """RPE, translation part [m] per ``delta`` (frames or metres)."""
         return ErrorStatistics.of(self.rpe_translation)
 
     @property
@@ -286,7 +341,8 @@ class PoseErrorResult:
             "estimate_poses": self.estimate_poses,
             "ape_translation_m": self.ape.as_dict(),
             "ape_rotation_deg": self.ape_rotation_deg.as_dict(),
-            "rpe_delta_frames": self.delta,
+            "rpe_delta": self.delta,
+            "rpe_delta_unit": self.delta_unit,
             "rpe_all_pairs": self.all_pairs,
             "rpe_translation_m": self.rpe.as_dict(),
             "rpe_rotation_deg": self.rpe_rotation_deg.as_dict(),
@@ -303,8 +359,10 @@ def compare_trajectories(
     n_align: int | None = None,
     max_diff: float = 0.01,
     offset: float = 0.0,
-    delta: int = 1,
+    delta: float = 1,
     all_pairs: bool = False,
+    delta_unit: DeltaUnit = "frames",
+    pairs_from_reference: bool = False,
 ) -> PoseErrorResult:
     """Associate (by stamps when both have them, else by index: same length needed), align,
     and compute APE and RPE (see the module docstring)."""
@@ -329,8 +387,9 @@ def compare_trajectories(
     aligned, sim = align_estimate(paired_ref, est[i_est], alignment, n_align)
     ape_t, ape_r = absolute_pose_error(paired_ref, aligned)
     pairs, rpe_t, rpe_r = relative_pose_error_se3(
-        paired_ref, aligned, delta=delta, all_pairs=all_pairs
-    )
+        paired_ref, aligned, delta=delta, all_pairs=all_pairs, delta_unit=delta_unit,
+        pairs_from_reference=pairs_from_reference,
+    )  # fmt: skip
     return PoseErrorResult(
         alignment=alignment,
         similarity=sim,
@@ -342,7 +401,8 @@ def compare_trajectories(
         rpe_pairs=pairs,
         rpe_translation=rpe_t,
         rpe_rotation=rpe_r,
-        delta=int(delta),
+        delta=float(delta),
+        delta_unit=delta_unit,
         all_pairs=bool(all_pairs),
         matched=int(i_ref.size),
         reference_poses=int(ref.shape[0]),
