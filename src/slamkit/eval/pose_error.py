@@ -28,10 +28,9 @@ Statistics (:class:`ErrorStatistics`) are those evo prints: rmse, mean, median, 
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import Literal
-
-import itertools
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -43,12 +42,12 @@ from slamkit.geometry.alignment import Similarity, align_points
 __all__ = [
     "ALIGNMENTS",
     "Alignment",
+    "DeltaUnit",
     "ErrorStatistics",
     "PoseErrorResult",
     "absolute_pose_error",
     "align_estimate",
     "associate_stamps",
-    "DeltaUnit",
     "compare_trajectories",
     "path_pairs",
     "relative_pose_error_se3",
