@@ -1,8 +1,8 @@
 """``slamkit eval …``: score a trajectory file. The main app adds :data:`eval_app` as ``eval``.
 
 ``slamkit eval ape|rpe REFERENCE ESTIMATE [--align se3|sim3|se2|none] [--max-diff S]
-[--offset S] [--delta N] [--delta-unit frames|m] [--all-pairs] [--out DIR]`` compares two TUM or KITTI files by evo's
-rules (:func:`slamkit.app.evaluate_files.evaluate_files`) and prints evo's statistics.
+[--offset S] [--delta N] [--delta-unit frames|m] [--all-pairs] [--out DIR]`` compares two
+TUM or KITTI files by evo's rules (:func:`slamkit.app.evaluate_files.evaluate_files`) and prints evo's statistics.
 
 ``slamkit eval relations TRAJ.tum RELATIONS [--max-gap S] [--max-duration S] [--json OUT]``
 reads a TUM trajectory (:func:`slamkit.io.read_tum`) and a ``*.relations`` file
@@ -162,7 +162,8 @@ def _pose_error_command(
             reference, estimate, kind=kind, fmt=fmt, alignment=align,  # type: ignore[arg-type]
             n_align=n_align, max_diff=max_diff, offset=offset, delta=delta,
             delta_unit=delta_unit,  # type: ignore[arg-type]
-            all_pairs=all_pairs, pairs_from_reference=pairs_from_reference, out_dir=target, plots=plots, overwrite=overwrite,
+            all_pairs=all_pairs, pairs_from_reference=pairs_from_reference, out_dir=target,
+            plots=plots, overwrite=overwrite,
         )
     )  # fmt: skip
     r = report.result
