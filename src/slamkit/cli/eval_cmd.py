@@ -2,7 +2,8 @@
 
 ``slamkit eval ape|rpe REFERENCE ESTIMATE [--align se3|sim3|se2|none] [--max-diff S]
 [--offset S] [--delta N] [--delta-unit frames|m] [--all-pairs] [--out DIR]`` compares two
-TUM or KITTI files by evo's rules (:func:`slamkit.app.evaluate_files.evaluate_files`) and prints evo's statistics.
+TUM or KITTI files by evo's rules (:func:`slamkit.app.evaluate_files.evaluate_files`) and
+prints evo's statistics.
 
 ``slamkit eval relations TRAJ.tum RELATIONS [--max-gap S] [--max-duration S] [--json OUT]``
 reads a TUM trajectory (:func:`slamkit.io.read_tum`) and a ``*.relations`` file
