@@ -193,3 +193,16 @@ def test_map_occupancy_honours_the_config_files_data_set(tmp_path):
     res = runner.invoke(app, ["map", "occupancy", "--config", str(cfg), "--data", "rooms-laser",
                               "--out", str(tmp_path / "n")])  # fmt: skip
     assert res.exit_code == 1 and "conflicts" in res.output
+
+
+def test_config_show_with_data_prints_a_file_that_runs_the_defaults(tmp_path):
+    text = _run("config", "show", "ekf-slam", "--data", "landmark-clutter")
+    parsed = tomllib.loads(text)
+    assert parsed["dataset"]["name"] == "landmark-clutter"
+    assert parsed["dataset"]["identities"] is False  # the variant's own default
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text)
+    a, b = tmp_path / "a", tmp_path / "b"
+    _run("run", "ekf-slam", "--config", str(cfg), "--out", str(a), "--no-plots")
+    _run("run", "ekf-slam", "--data", "landmark-clutter", "--out", str(b), "--no-plots")
+    assert (a / "trajectory.tum").read_bytes() == (b / "trajectory.tum").read_bytes()

@@ -37,6 +37,7 @@ __all__ = [
     "DEFAULT_DATA",
     "RunConfig",
     "apply_overrides",
+    "dataset_toml",
     "defaults_toml",
     "parse_value",
     "read_run_config",
@@ -235,4 +236,24 @@ def defaults_toml(config_type: type, table: str, title: str = "") -> str:
             lines.append(f"# {name} =   (unset)")
         else:
             lines.append(f"{name} = {_toml_value(doc.default)}")
+    return "\n".join(lines) + "\n"
+
+
+def dataset_toml(data: str, options: Mapping[str, Any]) -> str:
+    """A ``[dataset]`` table naming ``data`` (a registered name, else ``path``) with the
+    data set's resolved ``options`` (as ``config.json`` writes them)."""
+    from slamkit.datasets import DATASETS
+
+    key = "name" if data in DATASETS else "path"
+    lines = ["[dataset]", f"{key} = {_toml_value(data)}"]
+    nested = []
+    for name, value in options.items():
+        if value is None:
+            lines.append(f"# {name} =   (unset)")
+        elif isinstance(value, Mapping):
+            nested.append((name, value))
+        else:
+            lines.append(f"{name} = {_toml_value(value)}")
+    for name, value in nested:
+        lines.append(f"{name} = {_toml_value(value)}")
     return "\n".join(lines) + "\n"
