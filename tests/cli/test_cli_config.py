@@ -206,3 +206,11 @@ def test_config_show_with_data_prints_a_file_that_runs_the_defaults(tmp_path):
     _run("run", "ekf-slam", "--config", str(cfg), "--out", str(a), "--no-plots")
     _run("run", "ekf-slam", "--data", "landmark-clutter", "--out", str(b), "--no-plots")
     assert (a / "trajectory.tum").read_bytes() == (b / "trajectory.tum").read_bytes()
+
+
+def test_map_occupancy_takes_set_overrides(tmp_path):
+    out = tmp_path / "m"
+    _run("map", "occupancy", "--no-agreement", "--out", str(out), "--set", "model.max_range=12",
+         "--set", "dataset.sigma_v=0.2")  # fmt: skip
+    text = (out / "config.json").read_text()
+    assert '"max_range": 12.0' in text and '"sigma_v": 0.2' in text

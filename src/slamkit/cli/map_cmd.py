@@ -103,6 +103,16 @@ def occupancy_command(
         Path | None,
         typer.Option(help=escape("TOML/JSON file with [mapping] and [dataset] tables and a seed.")),
     ] = None,
+    set_: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--set",
+            metavar="KEY=VALUE",
+            help="Override one setting: KEY dotted into sections (model.alpha=0.2), "
+            "dataset.KEY for a data set option, seed=N; repeatable.",
+            show_default=False,
+        ),
+    ] = None,
     max_range: Annotated[
         str | None,
         typer.Option(
@@ -143,7 +153,7 @@ def occupancy_command(
     map.pgm + map.yaml (ROS map_server), quality.json and config.json."""
     _occupancy(
         data, resolution, out, config, max_range, method, poses, seed, data_root, agreement,
-        overwrite,
+        overwrite, set_ or [],
     )  # fmt: skip
 
 
@@ -176,12 +186,13 @@ def _occupancy(
     data_root: Path | None,
     agreement: bool,
     overwrite: bool,
+    overrides: list[str] | None = None,
 ) -> None:
     from slamkit.app.mapping import occupancy_map_job
-    from slamkit.app.runconfig import read_run_config, resolve_data
+    from slamkit.app.runconfig import apply_overrides, read_run_config, resolve_data
     from slamkit.errors import ConfigError
 
-    cfg = read_run_config(config, "mapping")
+    cfg = apply_overrides(read_run_config(config, "mapping"), overrides or [], "mapping")
     mapping, ds_options, cfg_seed = dict(cfg.settings), cfg.dataset_options, cfg.seed
     data = resolve_data(data, cfg, default="rooms-laser")
     if method is not None:  # options given on the command line win over the config file
