@@ -8,7 +8,10 @@ JSON-able dictionaries that are written next to every result.
 
 from __future__ import annotations
 
+import ast
 import dataclasses
+import inspect
+import itertools
 import json
 import math
 import tomllib
@@ -26,8 +29,10 @@ from slamkit.errors import ConfigError
 __all__ = [
     "Check",
     "Section",
+    "SettingDoc",
     "config_from_mapping",
     "config_to_dict",
+    "describe_settings",
     "finite_above",
     "finite_at_least",
     "fraction",
@@ -170,6 +175,8 @@ def _coerce(value: Any, annotation: Any, where: str) -> Any:
             _coerce(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=True))
         )
     if annotation is float:
+        if isinstance(value, str) and value in ("inf", "-inf"):
+            value = float(value)  # how config_to_dict writes an infinite setting in JSON
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ConfigError(f"{where}: expected a number, got {value!r}")
         if not math.isfinite(float(value)) and value != math.inf:
@@ -297,3 +304,83 @@ def load_config_file(path: str | Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: expected a table of settings at the top level")
     return data
+
+
+# -- documentation of the settings ------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class SettingDoc:
+    """One setting of a config dataclass: its dotted ``key`` (``"kld.epsilon"`` inside a
+    section), its default as written to ``config.json``, its type and the documentation
+    (the attribute docstring under the field, ``""`` when it has none)."""
+
+    key: str
+    default: Any
+    type: str
+    doc: str
+    expected: str = ""
+    """What the setting's check allows (from :func:`setting`), ``""`` when unchecked."""
+
+
+def _attribute_docs(cls: type) -> dict[str, str]:
+    """The attribute docstrings (a string literal right after a field) of ``cls`` and its
+    dataclass bases, read from the source (Python keeps no other record of them)."""
+    docs: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        if not dataclasses.is_dataclass(klass):
+            continue
+        try:
+            tree = ast.parse(inspect.getsource(klass))
+        except (OSError, TypeError, SyntaxError):  # no source (frozen app, REPL class)
+            continue
+        body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
+        for node, after in itertools.pairwise(body):
+            if (
+                isinstance(node, ast.AnnAssign)
+                and isinstance(node.target, ast.Name)
+                and isinstance(after, ast.Expr)
+                and isinstance(after.value, ast.Constant)
+                and isinstance(after.value.value, str)
+            ):
+                docs[node.target.id] = inspect.cleandoc(after.value.value)
+    return docs
+
+
+def _type_name(annotation: Any) -> str:
+    if isinstance(annotation, type):
+        return annotation.__name__
+    return str(annotation).replace("typing.", "")
+
+
+def describe_settings(cls: type, prefix: str = "", instance: Any = None) -> list[SettingDoc]:
+    """Every setting of the config dataclass ``cls`` with its default (that of ``instance``
+    when given) and documentation, in declaration order; the settings of a section follow
+    under ``section.`` keys, with the defaults the enclosing config gives that section."""
+    if not (dataclasses.is_dataclass(cls) and isinstance(cls, type)):
+        raise TypeError(f"{cls!r} is not a dataclass type")
+    docs = _attribute_docs(cls)
+    hints = typing.get_type_hints(cls)
+    value = cls() if instance is None else instance
+    defaults = config_to_dict(value)
+    out: list[SettingDoc] = []
+    sections: list[tuple[str, type]] = []
+    for f in dataclasses.fields(cls):
+        if not f.init:
+            continue
+        hint = hints[f.name]
+        if dataclasses.is_dataclass(hint) and isinstance(hint, type):
+            sections.append((f.name, hint))
+            continue
+        out.append(
+            SettingDoc(
+                f"{prefix}{f.name}",
+                defaults[f.name],
+                _type_name(hint),
+                docs.get(f.name, ""),
+                f.metadata.get("expected", ""),
+            )
+        )
+    for name, section in sections:
+        out += describe_settings(section, f"{prefix}{name}.", getattr(value, name))
+    return out

@@ -25,6 +25,7 @@ def test_run_dead_reckoning_writes_trajectory_metrics_config_and_plots(tmp_path)
     assert files == [
         "config.json",
         "errors.png",
+        "groundtruth.tum",
         "metrics.json",
         "nees.png",
         "trajectory.png",

@@ -160,10 +160,11 @@ def test_cli_runs_on_a_carmen_log_and_names_the_output_after_it(tmp_path, monkey
 
 
 def test_cli_unknown_format_is_one_line_with_the_formats(tmp_path):
-    (tmp_path / "scan.csv").write_text("1,2\n")
-    res = runner.invoke(app, ["run", "dead-reckoning", "--data", str(tmp_path / "scan.csv")])
+    (tmp_path / "scan.xyz").write_text("1,2\n")
+    res = runner.invoke(app, ["run", "dead-reckoning", "--data", str(tmp_path / "scan.xyz")])
     assert res.exit_code == 1
-    assert "unknown kind of file '.csv'" in res.output and "CARMEN .clf/.log" in res.output
+    assert "unknown kind of file '.xyz'" in res.output and "CARMEN .clf/.log" in res.output
+    assert "landmark data .csv" in res.output
 
 
 # ------------------------------------------------------------------------ a registered bag's path

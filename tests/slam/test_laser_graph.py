@@ -82,8 +82,9 @@ def test_the_loop_is_closed_and_no_closure_is_false(slam) -> None:
 def test_graph_slam_beats_dead_reckoning_and_scan_to_keyframe_odometry(loop_world, result) -> None:
     """ATE (SE(2)-aligned RMSE) on the ring, seed 0: dead reckoning 0.93 m, scan-to-keyframe
     laser odometry 0.26 m, graph SLAM 0.081 m (seeds 1, 2: 0.84 / 0.19 / 0.098 and
-    1.56 / 0.33 / 0.094 m; with 4 neighbour edges per keyframe 0.066 / 0.067 / 0.077 m). Laser odometry against its point map scores 0.067 m here: on a
-    ring this small its 20 m map reaches back to the first corridor, a closure of its own."""
+    1.56 / 0.33 / 0.094 m; with 4 neighbour edges per keyframe 0.066 / 0.067 / 0.077 m).
+    Laser odometry against its point map scores 0.067 m here: on a ring this small its
+    20 m map reaches back to the first corridor, a closure of its own."""
     graph = evaluate(result, loop_world).scores.ate.rmse
     dead = evaluate(run("dead-reckoning", loop_world), loop_world).scores.ate.rmse
     keyframe = run("laser-odometry", loop_world, config={"reference": "keyframe"})

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from slamkit.app.outputs import check_formats, write_result_files
 from slamkit.app.presets import resolve_preset
 from slamkit.datasets.files import load_data
+from slamkit.datasets.stream import Dataset
 from slamkit.errors import ConfigError
 from slamkit.eval.records import RunScores
 from slamkit.io import atomic_folder, write_json, write_tum
@@ -28,9 +30,10 @@ class RunRequest:
     mappings (from a config file's ``[estimator]`` and ``[dataset]`` tables)."""
 
     estimator: str
-    dataset: str
-    """A registered data set's name, or the path of a laser log
-    (:func:`slamkit.datasets.files.load_data`)."""
+    dataset: str | Dataset
+    """A registered data set's name, the path of a file (:func:`slamkit.datasets.files.
+    load_data`), or a :class:`~slamkit.datasets.Dataset` built in Python (its
+    ``dataset_options`` and ``seed`` then do not apply to it; ``config.json`` names it)."""
     out_dir: Path
     seed: int = 0
     estimator_config: Mapping[str, Any] = field(default_factory=dict)
@@ -44,6 +47,8 @@ class RunRequest:
     """Settings measured for this estimator on this data set (:mod:`slamkit.app.presets`),
     laid under ``estimator_config``: ``"auto"`` the matching preset if there is one, a
     preset's name, or ``None`` for none."""
+    formats: tuple[str, ...] = ()
+    """Trajectory formats besides TUM (``"kitti"``: :mod:`slamkit.app.outputs`)."""
 
 
 @dataclass(frozen=True)
@@ -65,22 +70,33 @@ class RunReport:
         return self.scores.as_dict()
 
 
-def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
+def run_job(
+    request: RunRequest,
+    progress: Progress | None = None,
+    stage: Callable[[str], None] | None = None,
+) -> RunReport:
     """Load the data set, run the estimator, evaluate, and write into ``request.out_dir``:
     ``trajectory.tum``, ``metrics.json``, ``config.json`` (the resolved configuration),
-    ``graph.g2o`` when the estimator built a pose graph, ``map.pgm`` + ``map.yaml`` (ROS
-    ``map_server``) when it built an occupancy grid, and PNG plots. The folder is
-    written completely or not at all."""
+    the files of :func:`slamkit.app.outputs.write_result_files` (``landmarks.csv``,
+    ``groundtruth.tum``, ``graph.g2o``, ``map.pgm`` + ``map.yaml``, KITTI on request) and
+    PNG plots. The folder is written completely or not at all. ``stage(text)`` is told of
+    the steps after the run (plots, the animation), which take long on big data sets."""
+    say = stage if stage is not None else (lambda text: None)
     entry = get_estimator_entry(request.estimator)
+    given = request.dataset if isinstance(request.dataset, Dataset) else None
     config, preset = resolve_preset(
-        entry.name, request.dataset, request.estimator_config, request.preset
+        entry.name,
+        given.name if given is not None else str(request.dataset),
+        request.estimator_config,
+        request.preset,
     )
     entry.make_config(config)  # fail on bad config before loading
     if isinstance(request.seed, bool) or not isinstance(request.seed, int) or request.seed < 0:
         raise ConfigError(f"seed: expected an integer >= 0, got {request.seed!r}")
+    check_formats(request.formats)
     check_output_folder(request.out_dir, overwrite=request.overwrite)  # before the work
-    dataset = load_data(
-        request.dataset,
+    dataset = given or load_data(
+        str(request.dataset),
         seed=request.seed,
         options=request.dataset_options,
         data_root=request.data_root,
@@ -94,11 +110,13 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         progress=progress,
         frames=frames,
     )
+    say("scoring the run")
     evaluation = evaluate(result, dataset)
     figures = {}
     if request.plots:
         from slamkit.viz.report import run_figures  # plotting only when asked for
 
+        say("drawing the plots")
         figures = run_figures(result, dataset, evaluation)
     resolved = {
         "estimator": {"name": entry.name, **result.config},
@@ -114,21 +132,18 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         write_tum(tmp / "trajectory.tum", result.times, result.poses)
         write_json(tmp / "metrics.json", evaluation.metrics)
         write_json(tmp / "config.json", resolved)
-        if result.output.grid is not None:  # the map for ROS's map_server
-            from slamkit.io.rosmap import write_ros_map
-
-            write_ros_map(result.output.grid, tmp / "map.pgm", tmp / "map.yaml")
-        if result.output.graph is not None:  # a pose-graph estimator's graph, for other tools
-            from slamkit.io.posegraph import write_graph
-
-            write_graph(result.output.graph, tmp / "graph.g2o", family="g2o")
+        write_result_files(tmp, result, dataset, request.formats)  # landmarks, truth, graph
         if figures:
             from slamkit.viz import save_figure
+
+            say(f"writing {len(figures)} plots")
 
             for name, fig in figures.items():
                 save_figure(fig, tmp / name)
         if request.animate:
             from slamkit.viz.animation import save_animation
+
+            say(f"writing animation.gif ({ANIMATION_FRAMES} frames)")
             from slamkit.viz.report import gps_alignment
 
             save_animation(

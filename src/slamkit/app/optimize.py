@@ -38,7 +38,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from slamkit.config import config_from_mapping, config_to_dict
-from slamkit.errors import ConfigError, InputError
+from slamkit.datasets.paths import find_data_root
+from slamkit.errors import ConfigError, DataNotFoundError, InputError
 from slamkit.io import atomic_folder, write_json
 from slamkit.io.graphfiles.families import FAMILIES, LANDMARK_KINDS, POSE_PAIR_KINDS
 from slamkit.io.posegraph import read_graph, write_graph
@@ -60,7 +61,7 @@ if TYPE_CHECKING:
     from slamkit.optim.settings import InitName
     from slamkit.viz.plots import Figure  # app never imports matplotlib itself
 
-__all__ = ["OptimizeReport", "OptimizeRequest", "optimize_graph_job"]
+__all__ = ["OptimizeReport", "OptimizeRequest", "find_graph_file", "optimize_graph_job"]
 
 SOLVERS = ("lm", "gn", "dogleg")
 INITS = ("file", "odometry", "chordal", "grow")
@@ -337,11 +338,29 @@ def _figure(
     )
 
 
+def find_graph_file(path: str | Path, data_root: str | Path | None = None) -> Path:
+    """``path`` if it exists, else the same relative path under the data folder
+    (``SLAMKIT_DATA``, :func:`~slamkit.datasets.find_data_root`), so ``posegraph2d/intel.g2o``
+    names the shared file from anywhere; neither: :class:`~slamkit.errors.DataNotFoundError`
+    saying where it looked."""
+    p = Path(path).expanduser()
+    if p.exists():
+        return p
+    root = find_data_root(data_root)
+    if not p.is_absolute() and root is not None and (root / p).exists():
+        return root / p
+    where = "" if root is None or p.is_absolute() else f" (nor under the data folder {root})"
+    raise DataNotFoundError(f"{p}: not found{where}")
+
+
 def optimize_graph_job(
-    request: OptimizeRequest, progress: Callable[[int, int], None] | None = None
+    request: OptimizeRequest,
+    progress: Callable[[int, int], None] | None = None,
+    iterations: Callable[[IterationInfo], None] | None = None,
 ) -> OptimizeReport:
     """Read ``request.path``, optimise it and write the files of the module docstring into
-    ``request.out_dir``. ``progress(iteration, max_iterations)`` runs after every iteration.
+    ``request.out_dir``. ``progress(iteration, max_iterations)`` runs after every iteration,
+    and ``iterations(info)`` with the iteration's record (χ², cost, step, times).
 
     Bad options raise :class:`~slamkit.errors.ConfigError` before the file is read; a
     malformed file raises :class:`~slamkit.errors.DatasetFormatError` naming the file and
@@ -364,6 +383,8 @@ def optimize_graph_job(
     def on_iteration(info: IterationInfo) -> None:
         if progress is not None:
             progress(info.iteration, cfg.stopping.max_iterations)
+        if iterations is not None:
+            iterations(info)
 
     # The folder check comes before the work; on any error the partial folder is removed.
     with atomic_folder(request.out_dir, overwrite=request.overwrite) as tmp:

@@ -4,8 +4,7 @@ bar and the splitting of a configuration file into its tables."""
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, ParamSpec, TypeVar
 
@@ -13,13 +12,53 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
+from slamkit.cli.progress import ERR_CONSOLE, ProgressHandle, progress_bar
 from slamkit.errors import SlamkitError
+
+__all__ = [
+    "ProgressHandle",
+    "console",
+    "err_console",
+    "known_errors",
+    "progress_bar",
+    "split_config",
+    "terminate",
+]
 
 P = ParamSpec("P")
 R = TypeVar("R")
 
 console = Console()
-err_console = Console(stderr=True)
+err_console = ERR_CONSOLE
+
+
+def _quiet_types() -> None:
+    """Help screens without type noise: typer (0.2x) prints a type after every option —
+    ``<bool>`` after each flag and ``--help``, ``<str>`` after every free-text option — which
+    says nothing the option's name and help do not. Flags and plain strings are shown
+    without one; choices (``<lm|gn|dogleg>``), numbers and paths keep theirs. Applied once,
+    to typer's option class (a no-op on versions without ``display_type_rich``)."""
+    from typer.core import TyperArgument, TyperOption
+
+    for cls in (TyperOption, TyperArgument):
+        original = getattr(cls, "display_type_rich", None)
+        if original is None or getattr(original, "slamkit_quiet", False):
+            continue
+        cls.display_type_rich = _quiet(original)  # type: ignore[method-assign, assignment]
+
+
+def _quiet(original: Callable[[Any, Any], str | None]) -> Callable[[Any, Any], str | None]:
+    def display_type_rich(self: Any, ctx: Any) -> str | None:
+        if self.metavar is None and getattr(self, "is_flag", False):
+            return None
+        shown = original(self, ctx)
+        return None if shown == "<str>" else shown
+
+    display_type_rich.slamkit_quiet = True  # type: ignore[attr-defined]
+    return display_type_rich
+
+
+_quiet_types()
 
 
 class Terminated(KeyboardInterrupt):
@@ -55,55 +94,13 @@ def known_errors(fn: Callable[P, R]) -> Callable[P, R]:
     return wrapper
 
 
-@contextmanager
-def progress_bar(label: str, unit: str = "events") -> Iterator[Callable[[int, int], None]]:
-    """A transient rich progress bar on stderr (silent when stderr is not a terminal);
-    yields the ``progress(done, total)`` callback the library functions take."""
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        TextColumn("{task.completed}/{task.total} " + unit),
-        TimeElapsedColumn(),
-        console=err_console,
-        transient=True,
-        disable=not err_console.is_terminal,
-    ) as bar:
-        task = bar.add_task(label, total=None)
-
-        def update(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total)
-
-        yield update
-
-
 def split_config(
     path: Path | None, main_table: str
 ) -> tuple[dict[str, Any], dict[str, Any], int | None]:
-    """Read a TOML/JSON configuration file into its ``[main_table]`` and ``[dataset]`` tables
-    and an optional top-level integer ``seed``; any other top-level key is an error. A
-    ``name`` key in either table, and a ``path`` key in ``[dataset]``, are informational (as
-    written in ``config.json``) and dropped."""
-    if path is None:
-        return {}, {}, None
-    from slamkit.config import load_config_file
-    from slamkit.errors import ConfigError
+    """A TOML/JSON configuration file's ``[main_table]`` and ``[dataset]`` options and its
+    ``seed`` (:func:`slamkit.app.runconfig.read_run_config`, which also gives the data set the
+    file names and its preset)."""
+    from slamkit.app.runconfig import read_run_config
 
-    raw = load_config_file(path)
-    unknown = sorted(set(raw) - {main_table, "dataset", "seed"})
-    if unknown:
-        raise ConfigError(
-            f"{path}: unknown section(s) {', '.join(unknown)}; expected {main_table}, dataset, seed"
-        )
-    seed = raw.get("seed")
-    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
-        raise ConfigError(f"{path}: seed must be an integer, got {seed!r}")
-    tables = []
-    for name in (main_table, "dataset"):
-        table = raw.get(name, {})
-        if not isinstance(table, dict):
-            raise ConfigError(f"{path}: [{name}] must be a table of settings")
-        dropped = {"name", "path"} if name == "dataset" else {"name"}
-        tables.append({k: v for k, v in table.items() if k not in dropped})
-    return tables[0], tables[1], seed
+    cfg = read_run_config(path, main_table)
+    return dict(cfg.settings), dict(cfg.dataset_options), cfg.seed

@@ -1,5 +1,10 @@
 """``slamkit eval …``: score a trajectory file. The main app adds :data:`eval_app` as ``eval``.
 
+``slamkit eval ape|rpe REFERENCE ESTIMATE [--align se3|sim3|se2|none] [--max-diff S]
+[--offset S] [--delta N] [--delta-unit frames|m] [--all-pairs] [--out DIR]`` compares two
+TUM or KITTI files by evo's rules (:func:`slamkit.app.evaluate_files.evaluate_files`) and
+prints evo's statistics.
+
 ``slamkit eval relations TRAJ.tum RELATIONS [--max-gap S] [--max-duration S] [--json OUT]``
 reads a TUM trajectory (:func:`slamkit.io.read_tum`) and a ``*.relations`` file
 (:func:`slamkit.datasets.read_relations`), calls :func:`slamkit.eval.relation_errors` and
@@ -22,8 +27,9 @@ from slamkit.cli._common import console, known_errors
 if TYPE_CHECKING:
     from slamkit._validation import FloatArray
     from slamkit.eval import RelationError
+    from slamkit.eval.pose_error import PoseErrorResult
 
-__all__ = ["eval_app", "relations_table"]
+__all__ = ["eval_app", "pose_error_table", "relations_table"]
 
 eval_app = typer.Typer(
     help="Score trajectory files against reference data.",
@@ -113,3 +119,125 @@ def relations_command(
             },
         )
         console.print(f"wrote [bold]{escape(str(json_out))}[/]", soft_wrap=True)
+
+
+def pose_error_table(result: PoseErrorResult, kind: str) -> Table:
+    """APE or RPE statistics (translation [m], rotation [deg]) as evo prints them."""
+    if kind == "ape":
+        stats = (result.ape, result.ape_rotation_deg)
+    else:
+        stats = (result.rpe, result.rpe_rotation_deg)
+    table = Table(show_header=True, header_style="bold")
+    table.add_column("statistic")
+    table.add_column(escape(f"{kind.upper()} translation [m]"), justify="right")
+    table.add_column(escape(f"{kind.upper()} rotation [deg]"), justify="right")
+    for key in ("rmse", "mean", "median", "std", "min", "max", "sse"):
+        table.add_row(key, *(f"{getattr(s, key):.6f}" for s in stats))
+    table.add_row("pairs", *(str(s.count) for s in stats))
+    return table
+
+
+def _pose_error_command(
+    kind: str,
+    reference: Path,
+    estimate: Path,
+    *,
+    fmt: str,
+    align: str,
+    n_align: int | None,
+    max_diff: float,
+    offset: float,
+    delta: float,
+    delta_unit: str,
+    all_pairs: bool,
+    pairs_from_reference: bool,
+    out: Path | None,
+    plots: bool,
+    overwrite: bool,
+) -> None:
+    from slamkit.app.evaluate_files import EvalFilesRequest, evaluate_files
+
+    target = out if out is not None else Path("results") / f"{kind}-{estimate.stem}"
+    report = evaluate_files(
+        EvalFilesRequest(
+            reference, estimate, kind=kind, fmt=fmt, alignment=align,  # type: ignore[arg-type]
+            n_align=n_align, max_diff=max_diff, offset=offset, delta=delta,
+            delta_unit=delta_unit,  # type: ignore[arg-type]
+            all_pairs=all_pairs, pairs_from_reference=pairs_from_reference, out_dir=target,
+            plots=plots, overwrite=overwrite,
+        )
+    )  # fmt: skip
+    r = report.result
+    console.print(
+        f"{escape(estimate.name)} against {escape(reference.name)}: {r.matched} pairs "
+        f"(of {r.estimate_poses} estimated, {r.reference_poses} reference poses), "
+        f"alignment {r.alignment}"
+        + ("" if r.similarity is None else f", scale {r.similarity.scale:.6g}")
+        + ("" if kind == "ape" else f"; {len(r.rpe_pairs)} pairs {r.delta:g} {r.delta_unit} apart"),
+        soft_wrap=True,
+    )
+    console.print(pose_error_table(r, kind))
+    console.print(f"wrote {', '.join(report.files)} to [bold]{escape(str(report.out_dir))}[/]")
+
+
+_REF_HELP = "Reference trajectory (TUM: 'time x y z qx qy qz qw'; KITTI: 12 numbers a line)."
+_EST_HELP = "Estimated trajectory, same format."
+_FMT = typer.Option(
+    "--format",
+    metavar="auto|tum|kitti",
+    help="File format: auto (KITTI when 12 numbers a line), tum, kitti.",
+)
+_ALIGN = typer.Option(
+    metavar="se3|sim3|se2|none",
+    help="Umeyama alignment of the estimate: se3, sim3 (with scale), se2 (planar: rotation "
+    "about z), none.",
+)
+_N_ALIGN = typer.Option(help="Align on the first N pairs only (default: all).", show_default=False)
+_MAX_DIFF = typer.Option(help=escape("Largest stamp difference of a pair [s] (TUM)."))
+_OFFSET = typer.Option(help=escape("Added to the estimate's stamps before pairing [s]."))
+_DELTA = typer.Option(help="RPE: pairs this far apart (in --delta-unit).")
+_DELTA_UNIT = typer.Option(
+    metavar="frames|m", help="RPE: delta in poses, or in metres of travelled path."
+)
+_ALL = typer.Option(help="RPE: every pair i, i+delta (default: i = 0, delta, 2·delta, …).")
+_FROM_REF = typer.Option(
+    help="RPE in metres: measure the path on the reference (default: on the estimate, as evo)."
+)
+_OUT = typer.Option(help="Output folder (default results/KIND-ESTIMATE).", show_default=False)
+
+
+def _make_command(kind: str) -> None:
+    @eval_app.command(kind)
+    @known_errors
+    def command(
+        reference: Annotated[Path, typer.Argument(help=_REF_HELP)],
+        estimate: Annotated[Path, typer.Argument(help=_EST_HELP)],
+        fmt: Annotated[str, _FMT] = "auto",
+        align: Annotated[str, _ALIGN] = "se3",
+        n_align: Annotated[int | None, _N_ALIGN] = None,
+        max_diff: Annotated[float, _MAX_DIFF] = 0.01,
+        offset: Annotated[float, _OFFSET] = 0.0,
+        delta: Annotated[float, _DELTA] = 1,
+        delta_unit: Annotated[str, _DELTA_UNIT] = "frames",
+        all_pairs: Annotated[bool, _ALL] = False,
+        pairs_from_reference: Annotated[bool, _FROM_REF] = False,
+        out: Annotated[Path | None, _OUT] = None,
+        plots: Annotated[bool, typer.Option(help="Write PNG plots.")] = True,
+        overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
+    ) -> None:
+        _pose_error_command(
+            kind, reference, estimate, fmt=fmt, align=align, n_align=n_align,
+            max_diff=max_diff, offset=offset, delta=delta, delta_unit=delta_unit,
+            all_pairs=all_pairs, pairs_from_reference=pairs_from_reference, out=out,
+            plots=plots, overwrite=overwrite,
+        )  # fmt: skip
+
+    command.__doc__ = (
+        f"{'Absolute' if kind == 'ape' else 'Relative'} pose error of ESTIMATE against "
+        "REFERENCE, by evo's rules (stamp association, Umeyama alignment); writes "
+        f"metrics.json (APE and RPE), trajectories.png and {kind}.png."
+    )
+
+
+_make_command("ape")
+_make_command("rpe")

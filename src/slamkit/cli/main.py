@@ -17,7 +17,8 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from slamkit.cli._common import console, known_errors, progress_bar, split_config, terminate
+from slamkit.cli._common import console, known_errors, progress_bar, terminate
+from slamkit.cli.config_cmd import config_app
 from slamkit.cli.eval_cmd import eval_app
 from slamkit.cli.map_cmd import map_app
 from slamkit.cli.optimize_cmd import optimize_command
@@ -36,6 +37,31 @@ data_app = typer.Typer(help="Data sets: simulated scenarios and real-data loader
 app.add_typer(data_app, name="data")
 app.add_typer(map_app, name="map")
 app.add_typer(eval_app, name="eval")
+app.add_typer(config_app, name="config")
+
+
+def _version(value: bool) -> None:
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            number = version("slamkit")
+        except PackageNotFoundError:  # run from a source tree that was never installed
+            number = "unknown (not installed)"
+        typer.echo(f"slamkit {number}")
+        raise typer.Exit
+
+
+@app.callback()
+def main_options(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_version, is_eager=True, help="Print the version and exit."
+        ),
+    ] = False,
+) -> None:
+    """Probabilistic robot localization, mapping and SLAM."""
 
 
 def _render_metrics(scores: RunScores) -> Table:
@@ -79,7 +105,10 @@ def _render_metrics(scores: RunScores) -> Table:
     assoc = scores.association
     if isinstance(assoc, AssociationScores):
         add("association accuracy", assoc.accuracy, ".4f")
-        add("duplicate landmarks", assoc.duplicates, "d")
+        # AssociationScores.duplicates: estimated landmarks that estimate no true one (mapped
+        # twice, clutter, a missed loop closure); merged: one estimate for several true ones
+        add("spurious landmarks (match no true one)", assoc.duplicates, "d")
+        add("merged landmarks (one for several true)", assoc.merged, "d")
     rel = scores.relations
     if isinstance(rel, RelationError):  # mean ± std as in the published tables
         add(
@@ -99,8 +128,8 @@ def _render_metrics(scores: RunScores) -> Table:
 
 def _run(
     estimator: str,
-    data: str,
-    out: Path,
+    data: str | None,
+    out: Path | None,
     *,
     config: Path | None,
     seed: int | None,
@@ -108,26 +137,35 @@ def _run(
     plots: bool,
     overwrite: bool,
     animate: bool = False,
-    preset: str = "auto",
+    preset: str | None = None,
+    overrides: list[str] | None = None,
+    formats: list[str] | None = None,
 ) -> None:
     from slamkit.app import RunRequest, run_job
+    from slamkit.app.runconfig import apply_overrides, read_run_config, resolve_data
+    from slamkit.datasets.files import data_label
 
-    est_cfg, ds_opts, cfg_seed = split_config(config, "estimator")
+    cfg = apply_overrides(read_run_config(config, "estimator"), overrides or [], "estimator")
+    data = resolve_data(data, cfg)
+    seed = seed if seed is not None else cfg.seed
+    preset = preset if preset is not None else (cfg.preset or "auto")
+    target = out if out is not None else Path("results") / f"{estimator}-{data_label(data)}"
     request = RunRequest(
         estimator=estimator,
         dataset=data,
-        out_dir=out,
-        seed=seed if seed is not None else (cfg_seed if cfg_seed is not None else 0),
-        estimator_config=est_cfg,
-        dataset_options=ds_opts,
+        out_dir=target,
+        seed=seed if seed is not None else 0,
+        estimator_config=cfg.settings,
+        dataset_options=cfg.dataset_options,
         data_root=data_root,
         plots=plots,
         overwrite=overwrite,
         animate=animate,
         preset=None if preset == "none" else preset,
+        formats=tuple(f for f in (formats or []) if f != "tum"),
     )
     with progress_bar(f"{estimator} on {data}") as progress:
-        report = run_job(request, progress)
+        report = run_job(request, progress, progress.stage)
     if report.preset_settings:
         used = ", ".join(f"{k}={v}" for k, v in report.preset_settings.items())
         console.print(f"preset {report.preset} (config.json has every setting): {used}")
@@ -140,48 +178,79 @@ def _run(
 def run_command(
     estimator: Annotated[str, typer.Argument(help="Estimator name (see `slamkit estimators`).")],
     data: Annotated[
-        str,
+        str | None,
         typer.Option(
             "--data",
             "-d",
+            metavar="NAME|PATH",
             help="Data set name (see `slamkit data list`), or the path of a laser log: ROS 1 "
             ".bag, ROS 2 bag folder, .db3, .mcap, CARMEN .clf/.log/.log.gz (reader options in "
-            r"the config file's \[dataset] table).",
+            r"the config file's \[dataset] table). Default: the config file's \[dataset] "
+            "name or path, else five-features.",
+            show_default=False,
         ),
-    ] = "five-features",
+    ] = None,
     config: Annotated[
         Path | None,
         # "\[" keeps rich markup from swallowing the table names in the help text.
-        typer.Option(help=r"TOML/JSON file with \[estimator] and \[dataset] tables and a seed."),
+        typer.Option(
+            help=r"TOML/JSON file with \[estimator] and \[dataset] tables, seed and preset "
+            "(a run's config.json re-runs it; `slamkit config show ESTIMATOR` prints one).",
+            show_default=False,
+        ),
     ] = None,
-    seed: Annotated[int | None, typer.Option(help="Seed of the simulator and estimator.")] = None,
+    set_: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--set",
+            metavar="KEY=VALUE",
+            help="Override one setting: KEY=VALUE, KEY dotted into sections (kld.epsilon=0.1), "
+            "dataset.KEY for a data set option, seed=N; repeatable.",
+            show_default=False,
+        ),
+    ] = None,
+    seed: Annotated[
+        int | None,
+        typer.Option(help="Seed of the simulator and estimator (default 0).", show_default=False),
+    ] = None,
     out: Annotated[
-        Path | None, typer.Option(help="Output folder (default results/ESTIMATOR-DATA).")
+        Path | None,
+        typer.Option(help="Output folder (default results/ESTIMATOR-DATA).", show_default=False),
     ] = None,
     data_root: Annotated[
-        Path | None, typer.Option(help="Folder of the real data sets (else $SLAMKIT_DATA).")
+        Path | None,
+        typer.Option(help="Folder of the real data sets (else $SLAMKIT_DATA).", show_default=False),
     ] = None,
     plots: Annotated[bool, typer.Option(help="Write PNG plots.")] = True,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
     animate: Annotated[
         bool, typer.Option(help="Also write animation.gif: the estimate and its map over time.")
     ] = False,
-    preset: Annotated[
-        str,
+    formats: Annotated[
+        list[str] | None,
         typer.Option(
-            help="Settings measured for this estimator on this data set: 'auto' (the matching "
-            "preset, if any), 'none', or a preset's name."
+            "--format",
+            metavar="kitti",
+            help="Also write the trajectory in this format: kitti (trajectory.kitti + "
+            "times.txt); tum is always written. Repeatable.",
+            show_default=False,
         ),
-    ] = "auto",
+    ] = None,
+    preset: Annotated[
+        str | None,
+        typer.Option(
+            metavar="auto|none|NAME",
+            help="Settings measured for this estimator on this data set: 'auto' (the matching "
+            "preset, if any; the default), 'none', or a preset's name.",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """Run ESTIMATOR on a data set; write trajectory, metrics, config and plots."""
-    from slamkit.datasets.files import data_label
-
-    target = out if out is not None else Path("results") / f"{estimator}-{data_label(data)}"
     _run(
         estimator,
         data,
-        target,
+        out,
         config=config,
         seed=seed,
         data_root=data_root,
@@ -189,6 +258,8 @@ def run_command(
         overwrite=overwrite,
         animate=animate,
         preset=preset,
+        overrides=set_,
+        formats=formats,
     )
 
 

@@ -19,7 +19,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from slamkit.cli._common import console, known_errors, progress_bar, split_config
+from slamkit.cli._common import console, known_errors, progress_bar
 
 __all__ = ["DEFAULT_MAX_RANGE", "map_app"]
 
@@ -79,7 +79,19 @@ def _table(quality: dict[str, Any], stats: dict[str, Any]) -> Table:
 @map_app.command("occupancy")
 @known_errors
 def occupancy_command(
-    data: Annotated[str, typer.Option("--data", "-d", help="Data set name.")] = "rooms-laser",
+    data: Annotated[
+        str | None,
+        typer.Option(
+            "--data",
+            "-d",
+            metavar="NAME|PATH",
+            help=escape(
+                "Data set name or laser log (default: the config file's [dataset], else "
+                "rooms-laser; a different one in both is an error)."
+            ),
+            show_default=False,
+        ),
+    ] = None,
     resolution: Annotated[
         float | None,
         typer.Option(help=escape("Cell size [m] (default: the config file's, else 0.05).")),
@@ -90,6 +102,16 @@ def occupancy_command(
     config: Annotated[
         Path | None,
         typer.Option(help=escape("TOML/JSON file with [mapping] and [dataset] tables and a seed.")),
+    ] = None,
+    set_: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--set",
+            metavar="KEY=VALUE",
+            help="Override one setting: KEY dotted into sections (model.alpha=0.2), "
+            "dataset.KEY for a data set option, seed=N; repeatable.",
+            show_default=False,
+        ),
     ] = None,
     max_range: Annotated[
         str | None,
@@ -106,11 +128,17 @@ def occupancy_command(
     ] = None,
     method: Annotated[
         str | None,
-        typer.Option(help="Update path: 'ray' (Bresenham, default) or 'cell' (per-cell model)."),
+        typer.Option(
+            metavar="ray|cell",
+            help="Update path: 'ray' (Bresenham, default) or 'cell' (per-cell model).",
+        ),
     ] = None,
     poses: Annotated[
         str | None,
-        typer.Option(help="Known poses: 'truth' (default) or 'odometry' (logs without truth)."),
+        typer.Option(
+            metavar="truth|odometry",
+            help="Known poses: 'truth' (default) or 'odometry' (logs without truth).",
+        ),
     ] = None,
     seed: Annotated[int | None, typer.Option(help="Seed (simulated data, odometry noise).")] = None,
     data_root: Annotated[
@@ -125,7 +153,7 @@ def occupancy_command(
     map.pgm + map.yaml (ROS map_server), quality.json and config.json."""
     _occupancy(
         data, resolution, out, config, max_range, method, poses, seed, data_root, agreement,
-        overwrite,
+        overwrite, set_ or [],
     )  # fmt: skip
 
 
@@ -147,7 +175,7 @@ def _usable_range(value: str | None) -> float | None:
 
 
 def _occupancy(
-    data: str,
+    data: str | None,
     resolution: float | None,
     out: Path | None,
     config: Path | None,
@@ -158,11 +186,15 @@ def _occupancy(
     data_root: Path | None,
     agreement: bool,
     overwrite: bool,
+    overrides: list[str] | None = None,
 ) -> None:
     from slamkit.app.mapping import occupancy_map_job
+    from slamkit.app.runconfig import apply_overrides, read_run_config, resolve_data
     from slamkit.errors import ConfigError
 
-    mapping, ds_options, cfg_seed = split_config(config, "mapping")
+    cfg = apply_overrides(read_run_config(config, "mapping"), overrides or [], "mapping")
+    mapping, ds_options, cfg_seed = dict(cfg.settings), cfg.dataset_options, cfg.seed
+    data = resolve_data(data, cfg, default="rooms-laser")
     if method is not None:  # options given on the command line win over the config file
         if method not in ("ray", "cell"):
             raise ConfigError(f"--method: expected 'ray' or 'cell', got {method!r}")

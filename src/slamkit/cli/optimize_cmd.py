@@ -1,4 +1,4 @@
-"""``slamkit optimize FILE --out DIR``: optimise a pose-graph or landmark-graph file.
+"""``slamkit optimize FILE [--out DIR]``: optimise a pose-graph or landmark-graph file.
 
 Parses the options, calls :func:`slamkit.app.optimize.optimize_graph_job` and prints a short
 table of its metrics and where the files are. Known errors
@@ -10,13 +10,16 @@ imports happen inside the command, so ``slamkit --help`` stays fast.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.markup import escape
 from rich.table import Table
 
-from slamkit.cli._common import console, known_errors, progress_bar
+from slamkit.cli._common import console, err_console, known_errors, progress_bar
+
+if TYPE_CHECKING:
+    from slamkit.optim.loop import IterationInfo
 
 __all__ = ["optimize_command"]
 
@@ -49,43 +52,64 @@ def optimize_command(
     file: Annotated[
         Path, typer.Argument(help="Graph file: g2o, TORO .graph, iSAM/GTSAM .txt (.gz too).")
     ],
-    out: Annotated[Path, typer.Option(help="Output folder.")],
+    out: Annotated[
+        Path | None,
+        typer.Option(help="Output folder (default results/optimize-FILE).", show_default=False),
+    ] = None,
     solver: Annotated[
-        str, typer.Option(help="gn (Gauss-Newton), lm (Levenberg-Marquardt) or dogleg.")
+        str,
+        typer.Option(
+            metavar="lm|gn|dogleg", help="lm (Levenberg-Marquardt), gn (Gauss-Newton) or dogleg."
+        ),
     ] = "lm",
     init: Annotated[
         str | None,
         typer.Option(
+            metavar="file|odometry|chordal|grow",
+            show_default=False,
             help="Start: file (its vertices), odometry, chordal or grow (solves over growing "
             "prefixes; default: file when it has vertices, else grow for landmark graphs and "
-            "chordal for pose graphs)."
+            "chordal for pose graphs).",
         ),
     ] = None,
     robust: Annotated[
-        str, typer.Option(help="Robust kernel: none, huber, cauchy, geman-mcclure, dcs.")
+        str,
+        typer.Option(metavar="none|huber|cauchy|geman-mcclure|dcs", help="Robust kernel."),
     ] = "none",
     robust_width: Annotated[
         float | None,
         typer.Option(help="Kernel width, in whitened-error units (default: the kernel's own)."),
     ] = None,
     objective: Annotated[
-        str, typer.Option(help="g2o (the file's χ²) or sesync (SE-Sync's F).")
+        str,
+        typer.Option(metavar="g2o|sesync", help="g2o (the file's χ²) or sesync (SE-Sync's F)."),
     ] = "g2o",
     max_iterations: Annotated[
         int | None, typer.Option(help="Linearisations at most (default 100).")
     ] = None,
     plots: Annotated[bool, typer.Option(help="Write graph.png (before and after).")] = True,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
+    data_root: Annotated[
+        Path | None,
+        typer.Option(
+            help="Data folder a FILE not found here is looked up in (else $SLAMKIT_DATA).",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """Optimise the pose or landmark graph in FILE and write the results to OUT.
 
-    OUT gets the optimised graph in the format of FILE (iSAM and GTSAM files
-    cannot hold vertices: g2o), graph.png, metrics.json and config.json."""
-    from slamkit.app.optimize import OptimizeRequest, optimize_graph_job
+    FILE not found here is looked up under the data folder (posegraph2d/intel.g2o). OUT gets
+    the optimised graph in the format of FILE (iSAM and GTSAM files cannot hold vertices:
+    g2o), graph.png, metrics.json and config.json. Each iteration's χ² is printed."""
+    from slamkit.app.optimize import OptimizeRequest, find_graph_file, optimize_graph_job
 
+    file = find_graph_file(file, data_root)
+    stem = Path(file.name.removesuffix(".gz")).stem
+    target = out if out is not None else Path("results") / f"optimize-{stem}"
     request = OptimizeRequest(
         path=file,
-        out_dir=out,
+        out_dir=target,
         solver=solver,
         init=init,
         robust_kernel=robust,
@@ -95,8 +119,17 @@ def optimize_command(
         plots=plots,
         overwrite=overwrite,
     )
+
+    def show(info: IterationInfo) -> None:  # one line per iteration, as g2o prints them
+        err_console.print(
+            f"iteration {info.iteration:3d}  χ² {info.chi2:.6g}"
+            + ("" if info.cost == info.chi2 else f"  robust cost {info.cost:.6g}")
+            + ("" if info.accepted else "  (step rejected)"),
+            highlight=False,
+        )
+
     with progress_bar(f"optimising {file.name}", unit="iterations") as progress:
-        report = optimize_graph_job(request, progress)
+        report = optimize_graph_job(request, progress, show)
     console.print(_table(report.metrics))
     for note in report.metrics["output"]["notes"]:
         console.print(f"note: {escape(note)}", soft_wrap=True)

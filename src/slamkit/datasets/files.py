@@ -6,7 +6,9 @@
   ``*.mcap``: one ROS 2 storage file — all read by :func:`slamkit.datasets.rosbag.read_rosbag`;
 * ``*.clf``, ``*.log`` and gzipped ones (``*.gz``: ``.log.gz``, ``.clf.gz``, gzip recognised
   by the content): a raw CARMEN log, read by
-  :func:`slamkit.datasets.carmen_raw.read_carmen_raw_log`.
+  :func:`slamkit.datasets.carmen_raw.read_carmen_raw_log`;
+* ``*.csv``: landmark data (controls or odometry, readings, optional truth), read by
+  :func:`slamkit.datasets.landmark_csv.read_landmark_csv`.
 
 ``options`` are the reader's options (:class:`~slamkit.datasets.rosbag.RosbagOptions`,
 :class:`~slamkit.datasets.carmen_raw.CarmenRawOptions`), from a config file's ``[dataset]``
@@ -33,15 +35,16 @@ __all__ = ["SUPPORTED_FORMATS", "data_label", "file_format", "load_data", "load_
 
 SUPPORTED_FORMATS = (
     "ROS 1 .bag, ROS 2 bag folder (with metadata.yaml), ROS 2 .db3 or .mcap file, "
-    "CARMEN .clf/.log (or gzipped: .clf.gz, .log.gz, .gz)"
+    "CARMEN .clf/.log (or gzipped: .clf.gz, .log.gz, .gz), landmark data .csv"
 )
 """The formats :func:`load_file` reads, for messages."""
 
 _ROS_SUFFIXES = (".bag", ".db3", ".mcap")
 _CARMEN_SUFFIXES = (".clf", ".log", ".gz")
-_LABEL_SUFFIXES = (".gz", ".bag", ".db3", ".mcap", ".clf", ".log")
+_CSV_SUFFIXES = (".csv",)
+_LABEL_SUFFIXES = (".gz", ".bag", ".db3", ".mcap", ".clf", ".log", ".csv")
 
-FileFormat = Literal["rosbag", "carmen"]
+FileFormat = Literal["rosbag", "carmen", "landmark-csv"]
 
 
 def file_format(path: str | Path) -> FileFormat:
@@ -63,6 +66,8 @@ def file_format(path: str | Path) -> FileFormat:
         return "rosbag"
     if suffix in _CARMEN_SUFFIXES:
         return "carmen"
+    if suffix in _CSV_SUFFIXES:
+        return "landmark-csv"
     raise DatasetFormatError(
         f"unknown kind of file {suffix or '(no suffix)'!r} (supported: {SUPPORTED_FORMATS})", p
     )
@@ -79,6 +84,10 @@ def load_file(
         from slamkit.datasets.rosbag import read_rosbag
 
         dataset = read_rosbag(p, options, name=name)
+    elif kind == "landmark-csv":
+        from slamkit.datasets.landmark_csv import read_landmark_csv
+
+        dataset = read_landmark_csv(p, options, name=name)
     else:
         from slamkit.datasets.carmen_raw import read_carmen_raw_log
 

@@ -60,6 +60,13 @@ def remove_stale_partials(target: Path) -> list[Path]:
     return removed
 
 
+def _umask() -> int:
+    """The process's umask (read by setting it, then restoring it)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -83,6 +90,9 @@ def atomic_folder(target: str | Path, *, overwrite: bool = False) -> Iterator[Pa
     tmp = Path(
         tempfile.mkdtemp(prefix=f".{dest.name}.{os.getpid()}.", suffix=".partial", dir=dest.parent)
     )
+    # mkdtemp makes the folder private (0700); a result folder gets the permissions of any
+    # folder the user creates (0777 less the umask: group-readable under the usual 022/002)
+    os.chmod(tmp, 0o777 & ~_umask())
     try:
         yield tmp
     except BaseException:

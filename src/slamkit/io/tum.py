@@ -16,7 +16,7 @@ from slamkit.datasets.text import text_lines
 from slamkit.errors import DatasetFormatError, ShapeError
 from slamkit.geometry import wrap_angle
 
-__all__ = ["format_tum", "read_tum", "write_tum"]
+__all__ = ["format_tum", "read_tum", "read_tum_matrices", "write_tum"]
 
 
 def format_tum(times: ArrayLike, poses: ArrayLike) -> str:
@@ -61,3 +61,42 @@ def read_tum(path: str | Path) -> tuple[FloatArray, FloatArray]:
     qx, qy, qz, qw = a[:, 4], a[:, 5], a[:, 6], a[:, 7]
     yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
     return a[:, 0], np.column_stack([a[:, 1], a[:, 2], wrap_angle(yaw)])
+
+
+def read_tum_matrices(path: str | Path) -> tuple[FloatArray, FloatArray]:
+    """Read a TUM file into ``times (N,)`` and SE(3) pose matrices ``(N, 4, 4)`` (the full
+    3D poses; :func:`read_tum` projects onto the plane)."""
+    p = Path(path)
+    rows: list[list[float]] = []
+    for lineno, line in enumerate(text_lines(p.read_text(encoding="utf-8")), start=1):
+        text = line.strip()
+        if not text or text.startswith("#"):
+            continue
+        parts = text.replace(",", " ").split()
+        if len(parts) != 8:
+            raise DatasetFormatError(f"expected 8 numbers, got {len(parts)}", p, lineno)
+        try:
+            rows.append([float(v) for v in parts])
+        except ValueError as exc:
+            raise DatasetFormatError(f"not a number: {exc}", p, lineno) from None
+    if not rows:
+        raise ShapeError(f"{p}: no poses in the file")
+    a = np.asarray(rows)
+    q = a[:, [7, 4, 5, 6]]  # w, x, y, z
+    norms = np.linalg.norm(q, axis=1)
+    if np.any(norms < 1e-9):
+        raise DatasetFormatError("a quaternion of zero length", p)
+    w, x, y, z = (q / norms[:, None]).T
+    m = np.zeros((a.shape[0], 4, 4))
+    m[:, 0, 0] = 1 - 2 * (y * y + z * z)
+    m[:, 0, 1] = 2 * (x * y - z * w)
+    m[:, 0, 2] = 2 * (x * z + y * w)
+    m[:, 1, 0] = 2 * (x * y + z * w)
+    m[:, 1, 1] = 1 - 2 * (x * x + z * z)
+    m[:, 1, 2] = 2 * (y * z - x * w)
+    m[:, 2, 0] = 2 * (x * z - y * w)
+    m[:, 2, 1] = 2 * (y * z + x * w)
+    m[:, 2, 2] = 1 - 2 * (x * x + y * y)
+    m[:, :3, 3] = a[:, 1:4]
+    m[:, 3, 3] = 1.0
+    return a[:, 0], m

@@ -1,0 +1,259 @@
+"""Run configuration files: reading one, overriding single settings, choosing the data set,
+and writing an estimator's defaults as a commented TOML file.
+
+A configuration file (TOML or JSON) has an ``[estimator]`` table (``[mapping]`` for
+``slamkit map occupancy``), a ``[dataset]`` table and top-level ``seed`` and ``preset``::
+
+    seed = 3
+    [dataset]
+    name = "five-features"       # or path = "my_robot.bag"; the rest are the data set's options
+    sigma_v = 0.2
+    [estimator]
+    motion_cov_scale = 2.0
+    [estimator.snapshots]        # a section of the estimator's settings
+    every = 50
+
+A run's own ``config.json`` has exactly this shape, so it re-runs that run. The data set named
+in the file is the one run; a ``--data`` that names another one is an error
+(:func:`resolve_data`). ``--set KEY=VALUE`` (:func:`apply_overrides`) changes one setting:
+``KEY`` is dotted into the estimator's sections (``kld.epsilon``), ``dataset.KEY`` is a data
+set option, ``seed`` and ``preset`` the top-level keys.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from slamkit.config import describe_settings, load_config_file
+from slamkit.errors import ConfigError
+
+__all__ = [
+    "DEFAULT_DATA",
+    "RunConfig",
+    "apply_overrides",
+    "dataset_toml",
+    "defaults_toml",
+    "parse_value",
+    "read_run_config",
+    "resolve_data",
+]
+
+DEFAULT_DATA = "five-features"
+"""The data set of a run that names none (neither ``--data`` nor a ``[dataset]`` name)."""
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """A configuration file's content, split into what a run takes."""
+
+    settings: dict[str, Any] = field(default_factory=dict)
+    """The ``[estimator]`` (or ``[mapping]``) table, sections as nested dicts."""
+    dataset_options: dict[str, Any] = field(default_factory=dict)
+    """The ``[dataset]`` table without ``name`` and ``path``: the data set's own options."""
+    data: str | None = None
+    """The data set the file names: ``[dataset] name`` if registered, else its ``path``."""
+    seed: int | None = None
+    preset: str | None = None
+    """The top-level ``preset`` (``config.json`` writes ``null`` for none: ``"none"`` here)."""
+    source: str = "the configuration"
+    """Where the settings came from, for messages."""
+
+
+def read_run_config(path: str | Path | None, main_table: str = "estimator") -> RunConfig:
+    """Read a TOML/JSON configuration file (see the module docstring); ``None``: an empty
+    configuration. Unknown top-level keys, a non-table section and a non-integer seed are
+    :class:`~slamkit.errors.ConfigError`; ``[estimator] name`` is informational (as
+    ``config.json`` writes it) and dropped."""
+    if path is None:
+        return RunConfig()
+    raw = load_config_file(path)
+    allowed = (main_table, "dataset", "seed", "preset")
+    unknown = sorted(set(raw) - set(allowed))
+    if unknown:
+        raise ConfigError(
+            f"{path}: unknown section(s) {', '.join(unknown)}; expected {', '.join(allowed)}"
+        )
+    seed = raw.get("seed")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
+        raise ConfigError(f"{path}: seed must be an integer, got {seed!r}")
+    preset = raw.get("preset", None)
+    if "preset" in raw and preset is None:
+        preset = "none"  # config.json of a run without a preset
+    if preset is not None and not isinstance(preset, str):
+        raise ConfigError(f"{path}: preset must be a preset's name or 'none', got {preset!r}")
+    tables = []
+    for name in (main_table, "dataset"):
+        table = raw.get(name, {})
+        if not isinstance(table, dict):
+            raise ConfigError(f"{path}: [{name}] must be a table of settings")
+        tables.append(table)
+    settings = {k: v for k, v in tables[0].items() if k != "name"}
+    ds = tables[1]
+    options = {k: v for k, v in ds.items() if k not in ("name", "path")}
+    return RunConfig(settings, options, _named_data(ds, path), seed, preset, str(path))
+
+
+def _named_data(table: Mapping[str, Any], path: str | Path) -> str | None:
+    from slamkit.datasets import DATASETS
+
+    name, file = table.get("name"), table.get("path")
+    for key, value in (("name", name), ("path", file)):
+        if value is not None and not isinstance(value, str):
+            raise ConfigError(f"{path}: [dataset] {key} must be a string, got {value!r}")
+    if name is not None and name in DATASETS:
+        return str(name)
+    if file is not None:
+        return str(file)
+    if name is not None:  # an unregistered name without a path: let load_data say so
+        return str(name)
+    return None
+
+
+def _same_data(a: str, b: str) -> bool:
+    if a == b:
+        return True
+    pa, pb = Path(a).expanduser(), Path(b).expanduser()
+    return pa.exists() and pb.exists() and pa.resolve() == pb.resolve()
+
+
+def resolve_data(cli_data: str | None, config: RunConfig, default: str = DEFAULT_DATA) -> str:
+    """The data set a run reads: ``--data`` (``cli_data``), else the file's, else
+    ``default``. Both given and different: :class:`~slamkit.errors.ConfigError`
+    (a configuration's data set is never silently replaced)."""
+    if cli_data is not None and config.data is not None and not _same_data(cli_data, config.data):
+        raise ConfigError(
+            f"--data {cli_data} conflicts with the data set {config.data!r} of "
+            f"{config.source}; give one of them (or the same in both)"
+        )
+    if cli_data is not None:
+        return cli_data
+    return config.data if config.data is not None else default
+
+
+def parse_value(text: str) -> Any:
+    """A ``--set`` value read as a TOML value (``2``, ``0.5``, ``true``, ``[1, 2]``,
+    ``"nn"``, ``inf``); anything TOML does not read is taken as a string (``nn``)."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def _set_dotted(table: dict[str, Any], keys: list[str], value: Any, where: str) -> dict[str, Any]:
+    out = dict(table)
+    head = keys[0]
+    if len(keys) == 1:
+        out[head] = value
+        return out
+    inner = out.get(head, {})
+    if not isinstance(inner, dict):
+        raise ConfigError(f"--set {where}: {head} is a setting, not a section")
+    out[head] = _set_dotted(inner, keys[1:], value, where)
+    return out
+
+
+def apply_overrides(config: RunConfig, assignments: Iterable[str], main_table: str) -> RunConfig:
+    """``config`` with each ``KEY=VALUE`` of ``assignments`` applied in order (see the module
+    docstring; a leading ``estimator.``/``mapping.`` is allowed). A malformed assignment is a
+    :class:`~slamkit.errors.ConfigError`; unknown keys are reported when the run builds
+    its configuration."""
+    for text in assignments:
+        key, sep, value_text = text.partition("=")
+        key = key.strip()
+        keys = key.split(".")
+        if not sep or not key or any(not k for k in keys):
+            raise ConfigError(f"--set {text!r}: expected KEY=VALUE, e.g. motion_cov_scale=2")
+        value = parse_value(value_text.strip())
+        if keys == ["seed"]:
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ConfigError(f"--set seed: expected an integer, got {value_text!r}")
+            config = replace(config, seed=value)
+        elif keys == ["preset"]:
+            config = replace(config, preset=str(value))
+        elif keys[0] == "dataset":
+            if len(keys) == 1:
+                raise ConfigError(f"--set {text!r}: name a data set option (dataset.KEY)")
+            if keys[1:] in (["name"], ["path"]):
+                config = replace(config, data=str(value))
+            else:
+                config = replace(
+                    config,
+                    dataset_options=_set_dotted(config.dataset_options, keys[1:], value, key),
+                )
+        else:
+            if keys[0] == main_table and len(keys) > 1:
+                keys = keys[1:]
+            config = replace(config, settings=_set_dotted(config.settings, keys, value, key))
+    return config
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        if value in ("inf", "-inf"):
+            return value
+        return json.dumps(value, ensure_ascii=False)
+    if isinstance(value, float) and not math.isfinite(value):
+        return "inf" if value > 0 else "-inf"
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, Mapping):
+        return "{" + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + "}"
+    return json.dumps(str(value))
+
+
+def defaults_toml(config_type: type, table: str, title: str = "") -> str:
+    """The defaults of ``config_type`` as a TOML file, each setting under its documentation
+    (comments), sections as ``[table.section]`` tables. A setting whose default is ``None``
+    (unset: the estimator chooses) is written commented out. The text reads back with
+    :func:`read_run_config` to the defaults."""
+    lines = [f"# {title}", ""] if title else []
+    current = None
+    for doc in describe_settings(config_type):
+        *sections, name = doc.key.split(".")
+        header = ".".join([table, *sections])
+        if header != current:
+            if current is not None:
+                lines.append("")
+            lines.append(f"[{header}]")
+            current = header
+        lines.append("")
+        for paragraph in doc.doc.splitlines() or [""]:
+            if paragraph:
+                lines.append(f"# {paragraph}")
+        allowed = f"{doc.type}" + (f"; {doc.expected}" if doc.expected else "")
+        lines.append(f"# ({allowed})")
+        if doc.default is None:
+            lines.append(f"# {name} =   (unset)")
+        else:
+            lines.append(f"{name} = {_toml_value(doc.default)}")
+    return "\n".join(lines) + "\n"
+
+
+def dataset_toml(data: str, options: Mapping[str, Any]) -> str:
+    """A ``[dataset]`` table naming ``data`` (a registered name, else ``path``) with the
+    data set's resolved ``options`` (as ``config.json`` writes them)."""
+    from slamkit.datasets import DATASETS
+
+    key = "name" if data in DATASETS else "path"
+    lines = ["[dataset]", f"{key} = {_toml_value(data)}"]
+    nested = []
+    for name, value in options.items():
+        if value is None:
+            lines.append(f"# {name} =   (unset)")
+        elif isinstance(value, Mapping):
+            nested.append((name, value))
+        else:
+            lines.append(f"{name} = {_toml_value(value)}")
+    for name, value in nested:
+        lines.append(f"{name} = {_toml_value(value)}")
+    return "\n".join(lines) + "\n"

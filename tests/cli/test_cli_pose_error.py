@@ -1,0 +1,65 @@
+"""``slamkit eval ape|rpe`` on a run's own files: the numbers agree with the run's metrics."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from slamkit.cli.main import app
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs") / "ekf"
+    res = runner.invoke(app, ["run", "ekf-slam", "--data", "five-features", "--seed", "1",
+                              "--out", str(out), "--no-plots", "--format", "kitti"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    return out
+
+
+def test_ape_se2_equals_the_runs_aligned_ate(run_dir, tmp_path):
+    out = tmp_path / "ape"
+    res = runner.invoke(app, ["eval", "ape", str(run_dir / "groundtruth.tum"),
+                              str(run_dir / "trajectory.tum"), "--align", "se2",
+                              "--out", str(out)])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    got = json.loads((out / "metrics.json").read_text())
+    run = json.loads((run_dir / "metrics.json").read_text())
+    assert got["ape_translation_m"]["rmse"] == pytest.approx(run["ate"]["rmse"], rel=1e-6)
+    assert got["matched"] == got["estimate_poses"]
+    assert sorted(p.name for p in out.iterdir()) == ["ape.png", "metrics.json", "trajectories.png"]
+    # Unaligned, the error is the run's unaligned ATE.
+    res = runner.invoke(app, ["eval", "ape", str(run_dir / "groundtruth.tum"),
+                              str(run_dir / "trajectory.tum"), "--align", "none", "--no-plots",
+                              "--out", str(tmp_path / "raw")])  # fmt: skip
+    raw = json.loads((tmp_path / "raw" / "metrics.json").read_text())
+    assert raw["ape_translation_m"]["rmse"] == pytest.approx(run["ate_unaligned"]["rmse"], rel=1e-6)
+
+
+def test_rpe_on_kitti_files_pairs_by_index(run_dir, tmp_path):
+    kitti = run_dir / "trajectory.kitti"
+    res = runner.invoke(app, ["eval", "rpe", str(kitti), str(kitti), "--delta", "5",
+                              "--out", str(tmp_path / "r")])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    got = json.loads((tmp_path / "r" / "metrics.json").read_text())
+    assert got["rpe_translation_m"]["max"] < 1e-9 and got["rpe_delta"] == 5
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["missing.tum", "missing.tum"], "not found"),
+        (["--align", "affine"], "alignment"),
+        (["--offset", "1000"], "no matching time stamps"),
+    ],
+)
+def test_bad_input_is_one_line(run_dir, tmp_path, args, message):
+    files = [str(run_dir / "groundtruth.tum"), str(run_dir / "trajectory.tum")]
+    argv = ["eval", "ape", *(args if args[0].endswith(".tum") else files + args)]
+    res = runner.invoke(app, [*argv, "--out", str(tmp_path / "x")])
+    assert res.exit_code == 1 and message in res.output, res.output
+    assert not (tmp_path / "x").exists()
