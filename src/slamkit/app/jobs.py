@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +40,8 @@ class RunRequest:
     data_root: Path | None = None
     plots: bool = True
     overwrite: bool = False
+    svg: bool = False
+    """Also write every figure as SVG (beside its PNG)."""
     animate: bool = False
     """Also write ``animation.gif``: the estimate over time (:data:`ANIMATION_FRAMES` frames)."""
     preset: str | None = "auto"
@@ -68,8 +72,9 @@ class RunReport:
 def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
     """Load the data set, run the estimator, evaluate, and write into ``request.out_dir``:
     ``trajectory.tum``, ``metrics.json``, ``config.json`` (the resolved configuration),
-    ``graph.g2o`` when the estimator built a pose graph, and PNG plots. The folder is
-    written completely or not at all."""
+    ``graph.g2o`` when the estimator built a pose graph, PNG plots and ``report.html`` (the
+    page of the run: :mod:`slamkit.report`). The folder is written completely or not at
+    all."""
     entry = get_estimator_entry(request.estimator)
     config, preset = resolve_preset(
         entry.name, request.dataset, request.estimator_config, request.preset
@@ -78,13 +83,17 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
     if isinstance(request.seed, bool) or not isinstance(request.seed, int) or request.seed < 0:
         raise ConfigError(f"seed: expected an integer >= 0, got {request.seed!r}")
     check_output_folder(request.out_dir, overwrite=request.overwrite)  # before the work
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
     dataset = load_data(
         request.dataset,
         seed=request.seed,
         options=request.dataset_options,
         data_root=request.data_root,
     )
+    timings["load the data set"] = time.perf_counter() - clock
     frames = ANIMATION_FRAMES if request.animate else 0
+    clock = time.perf_counter()
     result = run(
         entry,
         dataset,
@@ -93,8 +102,12 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         progress=progress,
         frames=frames,
     )
+    timings["run the estimator"] = time.perf_counter() - clock
+    clock = time.perf_counter()
     evaluation = evaluate(result, dataset)
+    timings["evaluate"] = time.perf_counter() - clock
     figures = {}
+    clock = time.perf_counter()
     if request.plots:
         from slamkit.viz.report import run_figures  # plotting only when asked for
 
@@ -122,6 +135,8 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
 
             for name, fig in figures.items():
                 save_figure(fig, tmp / name)
+                if request.svg:
+                    save_figure(fig, (tmp / name).with_suffix(".svg"))
         if request.animate:
             from slamkit.viz.animation import save_animation
             from slamkit.viz.report import gps_alignment
@@ -129,6 +144,8 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
             save_animation(
                 result, dataset, tmp / "animation.gif", gps_alignment=gps_alignment(evaluation)
             )
+        timings["figures and files"] = time.perf_counter() - clock
+        _write_report(tmp, entry.description, dataset.description, timings)
         files = tuple(sorted(p.name for p in tmp.iterdir()))
     settings = {} if preset is None else dict(preset.settings)
     used = {k: v for k, v in settings.items() if k not in request.estimator_config}
@@ -140,3 +157,14 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         None if preset is None else preset.name,
         used,
     )
+
+
+def _write_report(folder: Path, estimator: str, dataset: str, timings: Mapping[str, float]) -> None:
+    """``report.html`` from what the folder holds (written last, so it lists every file)."""
+    from slamkit.report import read_run_folder, write_run_page
+
+    page = read_run_folder(
+        folder, estimator_description=estimator, dataset_description=dataset, timings=timings
+    )
+    names = (*page.files, "report.html")
+    write_run_page(dataclasses.replace(page, files=tuple(sorted(names))))

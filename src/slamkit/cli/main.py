@@ -18,6 +18,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from slamkit.cli._common import console, known_errors, progress_bar, split_config, terminate
+from slamkit.cli.compare_cmd import compare_command
 from slamkit.cli.eval_cmd import eval_app
 from slamkit.cli.map_cmd import map_app
 from slamkit.cli.optimize_cmd import optimize_command
@@ -109,6 +110,7 @@ def _run(
     overwrite: bool,
     animate: bool = False,
     preset: str = "auto",
+    svg: bool = False,
 ) -> None:
     from slamkit.app import RunRequest, run_job
 
@@ -125,6 +127,7 @@ def _run(
         overwrite=overwrite,
         animate=animate,
         preset=None if preset == "none" else preset,
+        svg=svg,
     )
     with progress_bar(f"{estimator} on {data}") as progress:
         report = run_job(request, progress)
@@ -133,6 +136,8 @@ def _run(
         console.print(f"preset {report.preset} (config.json has every setting): {used}")
     console.print(_render_metrics(report.scores))
     console.print(f"wrote {', '.join(report.files)} to [bold]{report.out_dir}[/]")
+    if "report.html" in report.files:
+        console.print(f"report: [bold]{report.out_dir / 'report.html'}[/] (open it in a browser)")
 
 
 @app.command("run")
@@ -173,8 +178,9 @@ def run_command(
             "preset, if any), 'none', or a preset's name."
         ),
     ] = "auto",
+    svg: Annotated[bool, typer.Option(help="Also write every figure as SVG.")] = False,
 ) -> None:
-    """Run ESTIMATOR on a data set; write trajectory, metrics, config and plots."""
+    """Run ESTIMATOR on a data set; write trajectory, metrics, config, plots and report.html."""
     from slamkit.datasets.files import data_label
 
     target = out if out is not None else Path("results") / f"{estimator}-{data_label(data)}"
@@ -189,6 +195,7 @@ def run_command(
         overwrite=overwrite,
         animate=animate,
         preset=preset,
+        svg=svg,
     )
 
 
@@ -217,6 +224,7 @@ def demo_command(
 
 
 app.command("optimize")(optimize_command)
+app.command("compare")(compare_command)
 
 
 @app.command("estimators")
