@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 from collections.abc import Sequence
 from dataclasses import replace
@@ -20,20 +21,14 @@ def describe_run(page: RunPage) -> RunPage:
     from slamkit.pipeline import get_estimator_entry
 
     est, ds = page.estimator_description, page.dataset_description
-    try:
+    with contextlib.suppress(SlamkitError):
         est = est or get_estimator_entry(page.estimator).description
-    except SlamkitError:
-        pass
-    try:
+    with contextlib.suppress(SlamkitError):
         ds = ds or get_dataset_entry(page.dataset).description
-    except SlamkitError:
-        pass
     return replace(page, estimator_description=est, dataset_description=ds)
 
 
-def compare_job(
-    folders: Sequence[str | os.PathLike[str]], out_dir: str | os.PathLike[str]
-) -> Path:
+def compare_job(folders: Sequence[str | os.PathLike[str]], out_dir: str | os.PathLike[str]) -> Path:
     """Write ``compare.html`` into ``out_dir``: the runs written to ``folders`` (by
     ``slamkit run``) side by side — a metrics table with a column per run and their figures.
     Returns the page's path. Raises :class:`~slamkit.errors.InputError` for a folder that is

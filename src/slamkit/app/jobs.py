@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-import time
 import dataclasses
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -92,7 +92,8 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
         data_root=request.data_root,
     )
     timings["load the data set"] = time.perf_counter() - clock
-    frames = ANIMATION_FRAMES if request.animate else 0
+    # twice the GIF's frames, from which it picks those where the robot moves
+    frames = 2 * ANIMATION_FRAMES if request.animate else 0
     clock = time.perf_counter()
     result = run(
         entry,
@@ -132,9 +133,10 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
             write_graph(result.output.graph, tmp / "graph.g2o", family="g2o")
         if figures:
             from slamkit.viz import save_figure
+            from slamkit.viz.report import FIGURE_DPI
 
             for name, fig in figures.items():
-                save_figure(fig, tmp / name)
+                save_figure(fig, tmp / name, dpi=FIGURE_DPI)
                 if request.svg:
                     save_figure(fig, (tmp / name).with_suffix(".svg"))
         if request.animate:
@@ -142,7 +144,11 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
             from slamkit.viz.report import gps_alignment
 
             save_animation(
-                result, dataset, tmp / "animation.gif", gps_alignment=gps_alignment(evaluation)
+                result,
+                dataset,
+                tmp / "animation.gif",
+                gps_alignment=gps_alignment(evaluation),
+                max_frames=ANIMATION_FRAMES,
             )
         timings["figures and files"] = time.perf_counter() - clock
         _write_report(tmp, entry.description, dataset.description, timings)

@@ -21,9 +21,9 @@ def compare_command(
     folders: Annotated[
         list[Path], typer.Argument(help="Output folders of `slamkit run` to compare.")
     ],
-    out: Annotated[
-        Path, typer.Option(help="Folder to write compare.html into.")
-    ] = Path("results/compare"),
+    out: Annotated[Path, typer.Option(help="Folder to write compare.html into.")] = Path(
+        "results/compare"
+    ),
 ) -> None:
     """Write one page (compare.html) with the metrics and figures of several runs side by
     side."""

@@ -27,10 +27,10 @@ from slamkit.errors import InputError
 
 __all__ = [
     "FIGURE_ORDER",
-    "order_figures",
     "RunPage",
     "compare_html",
     "flatten_metrics",
+    "order_figures",
     "read_run_folder",
     "run_html",
     "write_compare_page",
@@ -251,7 +251,7 @@ def _table(header: Sequence[str] | None, rows: Iterable[Sequence[str]], css_id: 
 def _figure(src: str, caption: str, width: str = "") -> str:
     style = f' style="width:{width}"' if width else ""
     return (
-        f"<figure{style}><a href=\"{_e(src)}\"><img src=\"{_e(src)}\" alt=\"{_e(caption)}\"></a>"
+        f'<figure{style}><a href="{_e(src)}"><img src="{_e(src)}" alt="{_e(caption)}"></a>'
         f"<figcaption>{_e(caption)}</figcaption></figure>"
     )
 
@@ -329,7 +329,7 @@ def compare_html(pages: Sequence[RunPage], out_dir: str | os.PathLike[str]) -> s
         report = p.folder / "report.html"
         link = _relative(report if report.is_file() else p.folder, where)
         run_rows.append(
-            f"<tr><th>{_e(label)}</th><td><a href=\"{_e(link)}\">{_e(p.folder)}</a></td>"
+            f'<tr><th>{_e(label)}</th><td><a href="{_e(link)}">{_e(p.folder)}</a></td>'
             f"<td>{_e(p.estimator_description)}</td><td>{_e(p.dataset_description)}</td></tr>"
         )
     body.append(
