@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from slamkit.app.mapping import USABLE_RANGE_ESTIMATORS, with_usable_range
 from slamkit.app.presets import resolve_preset
 from slamkit.datasets.files import load_data
 from slamkit.errors import ConfigError
@@ -79,6 +80,8 @@ def run_job(request: RunRequest, progress: Progress | None = None) -> RunReport:
     config, preset = resolve_preset(
         entry.name, request.dataset, request.estimator_config, request.preset
     )
+    if entry.name in USABLE_RANGE_ESTIMATORS:  # the same map as `slamkit map occupancy`
+        config = with_usable_range(config)
     entry.make_config(config)  # fail on bad config before loading
     if isinstance(request.seed, bool) or not isinstance(request.seed, int) or request.seed < 0:
         raise ConfigError(f"seed: expected an integer >= 0, got {request.seed!r}")

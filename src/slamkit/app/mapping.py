@@ -31,7 +31,38 @@ from slamkit.mapping import (
 )
 from slamkit.maps import OccupancyGrid
 
-__all__ = ["OccupancyMapReport", "occupancy_map_job"]
+__all__ = [
+    "USABLE_RANGE",
+    "USABLE_RANGE_ESTIMATORS",
+    "OccupancyMapReport",
+    "occupancy_map_job",
+    "with_usable_range",
+]
+
+USABLE_RANGE = 30.0
+"""[m] The laser range the app's occupancy maps use unless the config's ``model.max_range``
+says otherwise — ``slamkit map occupancy`` (see its ``DEFAULT_MAX_RANGE`` for the
+measurements behind it) and ``slamkit run occupancy-mapping`` alike, so both make the same
+map by default. Readings beyond it clear free space up to it only. The library's
+:class:`~slamkit.mapping.InverseSensorModel` keeps the sensor's range as its default."""
+
+USABLE_RANGE_ESTIMATORS = ("occupancy-mapping",)
+"""Registered estimators whose config gets :data:`USABLE_RANGE` from :func:`run_job
+<slamkit.app.jobs.run_job>` (their settings are an
+:class:`~slamkit.mapping.OccupancyMappingConfig`)."""
+
+
+def with_usable_range(
+    mapping: Mapping[str, Any], max_range: float | None = USABLE_RANGE
+) -> dict[str, Any]:
+    """``mapping`` (an :class:`~slamkit.mapping.OccupancyMappingConfig` as a mapping) with
+    ``model.max_range`` set to ``max_range`` when it does not set one itself."""
+    out = dict(mapping)
+    model = out.get("model", {})
+    if isinstance(model, Mapping) and "max_range" not in model:
+        out["model"] = {**model, "max_range": max_range}
+    return out
+
 
 MAP_FILES = ("config.json", "map.pgm", "map.png", "map.yaml", "quality.json")
 
