@@ -221,6 +221,12 @@ def demo_command(
         plots=True,
         overwrite=True,
     )
+    from slamkit.app.demo import DEMO_LOOK_AT
+
+    console.print("[bold]where to look[/] (the report page shows them all):")
+    for name, what in DEMO_LOOK_AT:
+        if (out / name).exists():
+            console.print(f"  {out / name}: {what}")
 
 
 app.command("optimize")(optimize_command)

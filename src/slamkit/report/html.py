@@ -50,6 +50,16 @@ FIGURE_ORDER = (
 )
 """The order figures appear in on a page; other images follow by name."""
 
+HEADLINE = (
+    ("ate.rmse", "ATE RMSE, aligned [m]"),
+    ("ate_unaligned.rmse", "ATE RMSE, unaligned [m]"),
+    ("final_position_error", "final position error [m]"),
+    ("landmarks.rmse", "landmark RMSE [m]"),
+    ("gps.rmse", "GPS RMSE, aligned [m]"),
+    ("runtime.total_seconds", "estimator time [s]"),
+)
+"""Metrics (flattened keys) repeated at the top of a run's page, when the run has them."""
+
 _IMAGE_SUFFIXES = (".png", ".gif", ".svg", ".jpg", ".jpeg")
 
 _STYLE = """
@@ -282,6 +292,8 @@ def run_html(page: RunPage) -> str:
         facts.append(("seed", str(seed)))
     if preset:
         facts.append(("preset", str(preset)))
+    flat = flatten_metrics(page.metrics)
+    facts += [(label, flat[key]) for key, label in HEADLINE if key in flat]
     body.append(_table(None, facts, "summary"))
     body.append("<h2>Estimator</h2>")
     body.append(f"<p>{_e(page.estimator_description or page.estimator)}</p>")

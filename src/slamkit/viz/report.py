@@ -283,14 +283,16 @@ def _error_figure(result: Result, evaluation: Evaluation, n_sigma: float, t0: fl
     plot_pose_errors(axes, t, evaluation.errors, evaluation.sigmas, n_sigma)
     conv = evaluation.scores.convergence
     settle = conv.time if isinstance(conv, ConvergenceReport) and conv.time is not None else None
-    after = t >= (settle if settle is not None else -np.inf)
+    # after convergence; without a convergence score, after the first 5 % of the run
+    first = settle if settle is not None else float(t[0] + 0.05 * (t[-1] - t[0]))
+    after = t >= first
     if not np.any(after):
         after = np.ones_like(t, dtype=bool)
     unit = np.array([1.0, 1.0, np.degrees(1.0)])
     err = evaluation.errors.copy()
     err[:, 2] = (err[:, 2] + np.pi) % (2 * np.pi) - np.pi
     for i, ax in enumerate(axes):
-        half = robust_abs_limit(err[after, i] * unit[i], quantile=0.99)
+        half = robust_abs_limit(err[after, i] * unit[i], quantile=1.0)
         if evaluation.sigmas is not None:
             half = max(
                 half,

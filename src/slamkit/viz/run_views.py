@@ -151,7 +151,7 @@ def particle_figure(result: Result, dataset: Dataset) -> Figure:
     axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
     truth = dataset.truth
     scene = reference_extent(result, dataset, dataset.known_grid)
-    min_span = 1.0 if scene is None else 0.2 * max(scene[1] - scene[0], scene[3] - scene[2])
+    min_span = 1.0 if scene is None else 0.3 * max(scene[1] - scene[0], scene[3] - scene[2])
     t0 = float(result.times[0]) if len(result) else 0.0
     mapped = result.output.landmarks
     for n, (ax, i) in enumerate(zip(axes, pick, strict=False)):
@@ -196,7 +196,7 @@ def particle_figure(result: Result, dataset: Dataset) -> Figure:
         if true_pose is not None:
             box = union_box(box, (true_pose[0], true_pose[0], true_pose[1], true_pose[1]))
         set_box(ax, box, pad=0.15, min_span=min_span)
-        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_aspect("equal", adjustable="box")
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
         ax.set_title(
