@@ -33,12 +33,15 @@ from slamkit.viz.plots import (
 from slamkit.viz.report import map_under, plot_reference, reference_extent
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from matplotlib.artist import Artist
+    from matplotlib.figure import Figure
 
     from slamkit.datasets import Dataset
     from slamkit.pipeline.runner import Result
 
-__all__ = ["MAX_FRAMES", "PARTICLES_DRAWN", "save_animation"]
+__all__ = ["MAX_FRAMES", "PARTICLES_DRAWN", "animation_frames", "save_animation"]
 
 PARTICLES_DRAWN = 2000
 """At most this many particles per frame (a deterministic stride over the cloud)."""
@@ -47,24 +50,16 @@ MAX_FRAMES = 120
 """At most this many frames in a GIF (about 15 s at 8 frames per second)."""
 
 
-def save_animation(
+def animation_frames(
     result: Result,
     dataset: Dataset,
-    path: str | os.PathLike[str],
     *,
-    fps: int = 8,
     n_sigma: float = 3.0,
     gps_alignment: Similarity | None = None,
     max_frames: int = MAX_FRAMES,
-) -> Path:
-    """Write the frames of ``result`` as an animated GIF to ``path`` (atomically: a reader
-    never sees a half-written file) and return the path.
-
-    ``gps_alignment`` is the similarity that maps the estimate into the GPS frame (the
-    ``alignment`` of an evaluation's :class:`~slamkit.eval.GpsError`); with it the GPS track
-    is drawn in the estimate's frame. Raises :class:`~slamkit.errors.InputError` when the
-    run kept no frames.
-    """
+) -> tuple[Figure, Callable[[int], list[Artist]], int]:
+    """The figure of the animation, the function that draws frame ``i`` on it (and returns
+    the artists it changed), and the number of frames (see :func:`save_animation`)."""
     if not result.frames:
         raise InputError("save_animation: the run kept no frames (run it with frames > 0)")
     keep = pick_frames(
@@ -73,7 +68,6 @@ def save_animation(
         max(2, int(max_frames)),
     )
     frames = [result.frames[int(k)] for k in keep]
-    target = Path(path)
     fig = new_figure(figsize=(8.0, 6.4), dpi=90.0)
     ax = fig.add_subplot()
     truth = dataset.truth
@@ -147,7 +141,32 @@ def save_animation(
         title.set_text(f"{result.estimator} on {result.dataset}: t = {f.t - t0:.1f} s")
         return [path_line, truth_line, gps_line, title, *dynamic]
 
-    anim = FuncAnimation(fig, draw, frames=len(frames), blit=False)
+    return fig, draw, len(frames)
+
+
+def save_animation(
+    result: Result,
+    dataset: Dataset,
+    path: str | os.PathLike[str],
+    *,
+    fps: int = 8,
+    n_sigma: float = 3.0,
+    gps_alignment: Similarity | None = None,
+    max_frames: int = MAX_FRAMES,
+) -> Path:
+    """Write the frames of ``result`` as an animated GIF to ``path`` (atomically: a reader
+    never sees a half-written file) and return the path.
+
+    ``gps_alignment`` is the similarity that maps the estimate into the GPS frame (the
+    ``alignment`` of an evaluation's :class:`~slamkit.eval.GpsError`); with it the GPS track
+    is drawn in the estimate's frame. Raises :class:`~slamkit.errors.InputError` when the
+    run kept no frames.
+    """
+    fig, draw, count = animation_frames(
+        result, dataset, n_sigma=n_sigma, gps_alignment=gps_alignment, max_frames=max_frames
+    )
+    target = Path(path)
+    anim = FuncAnimation(fig, draw, frames=count, blit=False)
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = target.with_name(f".{target.name}.{uuid.uuid4().hex}.tmp.gif")
     try:
