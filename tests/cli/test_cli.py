@@ -27,6 +27,7 @@ def test_run_dead_reckoning_writes_trajectory_metrics_config_and_plots(tmp_path)
         "errors.png",
         "metrics.json",
         "nees.png",
+        "report.html",
         "trajectory.png",
         "trajectory.tum",
     ]
