@@ -43,6 +43,10 @@ Box = tuple[float, float, float, float]
 UNKNOWN_BAND = 0.02
 """A cell whose probability is within this of 0.5 counts as unknown (never observed)."""
 
+CONFIDENT_BAND = 0.2
+"""A cell further than this from 0.5 is known with confidence (one free reading moves a
+cell to about 0.35 only): the cells a cropped map is sized round."""
+
 
 def robust_box(points: ArrayLike, *, quantile: float = 0.0) -> Box | None:
     """The box of the finite ``points (N, 2)``, between the ``quantile`` and ``1 - quantile``
@@ -65,30 +69,54 @@ def union_box(*boxes: Box | None) -> Box | None:
     return (float(a[:, 0].min()), float(a[:, 1].max()), float(a[:, 2].min()), float(a[:, 3].max()))
 
 
-def known_box(grid: OccupancyGrid, *, band: float = UNKNOWN_BAND) -> Box | None:
+def known_box(
+    grid: OccupancyGrid, *, band: float = UNKNOWN_BAND, quantile: float = 0.0
+) -> Box | None:
     """The world box of the cells of ``grid`` that were observed (probability further than
-    ``band`` from 0.5); ``None`` when none was."""
+    ``band`` from 0.5), between the ``quantile`` and ``1 - quantile`` quantiles of their
+    rows and columns (0: all of them); ``None`` when none was."""
     known = np.abs(grid.prob - 0.5) > band
     if not np.any(known):
         return None
-    rows = np.flatnonzero(known.any(axis=1))
-    cols = np.flatnonzero(known.any(axis=0))
+    if quantile > 0.0:
+        rr, cc = np.nonzero(known)
+        r_lo, r_hi = np.quantile(rr, [quantile, 1.0 - quantile]).round().astype(int)
+        c_lo, c_hi = np.quantile(cc, [quantile, 1.0 - quantile]).round().astype(int)
+    else:
+        rows = np.flatnonzero(known.any(axis=1))
+        cols = np.flatnonzero(known.any(axis=0))
+        r_lo, r_hi, c_lo, c_hi = rows[0], rows[-1], cols[0], cols[-1]
     x0, y0 = grid.origin_xy
     r = grid.resolution
     return (
-        float(x0 + cols[0] * r),
-        float(x0 + (cols[-1] + 1) * r),
-        float(y0 + rows[0] * r),
-        float(y0 + (rows[-1] + 1) * r),
+        float(x0 + c_lo * r),
+        float(x0 + (c_hi + 1) * r),
+        float(y0 + r_lo * r),
+        float(y0 + (r_hi + 1) * r),
     )
 
 
 def crop_to_known(
-    grid: OccupancyGrid, *, margin: float = 1.0, band: float = UNKNOWN_BAND
+    grid: OccupancyGrid,
+    *,
+    margin: float = 1.0,
+    band: float = CONFIDENT_BAND,
+    quantile: float = 0.001,
 ) -> OccupancyGrid:
-    """The part of ``grid`` round its observed cells, with ``margin`` metres of border (the
-    same cells on the same lattice; the whole grid when nothing was observed)."""
-    box = known_box(grid, band=band)
+    """The part of ``grid`` round its confidently occupied cells (probability above
+    ``0.5 + band``: the walls, so the long free rays of readings through doors and windows
+    do not count; the ``quantile`` outermost left out on each side), with ``margin`` metres
+    of border — the same cells on the same lattice. Without such cells, round the cells
+    confidently known free or occupied, else round every observed cell; the whole grid when
+    none was observed."""
+    walls = OccupancyGrid(
+        np.where(grid.prob > 0.5 + band, 1.0, 0.5), grid.resolution, grid.origin_xy
+    )
+    box = known_box(walls, quantile=quantile)
+    if box is None:
+        box = known_box(grid, band=band, quantile=quantile)
+    if box is None:
+        box = known_box(grid)
     if box is None:
         return grid
     r = grid.resolution
@@ -170,9 +198,17 @@ def add_scale_bar(ax: Axes, *, length: float | None = None) -> AnchoredSizeBar:
     size = _nice_length(abs(xmax - xmin)) if length is None else float(length)
     label = f"{size:g} m" if size >= 1 else f"{100 * size:g} cm"
     bar = AnchoredSizeBar(
-        ax.transData, size, label, "lower right", pad=0.4, sep=4, color="black",
-        frameon=True, size_vertical=0, label_top=True,
-    )  # fmt: skip
+        ax.transData,
+        size,
+        label,
+        "lower right",
+        pad=0.4,
+        sep=4,
+        color="black",
+        frameon=True,
+        size_vertical=0,
+        label_top=True,
+    )
     bar.patch.set_alpha(0.75)
     ax.add_artist(bar)
     return bar
