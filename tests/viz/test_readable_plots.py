@@ -91,13 +91,15 @@ def _grid_with_a_room() -> OccupancyGrid:
     """A 100 m x 80 m grid (0.1 m cells) of which only a 6 m x 4 m room was observed."""
     prob = np.full((800, 1000), 0.5)
     prob[300:340, 500:560] = 0.1  # free floor at x 50..56, y 30..34
-    prob[300, 500:560] = 0.9  # a wall
+    prob[[300, 339], 500:560] = 0.9  # walls all round
+    prob[300:340, [500, 559]] = 0.9
+    prob[340:500, 520:530] = 0.35  # a free ray out through a door: not what the crop is for
     return OccupancyGrid(prob, 0.1, np.array([0.0, 0.0]))
 
 
 def test_occupancy_maps_are_cropped_to_known_cells_with_a_scale_bar() -> None:
     grid = _grid_with_a_room()
-    assert known_box(grid) == pytest.approx((50.0, 56.0, 30.0, 34.0))
+    assert known_box(grid) == pytest.approx((50.0, 56.0, 30.0, 50.0))  # with the ray
     cropped = crop_to_known(grid, margin=1.0)
     assert cropped.bounds() == pytest.approx((49.0, 29.0, 57.0, 35.0))
     np.testing.assert_array_equal(cropped.prob[10:50, 10:70], grid.prob[300:340, 500:560])
