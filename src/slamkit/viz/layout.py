@@ -28,6 +28,7 @@ __all__ = [
     "crop_to_known",
     "known_box",
     "legend_outside",
+    "map_box",
     "pick_frames",
     "plot_start_end",
     "reference_box",
@@ -96,6 +97,23 @@ def known_box(
     )
 
 
+def map_box(
+    grid: OccupancyGrid, *, band: float = CONFIDENT_BAND, quantile: float = 0.001
+) -> Box | None:
+    """The box a picture of ``grid`` is about: round its confidently occupied cells
+    (probability above ``0.5 + band``: the walls, so the long free rays of readings through
+    doors and windows do not count; the ``quantile`` outermost left out on each side);
+    without such cells, round the cells confidently known free or occupied, else round every
+    observed cell; ``None`` when none was observed."""
+    walls = OccupancyGrid(
+        np.where(grid.prob > 0.5 + band, 1.0, 0.5), grid.resolution, grid.origin_xy
+    )
+    box = known_box(walls, quantile=quantile)
+    if box is None:
+        box = known_box(grid, band=band, quantile=quantile)
+    return known_box(grid) if box is None else box
+
+
 def crop_to_known(
     grid: OccupancyGrid,
     *,
@@ -103,20 +121,9 @@ def crop_to_known(
     band: float = CONFIDENT_BAND,
     quantile: float = 0.001,
 ) -> OccupancyGrid:
-    """The part of ``grid`` round its confidently occupied cells (probability above
-    ``0.5 + band``: the walls, so the long free rays of readings through doors and windows
-    do not count; the ``quantile`` outermost left out on each side), with ``margin`` metres
-    of border — the same cells on the same lattice. Without such cells, round the cells
-    confidently known free or occupied, else round every observed cell; the whole grid when
-    none was observed."""
-    walls = OccupancyGrid(
-        np.where(grid.prob > 0.5 + band, 1.0, 0.5), grid.resolution, grid.origin_xy
-    )
-    box = known_box(walls, quantile=quantile)
-    if box is None:
-        box = known_box(grid, band=band, quantile=quantile)
-    if box is None:
-        box = known_box(grid)
+    """The part of ``grid`` in its :func:`map_box` with ``margin`` metres of border — the
+    same cells on the same lattice; the whole grid when no cell was observed."""
+    box = map_box(grid, band=band, quantile=quantile)
     if box is None:
         return grid
     r = grid.resolution

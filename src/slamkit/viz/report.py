@@ -108,7 +108,7 @@ def reference_extent(
     cells of ``grid``, the landmarks the run mapped, and the estimate between its 2 % and
     98 % quantiles when there is a reference (0.5 %–99.5 % without one) — never the
     covariance ellipses, and not a lost start's first wild estimates."""
-    from slamkit.viz.layout import known_box
+    from slamkit.viz.layout import map_box
 
     truth = dataset.truth
     parts = [
@@ -116,7 +116,7 @@ def reference_extent(
         None if truth.walls is None else truth.walls.segments.reshape(-1, 2),
         None if truth.landmarks is None else truth.landmarks.positions,
     ]
-    ref = union_box(reference_box(parts), None if grid is None else known_box(grid))
+    ref = union_box(reference_box(parts), None if grid is None else map_box(grid))
     est = reference_box([result.poses[:, :2]], quantile=0.02 if ref is not None else 0.005)
     mapped = result.output.landmarks
     lm = None

@@ -10,8 +10,8 @@ from matplotlib.collections import LineCollection, PathCollection
 
 from slamkit.viz.layout import (
     add_scale_bar,
-    known_box,
     legend_outside,
+    map_box,
     reference_box,
     set_box,
     union_box,
@@ -51,7 +51,7 @@ def map_figure(result: Result, dataset: Dataset) -> Figure:
     ax = fig.add_subplot()
     plot_map(ax, grid, scale_bar=False)
     plot_estimate_over_truth(ax, result, dataset)
-    set_box(ax, union_box(known_box(grid), reference_extent(result, dataset, grid)), pad=0.02)
+    set_box(ax, union_box(map_box(grid), reference_extent(result, dataset, grid)), pad=0.02)
     add_scale_bar(ax)
     ax.set_title(f"{result.estimator} on {result.dataset}: occupancy grid")
     legend_outside(ax)
@@ -128,7 +128,7 @@ def loop_figure(result: Result, dataset: Dataset) -> Figure:
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    box = union_box(reference_box([kf]), None if grid is None else known_box(grid))
+    box = union_box(reference_box([kf]), None if grid is None else map_box(grid))
     set_box(ax, box, pad=0.02)
     add_scale_bar(ax)
     ax.set_title(f"{result.estimator} on {result.dataset}: {loops.shape[0]} accepted loop closures")
