@@ -78,7 +78,15 @@ def animation_frames(
     gps_xy = None
     if truth.positions is not None and gps_alignment is not None:
         gps_xy = gps_alignment.inverse().apply_to_points(truth.positions)
-    (gps_line,) = ax.plot([], [], ".", ms=1.5, color="0.55", label="GPS (aligned)", zorder=1)
+    (gps_line,) = ax.plot(
+        [],
+        [],
+        ".",
+        ms=1.5,
+        color="0.55",
+        zorder=1,
+        label="GPS (aligned)" if gps_xy is not None else None,
+    )
     (truth_line,) = ax.plot(
         [], [], color="black", linestyle=(0, (4, 3)), linewidth=1.0, label="ground truth", zorder=4
     )
@@ -128,9 +136,9 @@ def animation_frames(
             ax.arrow(
                 f.pose[0],
                 f.pose[1],
-                0.04 * span * np.cos(f.pose[2]),
-                0.04 * span * np.sin(f.pose[2]),
-                width=0.008 * span,
+                0.03 * span * np.cos(f.pose[2]),
+                0.03 * span * np.sin(f.pose[2]),
+                width=0.006 * span,
                 color="tab:blue",
                 ec="black",
                 lw=0.5,
