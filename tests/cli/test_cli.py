@@ -28,6 +28,7 @@ def test_run_dead_reckoning_writes_trajectory_metrics_config_and_plots(tmp_path)
         "groundtruth.tum",
         "metrics.json",
         "nees.png",
+        "report.html",
         "trajectory.png",
         "trajectory.tum",
     ]

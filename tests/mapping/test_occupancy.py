@@ -782,7 +782,9 @@ def test_occupancy_map_job_writes_files(tmp_path, rooms_10cm):
     from slamkit.app.mapping import occupancy_map_job
 
     report = occupancy_map_job(rooms_10cm, 0.1, tmp_path / "m", config={"scan_stride": 2})
-    assert report.files == ("config.json", "map.pgm", "map.png", "map.yaml", "quality.json")
+    assert report.files == (
+        "config.json", "map.pgm", "map.png", "map.yaml", "map_view.png", "quality.json"
+    )  # fmt: skip
     quality = json.loads((tmp_path / "m" / "quality.json").read_text())
     assert quality["map"]["cells"] == report.grid.prob.size
     assert quality["even_odd"]["agreement"] >= 0.98

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from slamkit.app.mapping import USABLE_RANGE_ESTIMATORS, with_usable_range
 from slamkit.app.outputs import check_formats, write_result_files
 from slamkit.app.presets import resolve_preset
 from slamkit.datasets.files import load_data
@@ -41,6 +44,8 @@ class RunRequest:
     data_root: Path | None = None
     plots: bool = True
     overwrite: bool = False
+    svg: bool = False
+    """Also write every figure as SVG (beside its PNG)."""
     animate: bool = False
     """Also write ``animation.gif``: the estimate over time (:data:`ANIMATION_FRAMES` frames)."""
     preset: str | None = "auto"
@@ -78,9 +83,10 @@ def run_job(
     """Load the data set, run the estimator, evaluate, and write into ``request.out_dir``:
     ``trajectory.tum``, ``metrics.json``, ``config.json`` (the resolved configuration),
     the files of :func:`slamkit.app.outputs.write_result_files` (``landmarks.csv``,
-    ``groundtruth.tum``, ``graph.g2o``, ``map.pgm`` + ``map.yaml``, KITTI on request) and
-    PNG plots. The folder is written completely or not at all. ``stage(text)`` is told of
-    the steps after the run (plots, the animation), which take long on big data sets."""
+    ``groundtruth.tum``, ``graph.g2o``, ``map.pgm`` + ``map.yaml``, KITTI on request), PNG
+    plots and ``report.html`` (the page of the run: :mod:`slamkit.report`). The folder is
+    written completely or not at all. ``stage(text)`` is told of the steps after the run
+    (plots, the animation), which take long on big data sets."""
     say = stage if stage is not None else (lambda text: None)
     entry = get_estimator_entry(request.estimator)
     given = request.dataset if isinstance(request.dataset, Dataset) else None
@@ -90,18 +96,25 @@ def run_job(
         request.estimator_config,
         request.preset,
     )
+    if entry.name in USABLE_RANGE_ESTIMATORS:  # the same map as `slamkit map occupancy`
+        config = with_usable_range(config)
     entry.make_config(config)  # fail on bad config before loading
     if isinstance(request.seed, bool) or not isinstance(request.seed, int) or request.seed < 0:
         raise ConfigError(f"seed: expected an integer >= 0, got {request.seed!r}")
     check_formats(request.formats)
     check_output_folder(request.out_dir, overwrite=request.overwrite)  # before the work
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
     dataset = given or load_data(
         str(request.dataset),
         seed=request.seed,
         options=request.dataset_options,
         data_root=request.data_root,
     )
-    frames = ANIMATION_FRAMES if request.animate else 0
+    timings["load the data set"] = time.perf_counter() - clock
+    # twice the GIF's frames, from which it picks those where the robot moves
+    frames = 2 * ANIMATION_FRAMES if request.animate else 0
+    clock = time.perf_counter()
     result = run(
         entry,
         dataset,
@@ -110,9 +123,13 @@ def run_job(
         progress=progress,
         frames=frames,
     )
+    timings["run the estimator"] = time.perf_counter() - clock
+    clock = time.perf_counter()
     say("scoring the run")
     evaluation = evaluate(result, dataset)
+    timings["evaluate"] = time.perf_counter() - clock
     figures = {}
+    clock = time.perf_counter()
     if request.plots:
         from slamkit.viz.report import run_figures  # plotting only when asked for
 
@@ -135,11 +152,14 @@ def run_job(
         write_result_files(tmp, result, dataset, request.formats)  # landmarks, truth, graph
         if figures:
             from slamkit.viz import save_figure
+            from slamkit.viz.report import FIGURE_DPI
 
             say(f"writing {len(figures)} plots")
 
             for name, fig in figures.items():
-                save_figure(fig, tmp / name)
+                save_figure(fig, tmp / name, dpi=FIGURE_DPI)
+                if request.svg:
+                    save_figure(fig, (tmp / name).with_suffix(".svg"))
         if request.animate:
             from slamkit.viz.animation import save_animation
 
@@ -147,8 +167,14 @@ def run_job(
             from slamkit.viz.report import gps_alignment
 
             save_animation(
-                result, dataset, tmp / "animation.gif", gps_alignment=gps_alignment(evaluation)
+                result,
+                dataset,
+                tmp / "animation.gif",
+                gps_alignment=gps_alignment(evaluation),
+                max_frames=ANIMATION_FRAMES,
             )
+        timings["figures and files"] = time.perf_counter() - clock
+        _write_report(tmp, entry.description, dataset.description, timings)
         files = tuple(sorted(p.name for p in tmp.iterdir()))
     settings = {} if preset is None else dict(preset.settings)
     used = {k: v for k, v in settings.items() if k not in request.estimator_config}
@@ -160,3 +186,14 @@ def run_job(
         None if preset is None else preset.name,
         used,
     )
+
+
+def _write_report(folder: Path, estimator: str, dataset: str, timings: Mapping[str, float]) -> None:
+    """``report.html`` from what the folder holds (written last, so it lists every file)."""
+    from slamkit.report import read_run_folder, write_run_page
+
+    page = read_run_folder(
+        folder, estimator_description=estimator, dataset_description=dataset, timings=timings
+    )
+    names = (*page.files, "report.html")
+    write_run_page(dataclasses.replace(page, files=tuple(sorted(names))))

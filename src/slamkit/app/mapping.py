@@ -3,6 +3,8 @@
 Writes, into one folder that appears completely or not at all:
 
 * ``map.png`` — one pixel per cell, north up (free white, occupied black, unknown grey);
+* ``map_view.png`` — the map as a figure: cropped to the observed cells, axes in metres, a
+  scale bar, the poses of the scans used (``plots=False`` leaves it out);
 * ``map.pgm`` + ``map.yaml`` — the ROS ``map_server`` pair (:mod:`slamkit.io.rosmap`);
 * ``quality.json`` — occupied/free/unknown fractions, entropy, the agreement of the maps of
   the even and the odd scans, precision/recall against the true occupancy where the data set
@@ -31,9 +33,40 @@ from slamkit.mapping import (
 )
 from slamkit.maps import OccupancyGrid
 
-__all__ = ["OccupancyMapReport", "occupancy_map_job"]
+__all__ = [
+    "USABLE_RANGE",
+    "USABLE_RANGE_ESTIMATORS",
+    "OccupancyMapReport",
+    "occupancy_map_job",
+    "with_usable_range",
+]
 
-MAP_FILES = ("config.json", "map.pgm", "map.png", "map.yaml", "quality.json")
+USABLE_RANGE = 30.0
+"""[m] The laser range the app's occupancy maps use unless the config's ``model.max_range``
+says otherwise — ``slamkit map occupancy`` (see its ``DEFAULT_MAX_RANGE`` for the
+measurements behind it) and ``slamkit run occupancy-mapping`` alike, so both make the same
+map by default. Readings beyond it clear free space up to it only. The library's
+:class:`~slamkit.mapping.InverseSensorModel` keeps the sensor's range as its default."""
+
+USABLE_RANGE_ESTIMATORS = ("occupancy-mapping",)
+"""Registered estimators whose config gets :data:`USABLE_RANGE` from :func:`run_job
+<slamkit.app.jobs.run_job>` (their settings are an
+:class:`~slamkit.mapping.OccupancyMappingConfig`)."""
+
+
+def with_usable_range(
+    mapping: Mapping[str, Any], max_range: float | None = USABLE_RANGE
+) -> dict[str, Any]:
+    """``mapping`` (an :class:`~slamkit.mapping.OccupancyMappingConfig` as a mapping) with
+    ``model.max_range`` set to ``max_range`` when it does not set one itself."""
+    out = dict(mapping)
+    model = out.get("model", {})
+    if isinstance(model, Mapping) and "max_range" not in model:
+        out["model"] = {**model, "max_range": max_range}
+    return out
+
+
+MAP_FILES = ("config.json", "map.pgm", "map.png", "map.yaml", "map_view.png", "quality.json")
 
 
 @dataclass(frozen=True)
@@ -72,6 +105,7 @@ def occupancy_map_job(
     agreement: bool = True,
     overwrite: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    plots: bool = True,
 ) -> OccupancyMapReport:
     """Build the occupancy map of ``dataset`` (a registered name, or a loaded
     :class:`Dataset`) at ``resolution`` metres (None: the config's) and write the files of
@@ -111,8 +145,22 @@ def occupancy_map_job(
 
     with atomic_folder(out_dir, overwrite=overwrite) as tmp:
         save_map_image(result.grid, tmp / "map.png")
+        if plots:
+            _save_map_view(result.grid, result.poses, data.name, tmp / "map_view.png")
         write_ros_map(result.grid, tmp / "map.pgm", tmp / "map.yaml")
         write_json(tmp / "quality.json", {**quality, "stats": stats})
         write_json(tmp / "config.json", resolved)
         files = tuple(sorted(p.name for p in tmp.iterdir()))
     return OccupancyMapReport(Path(out_dir), files, quality, stats, result.grid)
+
+
+def _save_map_view(grid: OccupancyGrid, poses: Any, name: str, path: Path) -> None:
+    from slamkit.viz import new_figure, save_figure
+    from slamkit.viz.maps import plot_map
+    from slamkit.viz.report import FIGURE_DPI
+
+    fig = new_figure(figsize=(9.0, 7.0))
+    ax = fig.add_subplot()
+    plot_map(ax, grid, trajectory=poses, title=f"{name}: occupancy grid ({grid.resolution:g} m)")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize="small")
+    save_figure(fig, path, dpi=FIGURE_DPI)

@@ -318,14 +318,18 @@ def _figure(
     result: OptimizeResult,
     metrics: dict[str, Any],
 ) -> Figure:
-    from slamkit.viz.graphs import pose_graph_figure  # plotting only when asked for
+    from slamkit.viz.graphs import pose_graph_figure, principal_plane  # plotting only when asked
 
     p0, l0 = start
     lm = result.landmark_ids.shape[0] > 0
     what = f"{metrics['poses']} poses, {metrics['landmarks']} landmarks, {metrics['edges']} edges"
+    labels = ("x [m]", "y [m]")
+    xy0, xy1 = p0[:, :2], result.poses[:, :2]
+    if data.dim == 3 and not lm:  # the plane the poses mostly lie in, not always x-y
+        xy0, xy1, labels = principal_plane(p0[:, :3], result.poses[:, :3])
     return pose_graph_figure(
-        p0[:, :2],  # 3D: the x-y projection
-        result.poses[:, :2],
+        xy0,
+        xy1,
         edges=_pose_edge_rows(data, result.pose_ids),
         initial_landmarks=l0 if lm else None,
         optimized_landmarks=result.landmarks if lm else None,
@@ -334,7 +338,10 @@ def _figure(
             f"optimised ({result.method}, {result.iterations} iterations): "
             f"χ² = {metrics['chi2_final']:.6g}",
         ),
-        suptitle=f"{path.name}: {what}" + (" (x-y projection)" if data.dim == 3 else ""),
+        suptitle=f"{path.name}: {what}"
+        + (" (projected on its principal plane)" if labels[0] != "x [m]" else "")
+        + (" (x-y projection)" if data.dim == 3 and lm else ""),
+        axis_labels=labels,
     )
 
 

@@ -18,6 +18,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from slamkit.cli._common import console, known_errors, progress_bar, terminate
+from slamkit.cli.compare_cmd import compare_command
 from slamkit.cli.config_cmd import config_app
 from slamkit.cli.eval_cmd import eval_app
 from slamkit.cli.map_cmd import map_app
@@ -140,6 +141,7 @@ def _run(
     preset: str | None = None,
     overrides: list[str] | None = None,
     formats: list[str] | None = None,
+    svg: bool = False,
 ) -> None:
     from slamkit.app import RunRequest, run_job
     from slamkit.app.runconfig import apply_overrides, read_run_config, resolve_data
@@ -163,6 +165,7 @@ def _run(
         animate=animate,
         preset=None if preset == "none" else preset,
         formats=tuple(f for f in (formats or []) if f != "tum"),
+        svg=svg,
     )
     with progress_bar(f"{estimator} on {data}") as progress:
         report = run_job(request, progress, progress.stage)
@@ -171,6 +174,8 @@ def _run(
         console.print(f"preset {report.preset} (config.json has every setting): {used}")
     console.print(_render_metrics(report.scores))
     console.print(f"wrote {', '.join(report.files)} to [bold]{report.out_dir}[/]")
+    if "report.html" in report.files:
+        console.print(f"report: [bold]{report.out_dir / 'report.html'}[/] (open it in a browser)")
 
 
 @app.command("run")
@@ -245,8 +250,9 @@ def run_command(
             show_default=False,
         ),
     ] = None,
+    svg: Annotated[bool, typer.Option(help="Also write every figure as SVG.")] = False,
 ) -> None:
-    """Run ESTIMATOR on a data set; write trajectory, metrics, config and plots."""
+    """Run ESTIMATOR on a data set; write trajectory, metrics, config, plots and report.html."""
     _run(
         estimator,
         data,
@@ -260,6 +266,7 @@ def run_command(
         preset=preset,
         overrides=set_,
         formats=formats,
+        svg=svg,
     )
 
 
@@ -285,9 +292,16 @@ def demo_command(
         plots=True,
         overwrite=True,
     )
+    from slamkit.app.demo import DEMO_LOOK_AT
+
+    console.print("[bold]where to look[/] (the report page shows them all):")
+    for name, what in DEMO_LOOK_AT:
+        if (out / name).exists():
+            console.print(f"  {out / name}: {what}")
 
 
 app.command("optimize")(optimize_command)
+app.command("compare")(compare_command)
 
 
 @app.command("estimators")

@@ -23,7 +23,7 @@ from slamkit.cli._common import console, known_errors, progress_bar
 
 __all__ = ["DEFAULT_MAX_RANGE", "map_app"]
 
-DEFAULT_MAX_RANGE = 30.0
+DEFAULT_MAX_RANGE = 30.0  # = slamkit.app.mapping.USABLE_RANGE (run occupancy-mapping uses it)
 """[m] The command's usable range r_max unless ``--max-range`` or the config file's
 ``[mapping.model] max_range`` says otherwise (``--max-range sensor``: the sensor's own).
 

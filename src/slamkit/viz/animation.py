@@ -1,10 +1,13 @@
 """An animated GIF of a run: the estimate growing over time, from the runner's frames.
 
-Each frame of :attr:`slamkit.pipeline.Result.frames` becomes one image: the path estimated so
-far, the current pose with its ``n_sigma`` position ellipse, the estimator's map at that
-moment (landmarks with their ellipses) and its particles, over the true trajectory and
-landmarks (or the GPS track) where the data set has them. The axes are fixed to the extent
-of the whole run, so the picture does not jump.
+Frames are picked from :attr:`slamkit.pipeline.Result.frames` evenly over a mix of time and
+distance travelled (:func:`~slamkit.viz.layout.pick_frames`: few frames while the robot
+stands still). Each becomes one image: the path estimated so far, the current pose as an
+arrow with its ``n_sigma`` position ellipse, the estimator's map at that moment (landmarks
+with their ellipses) and at most :data:`PARTICLES_DRAWN` of its particles, over the map the
+run localizes in, the true landmarks, and the true path and GPS track *up to that moment*
+(a frame never shows the future). The axes are fixed to the extent of the whole run (the
+trajectories and the map, not the ellipses), so the picture does not jump.
 """
 
 from __future__ import annotations
@@ -19,59 +22,84 @@ from matplotlib.animation import FuncAnimation, PillowWriter
 
 from slamkit.errors import InputError
 from slamkit.geometry.alignment import Similarity
+from slamkit.viz.layout import legend_outside, pick_frames, set_box
+from slamkit.viz.maps import plot_map
 from slamkit.viz.plots import (
     new_figure,
     plot_covariance_ellipses,
     plot_landmark_estimates,
-    plot_trajectory,
+    plot_particles,
 )
-from slamkit.viz.report import plot_reference
+from slamkit.viz.report import map_under, plot_reference, reference_extent
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from matplotlib.artist import Artist
-    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
     from slamkit.datasets import Dataset
     from slamkit.pipeline.runner import Result
 
-__all__ = ["save_animation"]
+__all__ = ["MAX_FRAMES", "PARTICLES_DRAWN", "animation_frames", "save_animation"]
+
+PARTICLES_DRAWN = 2000
+"""At most this many particles per frame (a deterministic stride over the cloud)."""
+
+MAX_FRAMES = 120
+"""At most this many frames in a GIF (about 15 s at 8 frames per second)."""
 
 
-def save_animation(
+def animation_frames(
     result: Result,
     dataset: Dataset,
-    path: str | os.PathLike[str],
     *,
-    fps: int = 8,
     n_sigma: float = 3.0,
     gps_alignment: Similarity | None = None,
-) -> Path:
-    """Write the frames of ``result`` as an animated GIF to ``path`` (atomically: a reader
-    never sees a half-written file) and return the path.
-
-    ``gps_alignment`` is the similarity that maps the estimate into the GPS frame (the
-    ``alignment`` of an evaluation's :class:`~slamkit.eval.GpsError`); with it the GPS track
-    is drawn in the estimate's frame. Raises :class:`~slamkit.errors.InputError` when the
-    run kept no frames.
-    """
-    frames = result.frames
-    if not frames:
+    max_frames: int = MAX_FRAMES,
+) -> tuple[Figure, Callable[[int], list[Artist]], int]:
+    """The figure of the animation, the function that draws frame ``i`` on it (and returns
+    the artists it changed), and the number of frames (see :func:`save_animation`)."""
+    if not result.frames:
         raise InputError("save_animation: the run kept no frames (run it with frames > 0)")
-    target = Path(path)
-    fig = new_figure(figsize=(6.4, 5.6), dpi=80.0)
+    keep = pick_frames(
+        np.array([f.t for f in result.frames]),
+        np.array([f.pose[:2] for f in result.frames]),
+        max(2, int(max_frames)),
+    )
+    frames = [result.frames[int(k)] for k in keep]
+    fig = new_figure(figsize=(8.0, 6.4), dpi=90.0)
     ax = fig.add_subplot()
     truth = dataset.truth
-    plot_reference(ax, truth, gps_alignment)
-    if truth.poses is not None:
-        plot_trajectory(ax, truth.poses, label="ground truth", color="black", linewidth=1.0)
-    _fix_limits(ax, result, dataset)
+    grid = map_under(result, dataset) if result.output.grid is None else None
+    if grid is not None:  # the map localized in (a map being built would show the future)
+        plot_map(ax, grid, scale_bar=False)
+    plot_reference(ax, truth, None)  # walls and landmarks; the GPS track grows below
+    gps_xy = None
+    if truth.positions is not None and gps_alignment is not None:
+        gps_xy = gps_alignment.inverse().apply_to_points(truth.positions)
+    (gps_line,) = ax.plot(
+        [],
+        [],
+        ".",
+        ms=1.5,
+        color="0.55",
+        zorder=1,
+        label="GPS (aligned)" if gps_xy is not None else None,
+    )
+    (truth_line,) = ax.plot(
+        [], [], color="black", linestyle=(0, (4, 3)), linewidth=1.0, label="ground truth", zorder=4
+    )
+    set_box(ax, reference_extent(result, dataset, grid))
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    (path_line,) = ax.plot([], [], color="tab:blue", linewidth=1.2, label="estimate")
-    ax.legend(loc="upper right", fontsize="x-small")
+    (path_line,) = ax.plot([], [], color="tab:blue", linewidth=1.4, label="estimate", zorder=3)
+    span = np.diff(ax.get_xlim())[0]
+    legend_outside(ax, fontsize="x-small")
     title = ax.set_title("")
     dynamic: list[Artist] = []
+    t0 = float(result.times[0]) if len(result) else 0.0
 
     def draw(i: int) -> list[Artist]:
         for artist in dynamic:
@@ -80,10 +108,14 @@ def save_animation(
         f = frames[i]
         upto = int(np.searchsorted(result.times, f.t, side="right"))
         path_line.set_data(result.poses[:upto, 0], result.poses[:upto, 1])
+        if truth.poses is not None and truth.times is not None:
+            k = int(np.searchsorted(truth.times, f.t, side="right"))
+            truth_line.set_data(truth.poses[:k, 0], truth.poses[:k, 1])
+        if gps_xy is not None and truth.position_times is not None:
+            k = int(np.searchsorted(truth.position_times, f.t, side="right"))
+            gps_line.set_data(gps_xy[:k, 0], gps_xy[:k, 1])
         if f.particles is not None and f.particles.size:
-            dynamic.append(
-                ax.scatter(f.particles[:, 0], f.particles[:, 1], s=2, color="tab:red", alpha=0.3)
-            )
+            dynamic.extend(plot_particles(ax, f.particles, max_points=PARTICLES_DRAWN))
         if f.cov is not None:
             dynamic.append(
                 plot_covariance_ellipses(
@@ -100,10 +132,49 @@ def save_animation(
                     label=None,
                 )
             )
-        title.set_text(f"{result.estimator} on {result.dataset}: t = {f.t:.1f} s")
-        return [path_line, title, *dynamic]
+        dynamic.append(  # the current pose
+            ax.arrow(
+                f.pose[0],
+                f.pose[1],
+                0.03 * span * np.cos(f.pose[2]),
+                0.03 * span * np.sin(f.pose[2]),
+                width=0.006 * span,
+                color="tab:blue",
+                ec="black",
+                lw=0.5,
+                length_includes_head=True,
+                zorder=7,
+            )
+        )
+        title.set_text(f"{result.estimator} on {result.dataset}: t = {f.t - t0:.1f} s")
+        return [path_line, truth_line, gps_line, title, *dynamic]
 
-    anim = FuncAnimation(fig, draw, frames=len(frames), blit=False)
+    return fig, draw, len(frames)
+
+
+def save_animation(
+    result: Result,
+    dataset: Dataset,
+    path: str | os.PathLike[str],
+    *,
+    fps: int = 8,
+    n_sigma: float = 3.0,
+    gps_alignment: Similarity | None = None,
+    max_frames: int = MAX_FRAMES,
+) -> Path:
+    """Write the frames of ``result`` as an animated GIF to ``path`` (atomically: a reader
+    never sees a half-written file) and return the path.
+
+    ``gps_alignment`` is the similarity that maps the estimate into the GPS frame (the
+    ``alignment`` of an evaluation's :class:`~slamkit.eval.GpsError`); with it the GPS track
+    is drawn in the estimate's frame. Raises :class:`~slamkit.errors.InputError` when the
+    run kept no frames.
+    """
+    fig, draw, count = animation_frames(
+        result, dataset, n_sigma=n_sigma, gps_alignment=gps_alignment, max_frames=max_frames
+    )
+    target = Path(path)
+    anim = FuncAnimation(fig, draw, frames=count, blit=False)
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = target.with_name(f".{target.name}.{uuid.uuid4().hex}.tmp.gif")
     try:
@@ -113,20 +184,3 @@ def save_animation(
         tmp.unlink(missing_ok=True)
         raise
     return target
-
-
-def _fix_limits(ax: Axes, result: Result, dataset: Dataset) -> None:
-    """Axis limits around everything the animation will draw, with a 5 % margin."""
-    pts = [result.poses[:, :2]]
-    if dataset.truth.poses is not None:
-        pts.append(dataset.truth.poses[:, :2])
-    if dataset.truth.landmarks is not None:
-        pts.append(dataset.truth.landmarks.positions)
-    last = result.frames[-1].landmarks
-    if last is not None and len(last.landmarks):
-        pts.append(last.landmarks.positions)
-    xy = np.concatenate(pts)
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
-    pad = 0.05 * max(float(np.max(hi - lo)), 1.0)
-    ax.set_xlim(lo[0] - pad, hi[0] + pad)
-    ax.set_ylim(lo[1] - pad, hi[1] + pad)

@@ -22,6 +22,7 @@ from PIL import Image
 from slamkit._validation import as_array
 from slamkit.errors import ShapeError
 from slamkit.maps import OccupancyGrid
+from slamkit.viz.layout import add_scale_bar, crop_to_known
 from slamkit.viz.plots import plot_occupancy_grid
 
 __all__ = ["map_image", "plot_map", "save_map_image"]
@@ -38,11 +39,19 @@ def plot_map(
     *,
     trajectory: ArrayLike | None = None,
     title: str | None = None,
+    crop: bool = True,
+    margin: float = 1.0,
+    scale_bar: bool = True,
     **style: Any,
 ) -> AxesImage:
     """Draw ``grid`` on ``ax`` in world metres (equal aspect), optionally with the robot's
-    ``trajectory (N, 3)`` or ``(N, 2)`` as a thin line; returns the image artist."""
-    image = plot_occupancy_grid(ax, grid, **style)
+    ``trajectory (N, 3)`` or ``(N, 2)`` as a thin line; returns the image artist.
+
+    ``crop``: only the observed cells and ``margin`` metres round them (a grid sized for an
+    80 m laser is mostly unknown); ``scale_bar``: a bar of a round length in the lower right
+    (call :func:`~slamkit.viz.layout.add_scale_bar` after changing the limits instead)."""
+    shown = crop_to_known(grid, margin=margin) if crop else grid
+    image = plot_occupancy_grid(ax, shown, **style)
     if trajectory is not None:
         traj = as_array(trajectory, "trajectory", (None, None))
         if traj.shape[1] not in (2, 3):
@@ -53,6 +62,8 @@ def plot_map(
     ax.set_ylabel("y [m]")
     if title:
         ax.set_title(title)
+    if scale_bar:
+        add_scale_bar(ax)
     return image
 
 

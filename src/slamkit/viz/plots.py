@@ -442,7 +442,8 @@ def plot_particles(
     pose as a black arrow if given. Returns ``[scatter]`` or ``[scatter, arrow]``."""
     p = as_array(particles, "particles", (None, 3))
     w = None if weights is None else as_array(weights, "weights", (p.shape[0],))
-    step = max(1, p.shape[0] // _count(max_points, "max_points", 1))
+    # ceil: a stride of P // max_points would draw up to twice max_points
+    step = max(1, -(-p.shape[0] // _count(max_points, "max_points", 1)))
     p = p[::step]
     alpha: Any = 0.5
     if w is not None:

@@ -1,4 +1,10 @@
-"""The standard figures of one run: map view, per-axis errors with ±3σ, NEES over time."""
+"""The standard figures of one run: map view, per-axis errors with ±3σ, NEES over time.
+
+Every picture is made to be read: axis limits from the trajectories and the map, not from
+covariance ellipses or a lost start (:mod:`slamkit.viz.layout`); the map the run localizes
+or maps in drawn under it; the truth dashed over the estimate; start and end marked;
+legends beside the axes; times counted from the start of the run.
+"""
 
 from __future__ import annotations
 
@@ -6,8 +12,23 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from slamkit.eval import GpsError, RelationError, chi2_bounds, nis_summary
+from slamkit.eval import (
+    ConvergenceReport,
+    GpsError,
+    RelationError,
+    chi2_bounds,
+    nis_summary,
+)
 from slamkit.geometry.alignment import Similarity
+from slamkit.viz.layout import (
+    Box,
+    legend_outside,
+    plot_start_end,
+    reference_box,
+    robust_abs_limit,
+    set_box,
+    union_box,
+)
 from slamkit.viz.maps import plot_map
 from slamkit.viz.plots import (
     new_figure,
@@ -16,11 +37,10 @@ from slamkit.viz.plots import (
     plot_landmark_estimates,
     plot_landmarks,
     plot_nis,
-    plot_occupancy_grid,
     plot_particles,
     plot_pose_errors,
     plot_segments,
-    plot_trajectories,
+    plot_trajectory,
 )
 from slamkit.viz.relations import plot_relation_errors
 
@@ -29,10 +49,29 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from slamkit.datasets import Dataset, GroundTruth
+    from slamkit.maps import OccupancyGrid
     from slamkit.pipeline.evaluate import Evaluation
     from slamkit.pipeline.runner import Result
 
-__all__ = ["gps_alignment", "plot_reference", "run_figures"]
+__all__ = [
+    "FIGURE_DPI",
+    "POINT_ESTIMATORS",
+    "gps_alignment",
+    "map_under",
+    "plot_estimate_over_truth",
+    "plot_reference",
+    "reference_extent",
+    "run_figures",
+]
+
+FIGURE_DPI = 150.0
+"""Resolution of the PNGs a run writes (a 9 × 6.5 in figure: 1350 × 975 pixels)."""
+
+POINT_ESTIMATORS = frozenset({"least-squares"})
+"""Estimators whose estimates are independent fixes, drawn as points rather than a path."""
+
+MANY_LANDMARKS = 60
+"""Above this many true landmarks the stars are drawn small, so they do not bury the rest."""
 
 
 def gps_alignment(evaluation: Evaluation) -> Similarity | None:
@@ -49,25 +88,161 @@ def plot_reference(ax: Axes, truth: GroundTruth, gps_alignment: Similarity | Non
     if truth.walls is not None:
         plot_segments(ax, truth.walls)
     if truth.landmarks is not None:
-        plot_landmarks(ax, truth.landmarks, label="true landmarks")
+        many = len(truth.landmarks.positions) > MANY_LANDMARKS
+        plot_landmarks(
+            ax,
+            truth.landmarks,
+            label="true landmarks",
+            s=18 if many else 80,
+            alpha=0.6 if many else 1.0,
+        )
     if truth.positions is not None and gps_alignment is not None:
         xy = gps_alignment.inverse().apply_to_points(truth.positions)
         ax.plot(xy[:, 0], xy[:, 1], ".", ms=1.5, color="0.55", label="GPS (aligned)", zorder=1)
 
 
+def reference_extent(
+    result: Result, dataset: Dataset, grid: OccupancyGrid | None = None
+) -> Box | None:
+    """The box a run's map view should show: the true path, walls, true landmarks, the known
+    cells of ``grid``, the landmarks the run mapped, and the estimate between its 2 % and
+    98 % quantiles when there is a reference (0.5 %–99.5 % without one) — never the
+    covariance ellipses, and not a lost start's first wild estimates."""
+    from slamkit.viz.layout import map_box
+
+    truth = dataset.truth
+    parts = [
+        None if truth.poses is None else truth.poses[:, :2],
+        None if truth.walls is None else truth.walls.segments.reshape(-1, 2),
+        None if truth.landmarks is None else truth.landmarks.positions,
+    ]
+    ref = union_box(reference_box(parts), None if grid is None else map_box(grid))
+    est = reference_box([result.poses[:, :2]], quantile=0.02 if ref is not None else 0.005)
+    mapped = result.output.landmarks
+    lm = None
+    if mapped is not None and len(mapped.landmarks.positions):
+        lm = reference_box([mapped.landmarks.positions], quantile=0.0 if ref else 0.01)
+    return union_box(ref, est, lm)
+
+
+def plot_estimate_over_truth(
+    ax: Axes, result: Result, dataset: Dataset, *, markers: bool = True
+) -> None:
+    """The estimate (blue; independent fixes as dots) under the true path (black, dashed),
+    with start and end markers on the estimate."""
+    if result.estimator in POINT_ESTIMATORS:
+        ax.plot(
+            result.poses[:, 0],
+            result.poses[:, 1],
+            ".",
+            ms=3,
+            color="tab:blue",
+            label="least-squares fixes",
+            zorder=2,
+        )
+    else:
+        plot_trajectory(
+            ax, result.poses, label="estimate", color="tab:blue", linewidth=1.6, zorder=2
+        )
+    if dataset.truth.poses is not None:
+        plot_trajectory(
+            ax,
+            dataset.truth.poses,
+            label="ground truth",
+            color="black",
+            linestyle=(0, (4, 3)),
+            linewidth=1.0,
+            zorder=4,
+        )
+    if markers and result.estimator not in POINT_ESTIMATORS:
+        plot_start_end(ax, result.poses)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+
+
+def map_under(result: Result, dataset: Dataset) -> OccupancyGrid | None:
+    """The occupancy grid a run's map view is drawn on: the one it built, else the one it
+    localized in."""
+    return result.output.grid if result.output.grid is not None else dataset.known_grid
+
+
 def run_figures(
     result: Result, dataset: Dataset, evaluation: Evaluation, *, n_sigma: float = 3.0
 ) -> dict[str, Figure]:
-    """Figures keyed by file name: ``trajectory.png`` always; ``errors.png`` and ``nees.png``
-    when the data set has a true trajectory (and the estimator covariances); ``particles.png``
-    when the estimator kept particle snapshots; ``nis.png`` when it logged innovations;
-    ``map.png`` when it built an occupancy grid; ``relation_errors.png`` when it was scored
-    against the data set's reference relations."""
-    figs: dict[str, Figure] = {}
-    fig = new_figure(figsize=(7.0, 6.0))
+    """Figures keyed by file name: ``trajectory.png`` always (over the map the run built or
+    localized in); ``errors.png`` and ``nees.png`` when the data set has a true trajectory
+    (and the estimator covariances); ``particles.png`` when the estimator kept particle
+    snapshots; ``nis.png`` when it logged innovations; ``map.png`` when it built an occupancy
+    grid; ``loops.png`` when it built a pose graph with loop closures;
+    ``relation_errors.png`` when it was scored against the data set's reference relations."""
+    from slamkit.viz.run_views import loop_figure, map_figure, particle_figure
+
+    figs: dict[str, Figure] = {
+        "trajectory.png": _trajectory_figure(result, dataset, evaluation, n_sigma)
+    }
+    t0 = float(result.times[0]) if len(result) else 0.0
+    if evaluation.errors is not None and evaluation.matched_times is not None:
+        figs["errors.png"] = _error_figure(result, evaluation, n_sigma, t0)
+    if evaluation.nees is not None and evaluation.matched_times is not None:
+        ok = np.isfinite(evaluation.nees)
+        if np.any(ok):
+            fig = new_figure(figsize=(9.0, 4.0))
+            ax = fig.add_subplot()
+            lo, hi = chi2_bounds(3, 1, 0.95)
+            plot_consistency(ax, evaluation.matched_times[ok] - t0, evaluation.nees[ok], (lo, hi))
+            ax.set_yscale("log")
+            ax.set_xlabel("time since the start [s]")
+            ax.set_title("NEES of the pose (3 dof) with the 95 % χ² band")
+            legend_outside(ax)
+            figs["nees.png"] = fig
+    if result.output.grid is not None:
+        figs["map.png"] = map_figure(result, dataset)
+    graph = result.output.graph
+    if graph is not None and graph.dim == 2 and len(graph.poses) > 1:
+        figs["loops.png"] = loop_figure(result, dataset)
+    if result.output.particle_snapshots:
+        figs["particles.png"] = particle_figure(result, dataset)
+    log = result.output.innovations
+    if log is not None and len(log) > 0:
+        summary = nis_summary(log.times, log.nis, log.dof, window=50)
+        fig = new_figure(figsize=(9.0, 4.0))
+        ax = fig.add_subplot()
+        plot_nis(
+            ax,
+            summary.window_start - t0,
+            summary.window_sums,
+            summary.window_lower,
+            summary.window_upper,
+        )
+        ax.set_xlabel("time since the start [s]")
+        ax.set_ylabel("NIS / band centre")
+        ax.set_title(
+            f"NIS over windows of {summary.window} updates: consistent for "
+            f"{100 * summary.consistent_time_fraction:.0f} % of the run"
+        )
+        legend_outside(ax)
+        figs["nis.png"] = fig
+    rel = evaluation.scores.relations
+    if isinstance(rel, RelationError):
+        fig = new_figure(figsize=(9.0, 5.5))
+        axes = fig.subplots(2, 1, sharex=True)
+        plot_relation_errors(axes, rel)
+        axes[0].set_title(f"relation errors: {rel.summary()}")
+        figs["relation_errors.png"] = fig
+    return figs
+
+
+def _trajectory_figure(
+    result: Result, dataset: Dataset, evaluation: Evaluation, n_sigma: float
+) -> Figure:
+    fig = new_figure(figsize=(9.0, 6.5))
     ax = fig.add_subplot()
+    grid = map_under(result, dataset)
+    if grid is not None:
+        plot_map(ax, grid, scale_bar=False)
     plot_reference(ax, dataset.truth, gps_alignment(evaluation))
-    plot_trajectories(ax, truth=dataset.truth.poses, estimate=result.poses, legend=False)
+    plot_estimate_over_truth(ax, result, dataset)
     if result.covariances is not None and len(result) > 1:
         every = max(1, len(result) // 25)
         plot_covariance_ellipses(
@@ -77,94 +252,64 @@ def run_figures(
             n_sigma=n_sigma,
             every=every,
             label=f"{n_sigma:g}σ position",
+            linewidth=0.6,
+            alpha=0.7,
         )
     est_lm = result.output.landmarks
     if est_lm is not None:
         plot_landmark_estimates(ax, est_lm.landmarks.positions, est_lm.covariances, n_sigma=n_sigma)
     snaps = result.output.particle_snapshots
     if snaps:  # the last particle cloud over the map (FastSLAM: the poses behind the maps)
-        cloud = plot_particles(ax, snaps[-1].particles, snaps[-1].weights)
-        cloud[0].set_label(f"particles at t = {snaps[-1].t:.1f} s")
+        cloud = plot_particles(ax, snaps[-1].particles, snaps[-1].weights, max_points=3000)
+        cloud[0].set_label(f"particles at t = {snaps[-1].t - result.times[0]:.1f} s")
+        cloud[0].set_zorder(5)
+    set_box(ax, reference_extent(result, dataset, grid))
+    if grid is not None:
+        from slamkit.viz.layout import add_scale_bar
+
+        add_scale_bar(ax)
     ax.set_title(f"{result.estimator} on {result.dataset}")
-    ax.legend(loc="best", fontsize="small")
-    figs["trajectory.png"] = fig
-
-    if evaluation.errors is not None and evaluation.matched_times is not None:
-        fig = new_figure(figsize=(7.0, 6.0))
-        axes = fig.subplots(3, 1, sharex=True)
-        plot_pose_errors(
-            axes, evaluation.matched_times, evaluation.errors, evaluation.sigmas, n_sigma
-        )
-        axes[0].set_title(f"estimate − truth with ±{n_sigma:g}σ")
-        figs["errors.png"] = fig
-    if evaluation.nees is not None and evaluation.matched_times is not None:
-        ok = np.isfinite(evaluation.nees)
-        if np.any(ok):
-            fig = new_figure(figsize=(7.0, 3.5))
-            ax = fig.add_subplot()
-            lo, hi = chi2_bounds(3, 1, 0.95)
-            plot_consistency(ax, evaluation.matched_times[ok], evaluation.nees[ok], (lo, hi))
-            ax.set_yscale("log")
-            ax.set_xlabel("time [s]")
-            ax.set_title("NEES of the pose (3 dof) with the 95 % χ² band")
-            figs["nees.png"] = fig
-    if result.output.grid is not None:
-        fig = new_figure(figsize=(7.0, 6.0))
-        ax = fig.add_subplot()
-        plot_map(ax, result.output.grid)
-        plot_trajectories(ax, estimate=result.poses, legend=False)
-        ax.set_title(f"{result.estimator} on {result.dataset}: occupancy grid")
-        figs["map.png"] = fig
-    if snaps:
-        figs["particles.png"] = _particle_figure(result, dataset)
-    log = result.output.innovations
-    if log is not None and len(log) > 0:
-        summary = nis_summary(log.times, log.nis, log.dof, window=50)
-        fig = new_figure(figsize=(7.0, 3.5))
-        ax = fig.add_subplot()
-        plot_nis(ax, summary.window_start, summary.window_sums, summary.window_lower,
-                 summary.window_upper)  # fmt: skip
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel("NIS / band centre")
-        ax.set_title(
-            f"NIS over windows of {summary.window} updates: consistent for "
-            f"{100 * summary.consistent_time_fraction:.0f} % of the run"
-        )
-        figs["nis.png"] = fig
-    rel = evaluation.scores.relations
-    if isinstance(rel, RelationError):
-        fig = new_figure(figsize=(7.0, 5.0))
-        axes = fig.subplots(2, 1, sharex=True)
-        plot_relation_errors(axes, rel)
-        axes[0].set_title(f"relation errors: {rel.summary()}")
-        figs["relation_errors.png"] = fig
-    return figs
+    legend_outside(ax)
+    return fig
 
 
-def _particle_figure(result: Result, dataset: Dataset) -> Figure:
-    """Up to six particle clouds side by side, with the map and the true pose."""
-    snaps = result.output.particle_snapshots
-    pick = np.unique(np.linspace(0, len(snaps) - 1, min(6, len(snaps))).round().astype(int))
-    cols = min(3, pick.size)
-    rows = int(np.ceil(pick.size / cols))
-    fig = new_figure(figsize=(4.0 * cols, 3.6 * rows))
-    axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
-    truth = dataset.truth
-    for ax, i in zip(axes, pick, strict=False):
-        snap = snaps[int(i)]
-        if truth.walls is not None:
-            plot_segments(ax, truth.walls)
-        elif dataset.known_grid is not None:
-            plot_occupancy_grid(ax, dataset.known_grid)
-        if truth.landmarks is not None:
-            plot_landmarks(ax, truth.landmarks)
-        true_pose = None
-        if truth.times is not None and truth.poses is not None and truth.times.size:
-            k = int(np.argmin(np.abs(truth.times - snap.t)))
-            true_pose = truth.poses[k]
-        plot_particles(ax, snap.particles, snap.weights, true_pose=true_pose)
-        ax.set_aspect("equal")
-        ax.set_title(f"t = {snap.t:.1f} s, {snap.particles.shape[0]} particles", fontsize="small")
-    for ax in axes[pick.size :]:
-        ax.set_visible(False)
+def _error_figure(result: Result, evaluation: Evaluation, n_sigma: float, t0: float) -> Figure:
+    """x, y, heading errors against the time since the start, each axis limited to what the
+    run shows after its first transient (convergence, when the run was scored for it)."""
+    assert evaluation.errors is not None and evaluation.matched_times is not None
+    t = evaluation.matched_times - t0
+    fig = new_figure(figsize=(9.0, 6.5))
+    axes = fig.subplots(3, 1, sharex=True)
+    plot_pose_errors(axes, t, evaluation.errors, evaluation.sigmas, n_sigma)
+    conv = evaluation.scores.convergence
+    settle = conv.time if isinstance(conv, ConvergenceReport) and conv.time is not None else None
+    # after convergence; without a convergence score, after the first 5 % of the run
+    first = settle if settle is not None else float(t[0] + 0.05 * (t[-1] - t[0]))
+    after = t >= first
+    if not np.any(after):
+        after = np.ones_like(t, dtype=bool)
+    unit = np.array([1.0, 1.0, np.degrees(1.0)])
+    err = evaluation.errors.copy()
+    err[:, 2] = (err[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    for i, ax in enumerate(axes):
+        half = robust_abs_limit(err[after, i] * unit[i], quantile=1.0)
+        if evaluation.sigmas is not None:
+            half = max(
+                half,
+                robust_abs_limit(n_sigma * evaluation.sigmas[after, i] * unit[i], quantile=0.95),
+            )
+        half = 1.25 * half if half > 0 else 1.0
+        ax.set_ylim(-half, half)
+        ax.axhline(0.0, color="0.6", linewidth=0.6, zorder=0)
+        if settle is not None and settle > 0:
+            ax.axvspan(
+                float(t[0]),
+                settle,
+                color="0.85",
+                zorder=0,
+                label="before convergence" if i == 0 else None,
+            )
+    axes[-1].set_xlabel("time since the start [s]")
+    axes[0].set_title(f"estimate − truth with ±{n_sigma:g}σ")
+    legend_outside(axes[0])
     return fig

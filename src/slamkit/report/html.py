@@ -1,0 +1,393 @@
+"""Static HTML pages of runs: one per output folder (``report.html``) and one comparing runs.
+
+A page is plain HTML with its style inline and no script, so it opens from disk in any
+browser without a server. Figures are ``<img>`` elements with *relative* links to the PNGs
+beside the page (a run's page) or in the run folders (a comparison page): the PNGs are in the
+folder already, so embedding them as base64 would store every picture twice and make the
+page a third larger than the images; a folder moved or copied as a whole keeps its page
+working. Every text that comes from data (names, descriptions, config values, metric keys)
+goes through :func:`html.escape`.
+
+Nothing here imports matplotlib or numpy: the pages are built from what a run folder holds
+(``metrics.json``, ``config.json``, the images) and a few strings.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+import os
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from slamkit.errors import InputError
+
+__all__ = [
+    "FIGURE_ORDER",
+    "RunPage",
+    "compare_html",
+    "flatten_metrics",
+    "order_figures",
+    "read_run_folder",
+    "run_html",
+    "write_compare_page",
+    "write_run_page",
+]
+
+FIGURE_ORDER = (
+    "trajectory.png",
+    "map.png",
+    "loops.png",
+    "errors.png",
+    "particles.png",
+    "nees.png",
+    "nis.png",
+    "relation_errors.png",
+    "graph.png",
+)
+"""The order figures appear in on a page; other images follow by name."""
+
+HEADLINE = (
+    ("ate.rmse", "ATE RMSE, aligned [m]"),
+    ("ate_unaligned.rmse", "ATE RMSE, unaligned [m]"),
+    ("final_position_error", "final position error [m]"),
+    ("landmarks.rmse", "landmark RMSE [m]"),
+    ("gps.rmse", "GPS RMSE, aligned [m]"),
+    ("runtime.total_seconds", "estimator time [s]"),
+)
+"""Metrics (flattened keys) repeated at the top of a run's page, when the run has them."""
+
+_IMAGE_SUFFIXES = (".png", ".gif", ".svg", ".jpg", ".jpeg")
+
+_STYLE = """
+body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 1200px;
+       color: #222; background: #fff; padding: 0 1em; }
+h1 { font-size: 1.5em; } h2 { font-size: 1.2em; margin-top: 1.6em;
+     border-bottom: 1px solid #ccc; }
+table { border-collapse: collapse; font-size: 0.9em; }
+th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: left; vertical-align: top; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; }
+th { background: #f0f0f0; }
+pre { background: #f6f6f6; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
+figure { margin: 0.5em 0.5%; display: inline-block; vertical-align: top; max-width: 48%; }
+.runs figure { max-width: 100%; }
+figure img { max-width: 100%; border: 1px solid #ddd; }
+figcaption { font-size: 0.85em; color: #555; }
+.runs { display: grid; grid-template-columns: repeat(auto-fit, minmax(360px, 1fr)); gap: 1em; }
+.muted { color: #777; }
+"""
+
+
+@dataclass(frozen=True)
+class RunPage:
+    """What a run's page shows. ``figures`` and ``files`` are names inside ``folder``;
+    ``timings`` are wall-clock seconds by phase (``load``, ``run``, ``evaluate``, …)."""
+
+    folder: Path
+    estimator: str
+    dataset: str
+    metrics: Mapping[str, Any] = field(default_factory=dict)
+    config: Mapping[str, Any] = field(default_factory=dict)
+    figures: tuple[str, ...] = ()
+    files: tuple[str, ...] = ()
+    estimator_description: str = ""
+    dataset_description: str = ""
+    timings: Mapping[str, float] = field(default_factory=dict)
+
+    @property
+    def title(self) -> str:
+        return f"{self.estimator} on {self.dataset}"
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: not JSON (line {exc.lineno}: {exc.msg})") from exc
+    if not isinstance(data, dict):
+        raise InputError(f"{path}: expected a JSON object, got {type(data).__name__}")
+    return data
+
+
+def _figure_key(name: str) -> tuple[int, str]:
+    return (FIGURE_ORDER.index(name) if name in FIGURE_ORDER else len(FIGURE_ORDER), name)
+
+
+def order_figures(names: Iterable[str]) -> tuple[str, ...]:
+    """The image names among ``names`` in page order (:data:`FIGURE_ORDER`, then by name)."""
+    imgs = [n for n in names if n.lower().endswith(_IMAGE_SUFFIXES) and not n.startswith(".")]
+    return tuple(sorted(imgs, key=_figure_key))
+
+
+def read_run_folder(
+    folder: str | os.PathLike[str],
+    *,
+    estimator_description: str = "",
+    dataset_description: str = "",
+    timings: Mapping[str, float] | None = None,
+) -> RunPage:
+    """The page of the run written to ``folder`` (by ``slamkit run``): its
+    ``metrics.json``, ``config.json`` and images. Raises
+    :class:`~slamkit.errors.InputError` when the folder is not a run's output folder."""
+    root = Path(folder)
+    if not root.is_dir():
+        raise InputError(f"{root}: not a folder")
+    if not (root / "metrics.json").is_file():
+        raise InputError(f"{root}: not a run's output folder (no metrics.json)")
+    metrics = _read_json(root / "metrics.json")
+    config = _read_json(root / "config.json") if (root / "config.json").is_file() else {}
+    names = sorted(p.name for p in root.iterdir() if p.is_file())
+    figures = tuple(  # an SVG copy of a PNG is linked from the file list, not shown twice
+        n for n in order_figures(names) if not (n.endswith(".svg") and n[:-4] + ".png" in names)
+    )
+    est = config.get("estimator", {})
+    ds = config.get("dataset", {})
+    return RunPage(
+        folder=root,
+        estimator=str(metrics.get("estimator") or est.get("name", "?")),
+        dataset=str(metrics.get("dataset") or ds.get("name", "?")),
+        metrics=metrics,
+        config=config,
+        figures=figures,
+        files=tuple(names),
+        estimator_description=estimator_description,
+        dataset_description=dataset_description,
+        timings=dict(timings or {}),
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# metrics as rows
+# --------------------------------------------------------------------------------------------
+
+
+def _format_value(value: Any) -> str:
+    if isinstance(value, bool) or value is None:
+        return str(value).lower()
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            return str(value)
+        if value != 0 and (abs(value) >= 1e6 or abs(value) < 1e-3):
+            return f"{value:.3e}"
+        return f"{value:.4g}" if abs(value) < 1000 else f"{value:.1f}"
+    if isinstance(value, str):
+        return value
+    if isinstance(value, (list, tuple)):
+        if len(value) <= 4 and all(isinstance(v, (int, float)) for v in value):
+            return ", ".join(_format_value(v) for v in value)
+        return f"[{len(value)} values]"
+    return json.dumps(value)
+
+
+def flatten_metrics(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, str]:
+    """``metrics.json`` as ``{dotted key: formatted value}`` in the file's order: nested
+    records flattened (``ate.rmse``), a metric that does not apply as ``skipped: reason``,
+    long lists as their length. ``estimator``, ``dataset`` and ``seed`` are left out (they
+    head the page)."""
+    rows: dict[str, str] = {}
+    for key, value in metrics.items():
+        if not prefix and key in ("estimator", "dataset"):
+            continue
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            if set(value) == {"skipped"}:
+                rows[name] = f"skipped: {value['skipped']}"
+            else:
+                rows.update(flatten_metrics(value, f"{name}."))
+        else:
+            rows[name] = _format_value(value)
+    return rows
+
+
+# --------------------------------------------------------------------------------------------
+# HTML
+# --------------------------------------------------------------------------------------------
+
+
+def _e(text: object) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def _page(title: str, body: Sequence[str]) -> str:
+    return "\n".join(
+        [
+            "<!DOCTYPE html>",
+            '<html lang="en">',
+            "<head>",
+            '<meta charset="utf-8">',
+            '<meta name="viewport" content="width=device-width, initial-scale=1">',
+            f"<title>{_e(title)}</title>",
+            f"<style>{_STYLE}</style>",
+            "</head>",
+            "<body>",
+            *body,
+            "</body>",
+            "</html>",
+            "",
+        ]
+    )
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text.replace(",", ""))
+    except ValueError:
+        return False
+    return True
+
+
+def _table(header: Sequence[str] | None, rows: Iterable[Sequence[str]], css_id: str) -> str:
+    out = [f'<table id="{_e(css_id)}">']
+    if header:
+        out.append("<tr>" + "".join(f"<th>{_e(h)}</th>" for h in header) + "</tr>")
+    for row in rows:
+        cells = [f"<th>{_e(row[0])}</th>"]
+        cells += [
+            f'<td class="num">{_e(c)}</td>' if _is_number(c) else f"<td>{_e(c)}</td>"
+            for c in row[1:]
+        ]
+        out.append("<tr>" + "".join(cells) + "</tr>")
+    out.append("</table>")
+    return "\n".join(out)
+
+
+def _figure(src: str, caption: str, width: str = "") -> str:
+    style = f' style="width:{width}"' if width else ""
+    return (
+        f'<figure{style}><a href="{_e(src)}"><img src="{_e(src)}" alt="{_e(caption)}"></a>'
+        f"<figcaption>{_e(caption)}</figcaption></figure>"
+    )
+
+
+def _timing_rows(page: RunPage) -> list[tuple[str, str]]:
+    rows = [(k, f"{v:.3f}") for k, v in page.timings.items()]
+    runtime = page.metrics.get("runtime")
+    if isinstance(runtime, Mapping):
+        steps = page.metrics.get("steps")
+        if "total_seconds" in runtime:
+            rows.append(("estimator, all steps", f"{float(runtime['total_seconds']):.3f}"))
+        if "mean_step_seconds" in runtime:
+            rows.append(("estimator, mean step", f"{float(runtime['mean_step_seconds']):.6f}"))
+        if "max_step_seconds" in runtime:
+            rows.append(("estimator, largest step", f"{float(runtime['max_step_seconds']):.6f}"))
+        if steps is not None:
+            rows.append(("steps", str(steps)))
+    return rows
+
+
+def run_html(page: RunPage) -> str:
+    """The HTML of one run's page (figures linked relative to the run folder)."""
+    body = [f"<h1>{_e(page.title)}</h1>"]
+    seed = page.metrics.get("seed", page.config.get("seed"))
+    preset = page.config.get("preset")
+    facts = [("estimator", page.estimator), ("data set", page.dataset)]
+    if seed is not None:
+        facts.append(("seed", str(seed)))
+    if preset:
+        facts.append(("preset", str(preset)))
+    flat = flatten_metrics(page.metrics)
+    facts += [(label, flat[key]) for key, label in HEADLINE if key in flat]
+    body.append(_table(None, facts, "summary"))
+    body.append("<h2>Estimator</h2>")
+    body.append(f"<p>{_e(page.estimator_description or page.estimator)}</p>")
+    body.append("<h2>Data set</h2>")
+    body.append(f"<p>{_e(page.dataset_description or page.dataset)}</p>")
+    body.append("<h2>Figures</h2>")
+    if page.figures:
+        body.extend(_figure(name, name) for name in page.figures)
+    else:
+        body.append('<p class="muted">no figures (run without --no-plots to get them)</p>')
+    body.append("<h2>Metrics</h2>")
+    body.append(_table(("metric", "value"), flatten_metrics(page.metrics).items(), "metrics"))
+    body.append("<h2>Timings [s]</h2>")
+    body.append(_table(("phase", "seconds"), _timing_rows(page), "timings"))
+    body.append("<h2>Configuration (config.json)</h2>")
+    body.append(f"<pre>{_e(json.dumps(page.config, indent=2))}</pre>")
+    body.append("<h2>Files</h2>")
+    links = ", ".join(f'<a href="{_e(n)}">{_e(n)}</a>' for n in page.files)
+    body.append(f"<p>{links}</p>")
+    return _page(page.title, body)
+
+
+def _relative(target: Path, start: Path) -> str:
+    """``target`` as a URL path relative to the folder ``start`` (absolute when the two are
+    on different drives)."""
+    try:
+        rel = os.path.relpath(target.resolve(), start.resolve())
+    except ValueError:  # pragma: no cover - Windows, different drives
+        return target.resolve().as_uri()
+    return Path(rel).as_posix()
+
+
+def compare_html(pages: Sequence[RunPage], out_dir: str | os.PathLike[str]) -> str:
+    """The HTML of a page comparing ``pages`` side by side, to be written into ``out_dir``
+    (figures linked relative to it): the runs, one metrics table with a column per run,
+    and each kind of figure in a row across the runs."""
+    if not pages:
+        raise InputError("compare: expected at least one run folder")
+    where = Path(out_dir)
+    labels = [f"{i + 1}: {p.title}" for i, p in enumerate(pages)]
+    title = "slamkit: " + " vs ".join(p.title for p in pages)
+    body = [f"<h1>{_e('Comparison of ' + str(len(pages)) + ' runs')}</h1>"]
+    run_rows = []
+    for label, p in zip(labels, pages, strict=True):
+        report = p.folder / "report.html"
+        link = _relative(report if report.is_file() else p.folder, where)
+        run_rows.append(
+            f'<tr><th>{_e(label)}</th><td><a href="{_e(link)}">{_e(p.folder)}</a></td>'
+            f"<td>{_e(p.estimator_description)}</td><td>{_e(p.dataset_description)}</td></tr>"
+        )
+    body.append(
+        '<table id="runs"><tr><th>run</th><th>folder</th><th>estimator</th>'
+        "<th>data set</th></tr>" + "".join(run_rows) + "</table>"
+    )
+    flat = [flatten_metrics(p.metrics) for p in pages]
+    keys: list[str] = []
+    for f in flat:
+        keys.extend(k for k in f if k not in keys)
+    rows = [(k, *(f.get(k, "—") for f in flat)) for k in keys]
+    body.append("<h2>Metrics</h2>")
+    body.append(_table(("metric", *labels), rows, "metrics"))
+    body.append("<h2>Figures</h2>")
+    kinds: list[str] = []
+    for p in pages:
+        kinds.extend(n for n in p.figures if n not in kinds)
+    kinds.sort(key=_figure_key)
+    for kind in kinds:
+        body.append(f"<h3>{_e(kind)}</h3>")
+        cells = []
+        for label, p in zip(labels, pages, strict=True):
+            if kind in p.figures:
+                cells.append(_figure(_relative(p.folder / kind, where), label))
+            else:
+                cells.append(f'<p class="muted">{_e(label)}: no {_e(kind)}</p>')
+        body.append('<div class="runs">' + "".join(cells) + "</div>")
+    return _page(title, body)
+
+
+def _write_text(path: Path, text: str) -> Path:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+    return path
+
+
+def write_run_page(page: RunPage, name: str = "report.html") -> Path:
+    """Write :func:`run_html` of ``page`` into its folder; returns the path."""
+    return _write_text(page.folder / name, run_html(page))
+
+
+def write_compare_page(
+    pages: Sequence[RunPage], out_dir: str | os.PathLike[str], name: str = "compare.html"
+) -> Path:
+    """Write :func:`compare_html` of ``pages`` into ``out_dir`` (created); returns the path."""
+    where = Path(out_dir)
+    where.mkdir(parents=True, exist_ok=True)
+    return _write_text(where / name, compare_html(pages, where))

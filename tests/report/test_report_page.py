@@ -1,0 +1,98 @@
+"""The HTML of run and comparison pages: what they hold, escaping, and bad folders."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from slamkit.errors import InputError
+from slamkit.report import (
+    RunPage,
+    compare_html,
+    flatten_metrics,
+    order_figures,
+    read_run_folder,
+    run_html,
+)
+
+
+def _folder(root: Path, name: str, rmse: float) -> Path:
+    run = root / name
+    run.mkdir()
+    metrics = {
+        "estimator": "ekf-slam",
+        "dataset": "five<features>",
+        "seed": 3,
+        "steps": 10,
+        "runtime": {"total_seconds": 1.5, "mean_step_seconds": 0.15, "max_step_seconds": 0.4},
+        "ate": {"rmse": rmse, "max": 2 * rmse},
+        "gps": {"skipped": "no GPS & no fix"},
+        "per_step": list(range(100)),
+    }
+    (run / "metrics.json").write_text(json.dumps(metrics))
+    (run / "config.json").write_text(json.dumps({"estimator": {"name": "ekf-slam"}, "seed": 3}))
+    for fig in ("nees.png", "trajectory.png", "zeta.png", "errors.png", "trajectory.svg"):
+        (run / fig).write_bytes(b"")
+    return run
+
+
+def test_flatten_metrics_keeps_order_and_marks_skipped() -> None:
+    metrics = {"estimator": "x", "ate": {"rmse": 0.12345, "n": 7}, "gps": {"skipped": "none"}}
+    rows = flatten_metrics({**metrics, "big": 1.0e7, "v": [1, 2, 3, 4, 5]})
+    assert list(rows) == ["ate.rmse", "ate.n", "gps", "big", "v"]
+    assert rows["ate.rmse"] == "0.1235"
+    assert rows["ate.n"] == "7"
+    assert rows["gps"] == "skipped: none"
+    assert rows["big"] == "1.000e+07"
+    assert rows["v"] == "[5 values]"
+
+
+def test_order_figures_puts_the_trajectory_first() -> None:
+    names = ["nis.png", "b.png", "trajectory.png", "a.txt", ".hidden.png", "map.png"]
+    assert order_figures(names) == ("trajectory.png", "map.png", "nis.png", "b.png")
+
+
+def test_run_page_holds_figures_metrics_config_and_escapes(tmp_path: Path) -> None:
+    page = read_run_folder(
+        _folder(tmp_path, "r", 0.5),
+        estimator_description="EKF <SLAM>",
+        timings={"load the data set": 0.25},
+    )
+    assert page.figures == ("trajectory.png", "errors.png", "nees.png", "zeta.png")
+    text = run_html(page)
+    assert text.count("<img ") == 4
+    assert '<img src="trajectory.png"' in text  # relative to the folder
+    assert "five&lt;features&gt;" in text and "five<features>" not in text
+    assert "EKF &lt;SLAM&gt;" in text
+    assert "skipped: no GPS &amp; no fix" in text
+    assert ">0.25" in text and "load the data set" in text
+    assert text.index("trajectory.png") < text.index("errors.png")
+    assert "&quot;seed&quot;: 3" in text  # the config, escaped in a <pre>
+
+
+def test_compare_page_has_a_column_per_run(tmp_path: Path) -> None:
+    pages = [read_run_folder(_folder(tmp_path, n, r)) for n, r in (("a", 0.5), ("b", 0.25))]
+    text = compare_html(pages, tmp_path / "out")
+    assert text.count("<img ") == 8
+    assert 'src="../a/trajectory.png"' in text and 'src="../b/trajectory.png"' in text
+    row = text[text.index("<th>ate.rmse</th>") :].split("</tr>", 1)[0]
+    assert ">0.5<" in row and ">0.25<" in row
+
+
+def test_bad_folders_are_named(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match=r"no metrics\.json"):
+        read_run_folder(tmp_path)
+    with pytest.raises(InputError, match="not a folder"):
+        read_run_folder(tmp_path / "nope")
+    (tmp_path / "metrics.json").write_text("[1, 2]")
+    with pytest.raises(InputError, match="expected a JSON object"):
+        read_run_folder(tmp_path)
+    with pytest.raises(InputError, match="at least one"):
+        compare_html([], tmp_path)
+
+
+def test_page_without_figures_says_so(tmp_path: Path) -> None:
+    page = RunPage(tmp_path, "dead-reckoning", "five-features", metrics={"seed": 0})
+    assert "no figures" in run_html(page)
