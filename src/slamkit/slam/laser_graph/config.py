@@ -54,6 +54,12 @@ class FrontEndSettings(Section):
     were they made the chain 5× surer than it is — on the raw logs (2026-12-03) 4 of them
     gave Intel 0.319 m and Freiburg 079 0.084 m against 0.053 m and 0.068 m without
     (``docs/estimators/laser_graph.md``)."""
+    fuse_degenerate: bool = False
+    """A scan PLICP calls degenerate is matched again by point-to-normal ICP against the
+    keyframe with the prediction as a prior, and that posterior is the edge, instead of the
+    wheels' increment alone. Off by default: on Intel (2026-12-03) 1,023 scans were fused
+    and the run lost the log (3.71 m against 0.053 m without); on the simulated hallway it
+    helps (``docs/estimators/laser_graph.md``)."""
     max_correction_xy: float = setting(0.5, finite_above(0.0), "a finite number > 0")
     """Gate: a scan match that moves the pose farther than this from the odometry's
     prediction is refused (the prediction is kept, the scan counted as unmatched) [m]."""

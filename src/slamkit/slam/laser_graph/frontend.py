@@ -176,7 +176,11 @@ class Tracker:
                 result = plicp(reference, points, start, self.plicp)
         except MatchError as exc:
             fused = None
-            if exc.reason == "degenerate" and isinstance(reference, PreparedScan):
+            if (
+                exc.reason == "degenerate"
+                and self.settings.fuse_degenerate
+                and isinstance(reference, PreparedScan)
+            ):
                 fused = self._fuse_degenerate(reference, points)
             if fused is None:
                 self.counts[f"failed:{exc.reason}"] += 1
