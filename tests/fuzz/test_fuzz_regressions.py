@@ -8,10 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fuzzcases import write_files
-from fuzztargets import isam_landmarks_target, snapshots_target
+from fuzztargets import isam_landmarks_target, plaza_target, snapshots_target
 
 from slamkit.datasets.isam_landmarks import CITYTREES_FILES, load_citytrees10000
 from slamkit.datasets.mrclam_snapshots import GROUNDTRUTH_FILE, load_mrclam_snapshots
+from slamkit.datasets.plaza import DR_FILE, load_plaza1
 from slamkit.errors import DatasetFormatError
 from slamkit.io.posegraph import read_graph
 from slamkit.io.tum import read_tum
@@ -96,3 +97,16 @@ def test_snapshot_dangling_experiment_names_both_files(tmp_path: Path) -> None:
     with pytest.raises(DatasetFormatError, match="experiment 1 is not in the ground truth") as info:
         load_mrclam_snapshots({}, data_root=tmp_path)
     assert info.value.line == 2 and "mrclam1_groundtruth.csv" in str(info.value)
+
+
+def test_plaza_odometry_overflow_names_the_line(tmp_path: Path) -> None:
+    files = dict(plaza_target().files)
+    lines = files[DR_FILE].decode().splitlines()
+    fields = lines[3].split()
+    fields[1] = "1.7e308"  # finite, but the rate over 0.2 s is not
+    lines[3] = " ".join(fields)
+    files[DR_FILE] = ("\n".join(lines) + "\n").encode()
+    write_files(tmp_path, files)
+    with pytest.raises(DatasetFormatError, match="overflows as a rate") as info:
+        load_plaza1({}, seed=0, data_root=tmp_path)
+    assert info.value.line == 4 and info.value.path == tmp_path / DR_FILE
