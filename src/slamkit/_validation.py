@@ -66,7 +66,9 @@ def as_array(
         raise ShapeError(f"{name}: expected shape {describe_shape(shape)}, got {arr.shape}")
     # isfinite(sum) is one pass without a boolean temporary; overflow to inf in the sum of
     # finite values is possible only near 1e308, so fall back to the exact check then.
-    if finite and not np.isfinite(np.sum(arr)) and not np.all(np.isfinite(arr)):
+    with np.errstate(over="ignore", invalid="ignore"):  # the sum may overflow: checked below
+        total = np.sum(arr) if finite else 0.0
+    if finite and not np.isfinite(total) and not np.all(np.isfinite(arr)):
         bad = int(np.size(arr) - np.count_nonzero(np.isfinite(arr)))
         raise NonFiniteError(f"{name}: expected finite numbers, got {bad} NaN/inf value(s)")
     return arr

@@ -54,7 +54,7 @@ from slamkit.datasets.stream import (
     MotionSpec,
     Odometry,
 )
-from slamkit.datasets.text import integer_values, text_lines
+from slamkit.datasets.text import ascii_fields, integer_values, read_text, text_lines
 from slamkit.errors import DatasetFormatError
 from slamkit.geometry import pose2, wrap_angle
 from slamkit.maps import LandmarkMap
@@ -108,10 +108,7 @@ def read_isam_landmark_graph(path: str | Path) -> IsamLandmarkGraph:
     :class:`DatasetFormatError` naming the file and the line.
     """
     p = Path(path)
-    try:
-        text = p.read_text(encoding="ascii")
-    except UnicodeDecodeError as exc:
-        raise DatasetFormatError("not an ASCII text file", p) from exc
+    text = read_text(p)  # the shared opener: missing file, gzip, UTF-8 with its line
     # One pass over the lines checks tags and field counts and collects the value tokens;
     # each type is then converted by one NumPy call (a bad token is located afterwards).
     tokens: dict[bool, list[str]] = {True: [], False: []}  # is_edge -> flat value tokens
@@ -121,6 +118,8 @@ def read_isam_landmark_graph(path: str | Path) -> IsamLandmarkGraph:
         if not fields or fields[0].startswith("#"):
             continue
         tag = fields[0]
+        if not ascii_fields(fields):
+            raise DatasetFormatError("expected ASCII text, got other characters", p, no)
         want = _N_FIELDS.get(tag)
         if want is None:
             raise DatasetFormatError(
@@ -243,6 +242,33 @@ class CityTreesOptions:
     shuffled with the seed (for data-association tests)."""
 
 
+def _same_rows(
+    noisy: IsamLandmarkGraph, exact: IsamLandmarkGraph, tag: str, a: np.ndarray, b: np.ndarray
+) -> None:
+    """The two files must list the same ``tag`` lines (index pairs) in the same order; the
+    error names the first line without a partner, in the file that has it, and the other."""
+    lines_a = noisy.edge_lines if tag == "EDGE2" else noisy.landmark_lines
+    lines_b = exact.edge_lines if tag == "EDGE2" else exact.landmark_lines
+    n = min(len(a), len(b))
+    differ = np.flatnonzero(np.any(a[:n] != b[:n], axis=1))
+    if differ.size:
+        k = int(differ[0])
+        raise DatasetFormatError(
+            f"{tag} {a[k, 0]} {a[k, 1]} here, but {tag} {b[k, 0]} {b[k, 1]} on line "
+            f"{lines_b[k]} of {exact.path.name}: the two files must list the same {tag} lines",
+            noisy.path,
+            int(lines_a[k]),
+        )
+    if len(a) != len(b):
+        longer, other, at = (noisy, exact, lines_a) if len(a) > len(b) else (exact, noisy, lines_b)
+        raise DatasetFormatError(
+            f"{tag} line {n + 1} of {max(len(a), len(b))} here, but {other.path.name} has only "
+            f"{n}: the two files must list the same {tag} lines",
+            longer.path,
+            int(at[n]),
+        )
+
+
 def load_citytrees10000(
     options: Mapping[str, Any], *, seed: int, data_root: Path | None
 ) -> Dataset:
@@ -262,12 +288,7 @@ def load_citytrees10000(
     exact = read_isam_landmark_graph(truth_path)
 
     n_poses = noisy.edge_ids.shape[0] + 1
-    if exact.edge_ids.shape[0] + 1 != n_poses:
-        raise DatasetFormatError(
-            f"expected {n_poses - 1} odometry edges as in {noisy_path.name}, got "
-            f"{exact.edge_ids.shape[0]}",
-            truth_path,
-        )
+    _same_rows(noisy, exact, "EDGE2", noisy.edge_ids, exact.edge_ids)
     odom = _chain(noisy, n_poses)
     true_poses = _chain(exact, n_poses)
 
@@ -287,11 +308,7 @@ def load_citytrees10000(
             noisy_path,
             int(noisy.landmark_lines[k]),
         )
-    if not np.array_equal(noisy.landmark_ids, exact.landmark_ids):
-        raise DatasetFormatError(
-            f"the LANDMARK lines do not match those of {noisy_path.name} (pose, landmark)",
-            truth_path,
-        )
+    _same_rows(noisy, exact, "LANDMARK", noisy.landmark_ids, exact.landmark_ids)
 
     # Truth landmarks: the mean of each landmark's noise-free sightings, in the world frame.
     seen = pose2.transform_points(true_poses[pose_of], exact.landmark_z)

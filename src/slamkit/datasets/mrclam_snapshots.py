@@ -142,15 +142,21 @@ def _read_measurements(
     exp = _integer_column(table, 0, "experiment id", path)
     lid = _integer_column(table, 1, "landmark id", path)
     checks = (
-        (~np.isin(exp, experiments), "experiment {e} is not in the ground truth"),
+        (~np.isin(exp, experiments), "experiment {e} is not in the ground truth file {g}"),
         (np.r_[False, np.diff(exp) < 0], "rows must be ordered by experiment ({e} is late)"),
-        (~np.isin(lid, landmarks.ids), "landmark {l} is not in the landmark file"),
+        (~np.isin(lid, landmarks.ids), "landmark {l} is not in the landmark file {m}"),
         (~(table.values[:, 2] > 0), "expected a range > 0, got {r}"),
     )
     for bad, message in checks:
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            text = message.format(e=int(exp[i]), l=int(lid[i]), r=float(table.values[i, 2]))
+            text = message.format(
+                e=int(exp[i]),
+                l=int(lid[i]),
+                r=float(table.values[i, 2]),
+                g=GROUNDTRUTH_FILE.rsplit("/", 1)[-1],
+                m=LANDMARK_FILE.rsplit("/", 1)[-1],
+            )
             raise DatasetFormatError(text, path, int(table.line_numbers[i]))
     z = table.values[:, 2:4].copy()
     z[:, 1] = wrap_angle(z[:, 1])

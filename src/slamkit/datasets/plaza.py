@@ -242,7 +242,17 @@ def load_plaza1(
     t_end = dr.values[:, 0]
     t_begin = np.concatenate([[t0], t_end[:-1]])
     span = t_end - t_begin
-    rates = dr.values[:, 1:3] / span[:, None]  # (d / dt, dtheta / dt)
+    with np.errstate(over="ignore"):  # an overflow is reported below, by its line
+        rates = dr.values[:, 1:3] / span[:, None]  # (d / dt, dtheta / dt)
+    bad = np.flatnonzero(~np.all(np.isfinite(rates), axis=1))
+    if bad.size:
+        r = int(bad[0])
+        raise DatasetFormatError(
+            f"the increment ({dr.values[r, 1]:g}, {dr.values[r, 2]:g}) over {span[r]:g} s "
+            "overflows as a rate: expected increments of a plausible size",
+            p_dr,
+            int(dr.line_numbers[r]),
+        )
 
     # ---- range readings -------------------------------------------------------------------
     m = td.values

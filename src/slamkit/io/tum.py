@@ -6,14 +6,15 @@ TUM/evo tools read. Reading projects back onto the plane (the yaw of the quatern
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from slamkit._validation import FloatArray, as_array
-from slamkit.datasets.text import text_lines
-from slamkit.errors import DatasetFormatError, ShapeError
+from slamkit.datasets.text import ascii_fields, read_text, text_lines
+from slamkit.errors import DatasetFormatError
 from slamkit.geometry import wrap_angle
 
 __all__ = ["format_tum", "read_tum", "read_tum_matrices", "write_tum"]
@@ -44,21 +45,36 @@ def read_tum(path: str | Path) -> tuple[FloatArray, FloatArray]:
     """Read a TUM file into ``times (N,)`` and SE(2) poses ``(N, 3)`` (x, y, yaw)."""
     p = Path(path)
     rows: list[list[float]] = []
-    for lineno, line in enumerate(text_lines(p.read_text(encoding="utf-8")), start=1):
+    lines: list[int] = []
+    for lineno, line in enumerate(text_lines(read_text(p)), start=1):
         text = line.strip()
         if not text or text.startswith("#"):
             continue
         parts = text.replace(",", " ").split()
         if len(parts) != 8:
             raise DatasetFormatError(f"expected 8 numbers, got {len(parts)}", p, lineno)
+        if not ascii_fields(parts):
+            raise DatasetFormatError("expected ASCII numbers, got other characters", p, lineno)
         try:
-            rows.append([float(v) for v in parts])
+            row = [float(v) for v in parts]
         except ValueError as exc:
             raise DatasetFormatError(f"not a number: {exc}", p, lineno) from None
+        if not all(math.isfinite(v) for v in row):
+            raise DatasetFormatError("expected finite numbers, got NaN or infinity", p, lineno)
+        rows.append(row)
+        lines.append(lineno)
     if not rows:
-        raise ShapeError(f"{p}: no poses in the file")
+        raise DatasetFormatError("no poses in the file", p)
     a = np.asarray(rows)
-    qx, qy, qz, qw = a[:, 4], a[:, 5], a[:, 6], a[:, 7]
+    # The yaw is that of the quaternion's direction: divide by its largest component first
+    # so that no product overflows (arctan2 does not see the scale); a zero one has none.
+    scale = np.max(np.abs(a[:, 4:8]), axis=1)
+    if not np.all(scale > 0):
+        i = int(np.flatnonzero(~(scale > 0))[0])
+        raise DatasetFormatError("expected a rotation quaternion, got (0, 0, 0, 0)", p, lines[i])
+    q = a[:, 4:8] / scale[:, None]
+    q /= np.linalg.norm(q, axis=1, keepdims=True)  # the formula below wants a unit quaternion
+    qx, qy, qz, qw = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
     yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
     return a[:, 0], np.column_stack([a[:, 1], a[:, 2], wrap_angle(yaw)])
 

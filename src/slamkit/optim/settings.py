@@ -105,7 +105,9 @@ class DoglegConfig(Section):
     SECTION: ClassVar[str] = "dogleg"
 
     trust_radius_initial: float = setting(1.0, finite_above(0.0), "a finite number > 0")
-    """The first trust-region radius ``Δ`` (Euclidean norm of ``δ``, tangent units)."""
+    """The least first trust-region radius (Euclidean norm of ``δ``, tangent units): the
+    first region is ``max(trust_radius_initial, ‖δ_gn‖)``, so that it holds the first
+    Gauss-Newton step and shrinks only when that step fails."""
     trust_radius_min: float = setting(1e-12, finite_at_least(0.0), "a finite number >= 0")
     """Stop (``converged = False``) when ``Δ`` shrinks below this without finding a
     decrease."""

@@ -25,7 +25,7 @@ from typing import Literal, cast
 import numpy as np
 
 from slamkit._validation import FloatArray
-from slamkit.datasets.text import text_lines
+from slamkit.datasets.text import MAX_EXACT_INTEGER, text_lines
 from slamkit.errors import DatasetFormatError
 from slamkit.io.graphfiles.families import (
     FAMILIES,
@@ -166,13 +166,15 @@ def _fix_ids(tag: str, g: _Group, problems: _Problems) -> tuple[IntArray, IntArr
         if not fields:
             problems.add(line, f"{tag}: expected at least one vertex id after the tag")
         for f in fields:
-            try:
-                ids.append(int(f))
-            except ValueError:
-                problems.add(line, f"{tag}: expected a non-negative integer id, got {f!r}")
+            # ASCII digits only, and an id that the other tags' ids can equal (int64, exact).
+            value = int(f) if f.isascii() and f.isdigit() else -1
+            if not 0 <= value <= MAX_EXACT_INTEGER:
+                problems.add(
+                    line,
+                    f"{tag}: expected a non-negative integer id up to 2^53, got {f[:40]!r}",
+                )
                 continue
-            if ids[-1] < 0:
-                problems.add(line, f"{tag}: expected a non-negative integer id, got {f!r}")
+            ids.append(value)
             lines.append(line)
     return np.asarray(ids, dtype=np.int64), np.asarray(lines, dtype=np.int64)
 
