@@ -308,7 +308,11 @@ def report_markdown(report: SweepReport, name: str = "sweep") -> str:
             "|---|---|---|---|---:|---|---:|---:|",
         ]
         for b in report.best:
-            per_seed = ", ".join(f"{v:.3g}" for v in b.values)
+            per_seed = (
+                ", ".join(f"{v:.3g}" for v in b.values)
+                if len(b.values) <= 8
+                else f"{min(b.values):.3g} … {max(b.values):.3g}"
+            )
             lines.append(
                 f"| {b.estimator} | {b.dataset} | {b.metric} | {_settings_text(b.settings)} | "
                 f"{b.mean:.4g} | {per_seed} | {b.runs_ok} / {b.runs} | {b.candidates} |"
