@@ -108,8 +108,10 @@ def test_bad_specs_are_config_errors_naming_the_key(raw, named, tmp_path):
 
 def test_bad_spec_file_error_names_the_file(tmp_path):
     path = tmp_path / "bad.toml"
-    path.write_text('[sweep]\nestimators = ["ekf-localization"]\ndatasets = ["five-features"]\n'
-                    "[estimator]\nwrong_name = [1, 2]\n")
+    path.write_text(
+        '[sweep]\nestimators = ["ekf-localization"]\ndatasets = ["five-features"]\n'
+        "[estimator]\nwrong_name = [1, 2]\n"
+    )
     with pytest.raises(ConfigError, match=r"bad\.toml.*wrong_name"):
         run_sweep(path, tmp_path / "out")
 
@@ -148,12 +150,28 @@ def test_table_round_trip(tmp_path):
         "gps.skipped": "no GPS",
     }
     rows = [
-        {"key": "a", "status": "ok", "error": None, "estimator": "e", "dataset": "d", "seed": 0,
-         "estimator.k": 1.5, **flat},
-        {"key": "b", "status": "failed", "error": "ConfigError: laps", "estimator": "e",
-         "dataset": "d", "seed": 1, "estimator.k": "text"},
+        {
+            "key": "a",
+            "status": "ok",
+            "error": None,
+            "estimator": "e",
+            "dataset": "d",
+            "seed": 0,
+            "estimator.k": 1.5,
+            **flat,
+        },
+        {
+            "key": "b",
+            "status": "failed",
+            "error": "ConfigError: laps",
+            "estimator": "e",
+            "dataset": "d",
+            "seed": 1,
+            "estimator.k": "text",
+        },
     ]
     parquet, csv = write_table(tmp_path, rows)
+    assert parquet.name == "results.parquet"
     back = read_table(tmp_path)
     assert [r["key"] for r in back] == ["a", "b"]
     assert back[0]["ate.rmse"] == 0.5
@@ -165,9 +183,19 @@ def test_table_round_trip(tmp_path):
 
 def _rows(values, setting=1.0, metric=None):
     return [
-        {"key": f"{setting}-{i}", "status": "ok", "estimator": "e", "dataset": "d", "seed": i,
-         "estimator.k": setting, "nees.mean": v, "nees.dof": 3, "nis.count": 100,
-         "nis.mean_nis_per_dof": 1.0 + 0.01 * i, "ate.rmse": (metric or v) + 0.01 * i}
+        {
+            "key": f"{setting}-{i}",
+            "status": "ok",
+            "estimator": "e",
+            "dataset": "d",
+            "seed": i,
+            "estimator.k": setting,
+            "nees.mean": v,
+            "nees.dof": 3,
+            "nis.count": 100,
+            "nis.mean_nis_per_dof": 1.0 + 0.01 * i,
+            "ate.rmse": (metric or v) + 0.01 * i,
+        }
         for i, v in enumerate(values)
     ]
 

@@ -69,8 +69,12 @@ def test_sweep_matches_sequential_runs_and_reruns_nothing(client, tmp_path):
     for point, row in zip(points, rows, strict=True):
         report = run_job(
             RunRequest(
-                point.estimator, point.dataset, tmp_path / "seq" / row["key"], seed=point.seed,
-                estimator_config=point.settings, plots=False,
+                point.estimator,
+                point.dataset,
+                tmp_path / "seq" / row["key"],
+                seed=point.seed,
+                estimator_config=point.settings,
+                plots=False,
             )
         )
 
@@ -82,9 +86,7 @@ def test_sweep_matches_sequential_runs_and_reruns_nothing(client, tmp_path):
 
     again = run_sweep(SPEC, tmp_path / "out", client=client)
     assert (again.executed, again.skipped) == (0, 8)
-    assert [_comparable(r) for r in read_table(tmp_path / "out")] == [
-        _comparable(r) for r in rows
-    ]
+    assert [_comparable(r) for r in read_table(tmp_path / "out")] == [_comparable(r) for r in rows]
 
 
 def test_failed_runs_are_recorded_and_do_not_stop_the_others(client, tmp_path):

@@ -10,9 +10,8 @@ runs; ``slamkit sweep report DIR`` writes the summaries (:func:`slamkit.sweep.wr
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
-import click
 import typer
 from rich.markup import escape
 from typer.core import TyperGroup
@@ -28,7 +27,7 @@ __all__ = ["sweep_app"]
 class DefaultRunGroup(TyperGroup):
     """A group whose first argument, when it is not a subcommand, goes to ``run``."""
 
-    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
         if args and args[0] not in self.commands and args[0] not in ("--help", "-h"):
             args = ["run", *args]
         return super().parse_args(ctx, args)
@@ -118,8 +117,12 @@ def _print_report(report: SweepReport) -> None:
             settings = ", ".join(f"{k}={v}" for k, v in c.settings.items()) or "-"
             band = "-" if c.nees_band is None else f"{c.nees_band[0]:.2f}-{c.nees_band[1]:.2f}"
             table.add_row(
-                c.estimator, c.dataset, escape(settings), str(c.runs),
-                "-" if c.nees_mean is None else f"{c.nees_mean:.3f}", band,
+                c.estimator,
+                c.dataset,
+                escape(settings),
+                str(c.runs),
+                "-" if c.nees_mean is None else f"{c.nees_mean:.3f}",
+                band,
                 "-" if c.nis_per_dof is None else f"{c.nis_per_dof:.3f}",
             )
         console.print(table)
@@ -151,4 +154,3 @@ def report_command(
         f"wrote {', '.join(report.files)} to [bold]{escape(str(folder / 'report'))}[/]",
         soft_wrap=True,
     )
-

@@ -47,4 +47,5 @@ __all__ = [
     "run_sweep",
     "summarize",
     "write_report",
+    "write_table",
 ]

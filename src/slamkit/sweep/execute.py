@@ -113,11 +113,17 @@ def execute_task(task: RunTask) -> RunOutcome:
         )
     except Exception as exc:  # a failed run is a result, not the end of the sweep
         return RunOutcome(
-            task.key, False, error=one_line(exc), seconds=time.perf_counter() - start,
+            task.key,
+            False,
+            error=one_line(exc),
+            seconds=time.perf_counter() - start,
             worker_pid=os.getpid(),
         )
     return RunOutcome(
-        task.key, True, metrics=report.metrics, seconds=time.perf_counter() - start,
+        task.key,
+        True,
+        metrics=report.metrics,
+        seconds=time.perf_counter() - start,
         worker_pid=os.getpid(),
     )
 
@@ -272,8 +278,19 @@ def run_sweep(
     report(SweepProgress(len(plan), len(rows), 0, failed, skipped))
     if pending:
         failed += _execute(
-            sweep, pending, root, rows, table_rows, report, len(plan), skipped, failed,
-            scheduler=scheduler, workers=workers, client=client, data_root=data_root,
+            sweep,
+            pending,
+            root,
+            rows,
+            table_rows,
+            report,
+            len(plan),
+            skipped,
+            failed,
+            scheduler=scheduler,
+            workers=workers,
+            client=client,
+            data_root=data_root,
         )
         files = write_table(root, table_rows())
     return SweepResult(root, len(plan), len(pending), skipped, failed, table_rows(), files)
@@ -351,9 +368,7 @@ def _execute(
                 last_write = time.monotonic()
             threads = sum(client.nthreads().values()) if left else 0
             report(
-                SweepProgress(
-                    total, len(rows), min(left, threads), failed_before + failed, skipped
-                )
+                SweepProgress(total, len(rows), min(left, threads), failed_before + failed, skipped)
             )
     finally:
         write_table(root, table_rows())  # also when interrupted: what finished is kept

@@ -68,7 +68,4 @@ def run_key(point: SweepPoint, preset: str | None = "auto") -> str:
     """The point's key: :data:`KEY_LENGTH` hex digits of the SHA-256 of
     :func:`key_payload` in canonical JSON (sorted keys; ``1`` and ``1.0`` differ only where
     the config coerces them alike, since the settings are hashed after the config)."""
-    return hashlib.sha256(_canonical(key_payload(point, preset)).encode()).hexdigest()[
-        :KEY_LENGTH
-    ]
-
+    return hashlib.sha256(_canonical(key_payload(point, preset)).encode()).hexdigest()[:KEY_LENGTH]

@@ -191,8 +191,9 @@ def best_settings(
         for cfg, group in configs:
             runs = sorted(group, key=lambda r: r["seed"])
             values = [
-                v for r in runs if r.get("status") == "ok" and (v := _number(r.get(chosen)))
-                is not None
+                v
+                for r in runs
+                if r.get("status") == "ok" and (v := _number(r.get(chosen))) is not None
             ]
             if values:
                 complete = len(values) == len(runs)
@@ -202,8 +203,15 @@ def best_settings(
         _, mean, cfg, values, n = min(scored, key=lambda s: (s[0], s[1]))
         out.append(
             BestSetting(
-                est, ds, chosen, dict(zip(swept, cfg[2:], strict=True)), mean, tuple(values),
-                len(values), n, len(scored),
+                est,
+                ds,
+                chosen,
+                dict(zip(swept, cfg[2:], strict=True)),
+                mean,
+                tuple(values),
+                len(values),
+                n,
+                len(scored),
             )
         )
     return out
@@ -245,10 +253,7 @@ def summarize(
 ) -> SweepReport:
     """The numbers of a report from a table's rows."""
     failures = [
-        {
-            k: r.get(k)
-            for k in ("key", "estimator", "dataset", "seed", *swept, "error")
-        }
+        {k: r.get(k) for k in ("key", "estimator", "dataset", "seed", *swept, "error")}
         for r in rows
         if r.get("status") != "ok"
     ]
@@ -275,8 +280,12 @@ def _settings_text(settings: Mapping[str, Any]) -> str:
 
 def report_markdown(report: SweepReport, name: str = "sweep") -> str:
     """The report as a markdown page."""
-    lines = [f"# Sweep report: {name}", "", f"{report.runs} runs: {report.ok} ok, "
-             f"{report.failed} failed.", ""]
+    lines = [
+        f"# Sweep report: {name}",
+        "",
+        f"{report.runs} runs: {report.ok} ok, {report.failed} failed.",
+        "",
+    ]
     if report.consistency:
         lines += [
             "## NEES and NIS over seeds (95 % χ² bands)",
@@ -319,8 +328,12 @@ def report_markdown(report: SweepReport, name: str = "sweep") -> str:
             )
         lines.append("")
     if report.failures:
-        lines += ["## Failures", "", "| key | estimator | data set | seed | error |",
-                  "|---|---|---|---:|---|"]
+        lines += [
+            "## Failures",
+            "",
+            "| key | estimator | data set | seed | error |",
+            "|---|---|---|---:|---|",
+        ]
         for f in report.failures:
             error = str(f.get("error")).replace("|", "\\|")
             lines.append(
@@ -363,6 +376,12 @@ def write_report(
             save_figure(fig, folder / name)
             files.append(name)
     return SweepReport(
-        report.runs, report.ok, report.failed, report.swept, report.consistency, report.best,
-        report.failures, tuple(files),
+        report.runs,
+        report.ok,
+        report.failed,
+        report.swept,
+        report.consistency,
+        report.best,
+        report.failures,
+        tuple(files),
     )

@@ -180,8 +180,9 @@ def _combinations(spec: SweepSpec) -> Iterator[tuple[dict[str, Any], dict[str, A
         for drawn in draws:
             est: dict[str, Any] = {}
             ds: dict[str, Any] = {}
-            for (side, a), v in zip([*grid, *ranges], [*values, *drawn], strict=True):
-                (est if side == "e" else ds)[a.name] = v
+            named: list[tuple[str, Axis]] = [*grid, *ranges]
+            for (side, axis), v in zip(named, [*values, *drawn], strict=True):
+                (est if side == "e" else ds)[axis.name] = v
             yield est, ds
 
 
@@ -206,7 +207,9 @@ def _number(value: Any, where: str) -> float:
 def _axis(name: str, table: Mapping[str, Any], where: str) -> Axis:
     unknown = sorted(set(table) - _AXIS_KEYS)
     if unknown:
-        raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}; expected values or low/high")
+        raise ConfigError(
+            f"{where}: unknown key(s) {', '.join(unknown)}; expected values or low/high"
+        )
     if "values" in table:
         if set(table) != {"values"}:
             raise ConfigError(f"{where}: give either values or low/high, not both")
@@ -235,9 +238,7 @@ def _grid(name: str, values: Any, where: str) -> GridAxis:
     return GridAxis(name, tuple(values))
 
 
-def _settings(
-    table: Any, where: str, prefix: str = ""
-) -> tuple[list[Axis], dict[str, Any]]:
+def _settings(table: Any, where: str, prefix: str = "") -> tuple[list[Axis], dict[str, Any]]:
     """Axes and fixed values of a ``[estimator]`` or ``[dataset]`` table (dotted names)."""
     if not isinstance(table, Mapping):
         raise ConfigError(f"{where}: expected a table of settings, got {table!r}")
@@ -294,6 +295,7 @@ def _seeds(value: Any) -> tuple[int, ...]:
         start, count = value.get("start", 0), value.get("count")
         if unknown or not is_int(start) or not is_int(count) or start < 0:
             raise ConfigError(f"{where}: expected {{start = N >= 0, count = M}}, got {value!r}")
+        assert isinstance(count, int) and isinstance(start, int)
         if count < 1:
             raise ConfigError(f"{where}.count: empty range of seeds (count {count})")
         return tuple(range(start, start + count))

@@ -51,7 +51,8 @@ def plot_metric_against_setting(
         points = ax.scatter(x_arr, y_arr, s=10, alpha=0.45, label=label)
         at = np.unique(x_arr)
         means = np.array([y_arr[x_arr == x].mean() for x in at])
-        (line,) = ax.plot(at, means, "-o", ms=4, color=points.get_facecolor()[0][:3])
+        colour = tuple(np.asarray(points.get_facecolor())[0][:3])
+        (line,) = ax.plot(at, means, "-o", ms=4, color=colour)
         artists += [points, line]
     if not numeric:
         ax.set_xticks(range(len(labels)), labels)
