@@ -222,3 +222,15 @@ def test_best_settings_picks_the_lowest_mean_of_complete_configurations():
     assert best.mean == pytest.approx(0.205)
     assert (best.runs_ok, best.runs, best.candidates) == (2, 2, 3)
     assert best.metric == "ate.rmse"
+
+
+def test_the_sweep_package_imports_neither_matplotlib_nor_dask():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, slamkit.sweep, slamkit.sweep.report, slamkit.sweep.execute\n"
+        "print(sorted(m for m in ('matplotlib', 'distributed', 'pyarrow') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
