@@ -87,15 +87,22 @@ def run_command(
         def update(p: SweepProgress) -> None:
             bar.update(task, completed=p.done, total=p.total, running=p.running, failed=p.failed)
 
-        result = run_sweep(
-            sweep,
-            out,
-            scheduler=scheduler,
-            workers=workers,
-            data_root=data_root,
-            retry_failed=retry_failed,
-            progress=update,
-        )
+        try:
+            result = run_sweep(
+                sweep,
+                out,
+                scheduler=scheduler,
+                workers=workers,
+                data_root=data_root,
+                retry_failed=retry_failed,
+                progress=update,
+            )
+        except KeyboardInterrupt:  # finished runs are kept: say so, not "nothing written"
+            err_console.print(
+                f"interrupted; the finished runs are in {escape(str(out))} (run again to resume)",
+                highlight=False,
+            )
+            raise typer.Exit(130) from None
     console.print(
         f"{result.total} runs: {result.executed} run now, {result.skipped} finished before, "
         f"{result.failed} failed"
