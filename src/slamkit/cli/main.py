@@ -23,6 +23,7 @@ from slamkit.cli.config_cmd import config_app
 from slamkit.cli.eval_cmd import eval_app
 from slamkit.cli.map_cmd import map_app
 from slamkit.cli.optimize_cmd import optimize_command
+from slamkit.cli.sweep_cmd import sweep_app
 
 if TYPE_CHECKING:
     from slamkit.eval.records import RunScores
@@ -38,6 +39,7 @@ data_app = typer.Typer(help="Data sets: simulated scenarios and real-data loader
 app.add_typer(data_app, name="data")
 app.add_typer(map_app, name="map")
 app.add_typer(eval_app, name="eval")
+app.add_typer(sweep_app, name="sweep")
 app.add_typer(config_app, name="config")
 
 

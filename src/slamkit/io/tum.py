@@ -96,7 +96,7 @@ def read_tum_matrices(path: str | Path) -> tuple[FloatArray, FloatArray]:
         except ValueError as exc:
             raise DatasetFormatError(f"not a number: {exc}", p, lineno) from None
     if not rows:
-        raise ShapeError(f"{p}: no poses in the file")
+        raise DatasetFormatError("no poses in the file", p)
     a = np.asarray(rows)
     q = a[:, [7, 4, 5, 6]]  # w, x, y, z
     norms = np.linalg.norm(q, axis=1)

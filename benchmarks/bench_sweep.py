@@ -1,0 +1,109 @@
+"""Sweeps on Dask: runs per minute with 1 and 2 local workers, against the same runs done
+one after another in one process (``slamkit.app.run_job``, what ``slamkit run`` does).
+
+The workload: EKF localization on ``five-features`` driven three laps (about a second a
+run with loading and evaluation), 16 seeds, no plots. The workers are started and warmed up
+(slamkit imported) before the clock starts; cluster start-up is reported apart. The
+overhead per task is ``(sweep with 1 worker − sequential) / runs``: keying, scheduling,
+shipping the outcome, the table written as results arrive.
+
+    python benchmarks/bench_sweep.py
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from _common import Record, write_results
+from slamkit.app import RunRequest, run_job
+from slamkit.sweep import local_cluster, parse_spec, run_sweep
+
+RUNS = 16
+SPEC: dict[str, Any] = {
+    "sweep": {
+        "name": "bench",
+        "estimators": ["ekf-localization"],
+        "datasets": ["five-features"],
+        "seeds": RUNS,
+    },
+    "dataset": {"laps": 3},
+}
+
+
+def _sequential(folder: Path) -> float:
+    start = time.perf_counter()
+    for p in parse_spec(SPEC).points():
+        run_job(
+            RunRequest(
+                p.estimator,
+                p.dataset,
+                folder / f"seed-{p.seed}",
+                seed=p.seed,
+                dataset_options=p.dataset_options,
+                plots=False,
+            )
+        )
+    return time.perf_counter() - start
+
+
+def _sweep(workers: int, folder: Path) -> tuple[float, float]:
+    """Seconds of the sweep on a warm cluster, and the cluster's start-up seconds."""
+    from distributed import Client
+
+    start = time.perf_counter()
+    cluster = local_cluster(workers)
+    client = Client(cluster)
+    warm = {**SPEC, "sweep": {**SPEC["sweep"], "seeds": [10_000 + i for i in range(workers)]}}
+    run_sweep(warm, folder / "warm", client=client)  # imports slamkit on every worker
+    startup = time.perf_counter() - start
+    try:
+        start = time.perf_counter()
+        result = run_sweep(SPEC, folder / "sweep", client=client)
+        seconds = time.perf_counter() - start
+    finally:
+        client.close()
+        cluster.close()
+    if result.executed != RUNS or result.failed:
+        raise RuntimeError(f"sweep ran {result.executed} of {RUNS}, {result.failed} failed")
+    return seconds, startup
+
+
+def main() -> str:
+    root = Path(tempfile.mkdtemp(prefix="bench-sweep-"))
+    load_before = os.getloadavg()[0]
+    try:
+        # warm this process too (imports, caches), then time the sequential loop
+        run_job(RunRequest("ekf-localization", "five-features", root / "warm", plots=False))
+        t_seq = _sequential(root / "seq")
+        t_one, start_one = _sweep(1, root / "one")
+        t_two, start_two = _sweep(2, root / "two")
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    load_after = os.getloadavg()[0]
+    per_run = t_seq / RUNS
+    overhead = (t_one - t_seq) / RUNS
+    records = [
+        Record(f"{RUNS} runs, sweep on 1 worker", t_one, "sequential run_job", t_seq),
+        Record(f"{RUNS} runs, sweep on 2 workers", t_two, "sequential run_job", t_seq),
+        Record(f"{RUNS} runs, sweep on 2 workers", t_two, "sweep on 1 worker", t_one),
+    ]
+    notes = (
+        f"EKF localization on five-features, 3 laps, {RUNS} seeds, no plots; "
+        f"{per_run:.2f} s per run sequentially. Runs per minute: sequential "
+        f"{60 * RUNS / t_seq:.1f}, 1 worker {60 * RUNS / t_one:.1f}, 2 workers "
+        f"{60 * RUNS / t_two:.1f} ({t_one / t_two:.2f}x the 1-worker rate). Overhead per task "
+        f"against the bare run: {1000 * overhead:.0f} ms ({100 * overhead / per_run:.1f} %). "
+        f"Cluster start-up with warm-up: {start_one:.1f} s (1 worker), {start_two:.1f} s "
+        f"(2 workers), not in the times. Load average (1 min) {load_before:.1f} before, "
+        f"{load_after:.1f} after, on {os.cpu_count()} CPUs (the machine is shared)."
+    )
+    return write_results("sweep", records, notes=notes)
+
+
+if __name__ == "__main__":
+    print(main())
