@@ -77,7 +77,7 @@ def test_eval_relations_max_duration(tmp_path):
     [
         (lambda p: None, "missing.tum: not found"),
         (lambda p: p.write_text("100.0 1 2 3\n"), "expected 8 numbers, got 4"),
-        (lambda p: p.write_bytes(b"\xff\xfe\x00binary"), "not a text file"),
+        (lambda p: p.write_bytes(b"\xff\xfe\x00binary"), "not UTF-8 text"),
         (
             lambda p: write_tum(p, [0.0, 1.0], np.zeros((2, 3))),
             "covers no relation",
