@@ -571,7 +571,7 @@ def test_loader_reports_structural_problems(tmp_path: Path) -> None:
     assert info.value.line == 2
     # sightings that differ between the noisy and the noise-free file
     other = [EDGES[0], "LANDMARK 1 8 2 0 10 0 10", EDGES[1]]
-    with pytest.raises(DatasetFormatError, match="do not match"):
+    with pytest.raises(DatasetFormatError, match="must list the same LANDMARK lines"):
         load_citytrees10000(
             {},
             seed=0,
