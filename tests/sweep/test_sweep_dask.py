@@ -157,3 +157,19 @@ def test_a_killed_worker_has_its_run_retried(client, tmp_path):
     assert sorted(r["seed"] for r in rows) == list(range(6))
     assert all(Path(tmp_path, "runs", r["key"], "metrics.json").is_file() for r in rows)
     assert not list((tmp_path / "runs").glob(".*.partial"))  # the killed run's partial folder
+
+
+def test_a_finished_run_whose_result_was_lost_is_not_run_again(tmp_path):
+    # When the worker holding a finished result dies, the scheduler recomputes the task:
+    # the second attempt finds the run's folder complete and returns what it wrote.
+    from slamkit.sweep.execute import RunTask, execute_task, plan_sweep
+
+    spec = parse_spec({"sweep": {"estimators": ["dead-reckoning"], "datasets": ["five-features"]}})
+    ((key, point),) = plan_sweep(spec)
+    task = RunTask(key, point, str(tmp_path / key))
+    first = execute_task(task)
+    assert first.ok, first.error
+    again = execute_task(task)
+    assert again.ok, again.error
+    assert again.metrics == first.metrics
+    assert first.metrics["ate"]["rmse"] > 0

@@ -97,6 +97,17 @@ def execute_task(task: RunTask) -> RunOutcome:
 
     start = time.perf_counter()
     p = task.point
+    done = Path(task.out_dir) / "metrics.json"
+    if done.is_file():
+        # An earlier attempt finished but its result was lost with its worker (the scheduler
+        # recomputes lost results); the key names the run, so the folder on disk is this run.
+        return RunOutcome(
+            task.key,
+            True,
+            metrics=_read_json(done),
+            seconds=time.perf_counter() - start,
+            worker_pid=os.getpid(),
+        )
     try:
         report = run_job(
             RunRequest(
