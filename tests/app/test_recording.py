@@ -61,3 +61,14 @@ def test_laser_recording_holds_scans_and_map(tmp_path):
     occupied = int((grid.prob >= 0.65).sum())
     assert occupied > 0
     assert np.concatenate(logged["/world/map"]).shape[0] == occupied
+
+
+def test_run_job_writes_the_recording_inside_its_folder(tmp_path):
+    from slamkit.app import RunRequest, run_job
+
+    report = run_job(
+        RunRequest("ekf-slam", "five-features", tmp_path / "out", plots=False, rerun="run.rrd")
+    )
+    assert "run.rrd" in report.files
+    logged = _read(tmp_path / "out" / "run.rrd")
+    assert len(logged["/world/estimate/pose"]) == len(report.result.poses)

@@ -54,6 +54,9 @@ class RunRequest:
     preset's name, or ``None`` for none."""
     formats: tuple[str, ...] = ()
     """Trajectory formats besides TUM (``"kitti"``: :mod:`slamkit.app.outputs`)."""
+    rerun: str | None = None
+    """Also record the run for rerun (:mod:`slamkit.app.recording`): ``"spawn"`` a viewer,
+    a relative ``.rrd`` name inside the output folder, or an absolute path."""
 
 
 @dataclass(frozen=True)
@@ -102,6 +105,10 @@ def run_job(
     if isinstance(request.seed, bool) or not isinstance(request.seed, int) or request.seed < 0:
         raise ConfigError(f"seed: expected an integer >= 0, got {request.seed!r}")
     check_formats(request.formats)
+    if request.rerun is not None:
+        from slamkit.app.recording import require_rerun
+
+        require_rerun()  # before the work
     check_output_folder(request.out_dir, overwrite=request.overwrite)  # before the work
     timings: dict[str, float] = {}
     clock = time.perf_counter()
@@ -172,6 +179,15 @@ def run_job(
                 tmp / "animation.gif",
                 gps_alignment=gps_alignment(evaluation),
                 max_frames=ANIMATION_FRAMES,
+            )
+        if request.rerun is not None:
+            from slamkit.app.recording import record_run
+
+            say("recording the run for rerun")
+            where = Path(request.rerun)
+            spawn = request.rerun == "spawn"
+            record_run(
+                result, dataset, "spawn" if spawn else where if where.is_absolute() else tmp / where
             )
         timings["figures and files"] = time.perf_counter() - clock
         _write_report(tmp, entry.description, dataset.description, timings)

@@ -29,7 +29,7 @@ from slamkit.geometry.pose2 import compose, interpolate_poses, transform_points
 from slamkit.pipeline import Result
 from slamkit.scanmatch.result import scan_points
 
-__all__ = ["MAX_ELLIPSES", "MAX_SCANS", "OCCUPIED", "record_run"]
+__all__ = ["MAX_ELLIPSES", "MAX_SCANS", "OCCUPIED", "record_run", "require_rerun"]
 
 MAX_SCANS = 2000
 """At most this many scans are logged (an even stride over the scans)."""
@@ -40,7 +40,8 @@ OCCUPIED = 0.65
 TIMELINE = "time"
 
 
-def _rerun() -> Any:
+def require_rerun() -> Any:
+    """The rerun module, or an :class:`InputError` saying how to install it."""
     try:
         import rerun
     except ImportError as exc:
@@ -61,7 +62,7 @@ def _ellipse(centre: np.ndarray, cov: np.ndarray, n: int = 32) -> np.ndarray:
 def record_run(result: Result, dataset: Dataset, target: str | Path) -> None:
     """Log ``result`` (on ``dataset``) to rerun: ``target`` ``"spawn"`` opens a viewer,
     anything else is the path of the ``.rrd`` file to write."""
-    rr = _rerun()
+    rr = require_rerun()
     rec = rr.RecordingStream("slamkit", recording_id=f"{result.estimator}-{result.dataset}")
     if str(target) == "spawn":
         rec.spawn()

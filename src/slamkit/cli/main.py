@@ -144,6 +144,7 @@ def _run(
     overrides: list[str] | None = None,
     formats: list[str] | None = None,
     svg: bool = False,
+    rerun: str | None = None,
 ) -> None:
     from slamkit.app import RunRequest, run_job
     from slamkit.app.runconfig import apply_overrides, read_run_config, resolve_data
@@ -168,6 +169,7 @@ def _run(
         preset=None if preset == "none" else preset,
         formats=tuple(f for f in (formats or []) if f != "tum"),
         svg=svg,
+        rerun=rerun,
     )
     with progress_bar(f"{estimator} on {data}") as progress:
         report = run_job(request, progress, progress.stage)
@@ -253,6 +255,15 @@ def run_command(
         ),
     ] = None,
     svg: Annotated[bool, typer.Option(help="Also write every figure as SVG.")] = False,
+    rerun: Annotated[
+        str | None,
+        typer.Option(
+            metavar="FILE.rrd|spawn",
+            help="Also record the run for the rerun viewer: a .rrd file (relative: inside the "
+            "output folder) or 'spawn' a viewer. Needs pip install 'slamkit[rerun]'.",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """Run ESTIMATOR on a data set; write trajectory, metrics, config, plots and report.html."""
     _run(
@@ -269,6 +280,7 @@ def run_command(
         overrides=set_,
         formats=formats,
         svg=svg,
+        rerun=rerun,
     )
 
 
