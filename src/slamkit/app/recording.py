@@ -10,8 +10,8 @@ Entities (all in metres, the world frame):
   ``world/landmarks/covariance``; ``world/truth/landmarks`` the true ones;
 * ``world/scan`` — each laser scan's end points at the pose of its time;
 * ``world/particles`` — the particle snapshots of a particle filter;
-* ``world/map`` — the occupancy grid's occupied cells (static points at the cell centres,
-  radius half a cell).
+* ``world/map`` — the occupancy grid's occupied cells (``OCCUPIED_THRESHOLD``), static
+  points at the cell centres of radius half a cell.
 
 rerun is imported only here, and only when a recording is made.
 """
@@ -26,17 +26,16 @@ import numpy as np
 from slamkit.datasets.stream import Dataset, LaserScan
 from slamkit.errors import InputError
 from slamkit.geometry.pose2 import compose, interpolate_poses, transform_points
+from slamkit.maps import OCCUPIED_THRESHOLD
 from slamkit.pipeline import Result
 from slamkit.scanmatch.result import scan_points
 
-__all__ = ["MAX_ELLIPSES", "MAX_SCANS", "OCCUPIED", "record_run", "require_rerun"]
+__all__ = ["MAX_ELLIPSES", "MAX_SCANS", "record_run", "require_rerun"]
 
 MAX_SCANS = 2000
 """At most this many scans are logged (an even stride over the scans)."""
 MAX_ELLIPSES = 1000
 """At most this many pose covariance ellipses are logged."""
-OCCUPIED = 0.65
-"""Cells at least this likely occupied are logged as the map."""
 TIMELINE = "time"
 
 
@@ -128,7 +127,7 @@ def record_run(result: Result, dataset: Dataset, target: str | Path) -> None:
         rec.log("world/particles", rr.Points2D(snap.particles[:, :2], radii=0.02))
     grid = result.output.grid
     if grid is not None:
-        rows, cols_ = np.nonzero(grid.prob >= OCCUPIED)
+        rows, cols_ = np.nonzero(grid.prob >= OCCUPIED_THRESHOLD)
         centres = grid.origin_xy + (np.column_stack([cols_, rows]) + 0.5) * grid.resolution
         rec.log(
             "world/map",
