@@ -98,42 +98,33 @@ def execute_task(task: RunTask) -> RunOutcome:
     start = time.perf_counter()
     p = task.point
     done = Path(task.out_dir) / "metrics.json"
+    metrics, error = None, None
     if done.is_file():
         # An earlier attempt finished but its result was lost with its worker (the scheduler
         # recomputes lost results); the key names the run, so the folder on disk is this run.
-        return RunOutcome(
-            task.key,
-            True,
-            metrics=_read_json(done),
-            seconds=time.perf_counter() - start,
-            worker_pid=os.getpid(),
-        )
-    try:
-        report = run_job(
-            RunRequest(
-                estimator=p.estimator,
-                dataset=p.dataset,
-                out_dir=Path(task.out_dir),
-                seed=p.seed,
-                estimator_config=p.settings,
-                dataset_options=p.dataset_options,
-                data_root=None if task.data_root is None else Path(task.data_root),
-                plots=task.plots,
-                preset=task.preset,
-            )
-        )
-    except Exception as exc:  # a failed run is a result, not the end of the sweep
-        return RunOutcome(
-            task.key,
-            False,
-            error=one_line(exc),
-            seconds=time.perf_counter() - start,
-            worker_pid=os.getpid(),
-        )
+        metrics = _read_json(done)
+    else:
+        try:
+            metrics = run_job(
+                RunRequest(
+                    estimator=p.estimator,
+                    dataset=p.dataset,
+                    out_dir=Path(task.out_dir),
+                    seed=p.seed,
+                    estimator_config=p.settings,
+                    dataset_options=p.dataset_options,
+                    data_root=None if task.data_root is None else Path(task.data_root),
+                    plots=task.plots,
+                    preset=task.preset,
+                )
+            ).metrics
+        except Exception as exc:  # a failed run is a result, not the end of the sweep
+            error = one_line(exc)
     return RunOutcome(
         task.key,
-        True,
-        metrics=report.metrics,
+        error is None,
+        metrics=metrics,
+        error=error,
         seconds=time.perf_counter() - start,
         worker_pid=os.getpid(),
     )
