@@ -22,6 +22,7 @@ from slamkit._validation import FloatArray
 __all__ = [
     "AVAILABLE",
     "enabled",
+    "gathered_sums",
     "ieee_remainder",
     "jit",
     "min_eigenvalue_sym3",
@@ -80,6 +81,23 @@ def writable(a: np.ndarray) -> np.ndarray:
     if a.flags.c_contiguous and a.flags.writeable:
         return a
     return np.array(a, order="C")
+
+
+@jit
+def gathered_sums(
+    flat: FloatArray, bases: np.ndarray, k: np.ndarray, offsets: np.ndarray, out: FloatArray
+) -> None:
+    """``out[u] = sum_p flat[bases[k[u], p] + offsets[u]]``: the node scores of correlative
+    matching (:mod:`slamkit.scanmatch.correlative`) without the ``(nodes, points)`` index and
+    value temporaries of the NumPy gather. The indices must be in range (the lookup grid's
+    padding guarantees it)."""
+    for u in range(k.shape[0]):
+        row = k[u]
+        shift = offsets[u]
+        total = 0.0
+        for p in range(bases.shape[1]):
+            total += flat[bases[row, p] + shift]
+        out[u] = total
 
 
 @jit

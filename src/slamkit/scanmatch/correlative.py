@@ -55,6 +55,7 @@ from slamkit.errors import ConfigError, InputError, MatchError
 from slamkit.geometry.angles import wrap_angle_float
 from slamkit.localization.likelihood_field import LikelihoodField
 from slamkit.maps import FREE_THRESHOLD, OCCUPIED_THRESHOLD, OccupancyGrid
+from slamkit.scanmatch import compiled
 from slamkit.scanmatch.lookup import (
     LookupGrid,
     log_likelihood_of_distance,
@@ -304,6 +305,9 @@ def _score(flat: FloatArray, bases: IntArray, k: IntArray, offsets: IntArray) ->
     """``sum_p flat[bases[k_u, p] + offsets_u]`` for every node ``u``, gathered in chunks."""
     n_points = bases.shape[1]
     out = np.empty(k.size)
+    if compiled.enabled():
+        compiled.gathered_sums(flat, bases, k, offsets, out)
+        return out
     step = max(1, _CHUNK_ELEMENTS // max(n_points, 1))
     for a in range(0, k.size, step):
         b = min(a + step, k.size)

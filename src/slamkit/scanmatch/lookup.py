@@ -25,6 +25,15 @@ one (the same rule as clipping an index into the table).
 Every table is padded by ``pad`` cells of value ``log f`` on each side, so a point that
 falls outside the reference reads "miss", and the search can add integer offsets to flat
 indices without any per-offset bounds check (see :meth:`LookupGrid.base_indices`).
+
+**Exact scores.** Every table value is rounded to a multiple of ``QUANTUM = 2^-12`` (a
+quarter of a thousandth of a nat, far below any difference between two poses that matters).
+A score is then a sum of integers times a power of two, exact in float64 as long as the
+integer sum stays below ``2^53`` (``N |log f| 2^12`` is about ``10^8`` for ten thousand
+points): it no longer depends on the order of summation, so NumPy's pairwise sum, a compiled
+loop and another machine's SIMD width give the same score to the last bit, and ties between
+poses (the max tables repeat values, so exact ties are common) are broken by the documented
+rule rather than by rounding.
 """
 
 from __future__ import annotations
@@ -47,6 +56,15 @@ __all__ = [
 ]
 
 IntArray = NDArray[np.int64]
+
+QUANTUM = 2.0**-12
+"""Table values are multiples of this (module docstring: exact scores)."""
+
+
+def quantize(values: FloatArray) -> FloatArray:
+    """``values`` rounded to the nearest multiple of :data:`QUANTUM`."""
+    out: FloatArray = np.round(np.asarray(values, dtype=np.float64) / QUANTUM) * QUANTUM
+    return out
 
 
 def log_likelihood_of_distance(d: FloatArray, sigma: float, floor_likelihood: float) -> FloatArray:
@@ -189,8 +207,9 @@ def lookup_from_log_table(
 ) -> LookupGrid:
     """A lookup grid from a per-cell log-likelihood table ``(rows, cols)`` whose cell
     ``(0, 0)`` has its lower-left corner at ``origin_xy``: values are clipped below at
-    ``floor``, the table is padded by ``pad`` cells of ``floor`` and the max pyramid of
-    ``levels`` tables is built."""
+    ``floor``, rounded to multiples of :data:`QUANTUM` (so are ``floor`` and ``inlier_log``),
+    the table is padded by ``pad`` cells of ``floor`` and the max pyramid of ``levels``
+    tables is built."""
     table = as_array(log_table, "log-likelihood table", (None, None))
     if table.size == 0:
         raise MatchError("reference lookup table is empty", "too_few_points")
@@ -198,11 +217,13 @@ def lookup_from_log_table(
         raise InputError(f"levels: expected an integer >= 1, got {levels!r}")
     if int(pad) != pad or pad < 1:
         raise InputError(f"pad: expected an integer >= 1, got {pad!r}")
-    fine = np.pad(np.maximum(table, floor), int(pad), mode="constant", constant_values=floor)
-    origin = as_array(origin_xy, "origin_xy", (2,)) - int(pad) * resolution
-    return LookupGrid(
-        _max_pyramid(fine, int(levels)), resolution, origin, int(pad), float(floor), inlier_log
+    floor = float(quantize(np.array(floor)))
+    inlier = float(quantize(np.array(inlier_log)))
+    fine = np.pad(
+        quantize(np.maximum(table, floor)), int(pad), mode="constant", constant_values=floor
     )
+    origin = as_array(origin_xy, "origin_xy", (2,)) - int(pad) * resolution
+    return LookupGrid(_max_pyramid(fine, int(levels)), resolution, origin, int(pad), floor, inlier)
 
 
 def lookup_from_points(
