@@ -128,7 +128,10 @@ def test_flat_configs_read_as_before() -> None:
         (lambda: StoppingConfig(step_tolerance=float("nan")), r"stopping\.step_tolerance"),
         (lambda: LmConfig(lambda_factor=1.0), r"lm\.lambda_factor: expected a finite number > 1"),
         (lambda: LmConfig(lambda_initial=0.0), r"lm\.lambda_initial: expected a finite number > 0"),
-        (lambda: LmConfig(damping="x"), r"lm\.damping: expected one of 'hessian', 'levenberg', 'marquardt'"),
+        (
+            lambda: LmConfig(damping="x"),
+            r"lm\.damping: expected one of 'hessian', 'levenberg', 'marquardt'",
+        ),
         (lambda: DoglegConfig(trust_radius_initial=-1.0), r"dogleg\.trust_radius_initial"),
         (lambda: GrowConfig(max_step=0), r"grow\.max_step: expected an integer >= 1"),
         (lambda: RobustConfig(kernel="tukey"), r"robust\.kernel: expected one of"),

@@ -16,7 +16,9 @@ Files written (``OUT`` the output folder):
 * ``metrics.json`` — ``chi2_initial``/``chi2_final`` (g2o's χ² of every edge, whatever the
   objective minimised), ``sesync_objective_initial``/``_final`` (SE-Sync's F over the
   relative-pose edges), ``cost_initial``/``cost_final`` (the objective minimised, with the
-  robust kernel), ``iterations``, ``factorizations``, ``converged``, ``reason``, counts,
+  robust kernel), ``start`` (``requested``, ``used``, the cost of every start compared in
+  ``costs`` and the ``reason``), ``iterations``, ``factorizations``, ``converged``,
+  ``reason``, counts,
   solver and linear solver, the per-iteration history and the times: ``solve_seconds`` is
   the optimiser alone (sparsity pattern, symbolic analysis and iterations; not reading,
   validating or initialising, which are ``read_seconds``, ``validate_seconds`` and
@@ -49,9 +51,8 @@ from slamkit.optim import (
     IterationInfo,
     OptimizerConfig,
     OptimizeResult,
+    choose_start,
     g2o_chi2,
-    grow_initialization,
-    initial_values,
     optimize,
     sesync_objective,
 )
@@ -64,10 +65,11 @@ if TYPE_CHECKING:
 __all__ = ["OptimizeReport", "OptimizeRequest", "find_graph_file", "optimize_graph_job"]
 
 SOLVERS = ("lm", "gn", "dogleg")
-INITS = ("file", "odometry", "chordal", "grow")
+INITS = ("auto", "file", "odometry", "chordal", "grow")
 OBJECTIVES = ("g2o", "sesync")
 KERNELS = ("none", "huber", "cauchy", "geman_mcclure", "dcs")
 _INIT_METHOD: dict[str, InitName] = {
+    "auto": "auto",
     "file": "vertices",
     "odometry": "odometry",
     "chordal": "chordal",
@@ -90,9 +92,11 @@ class OptimizeRequest:
     init: str | None = None
     """``"file"`` (the file's vertices), ``"odometry"`` (spanning tree), ``"chordal"`` or
     ``"grow"`` (batch solves over growing time-ordered prefixes,
-    :func:`~slamkit.optim.grow_initialization`); ``None``: the file's vertices when it has
-    them, else grow for landmark graphs (their chordal or odometry start lies in a bad basin:
-    Victoria Park) and chordal for pose graphs."""
+    :func:`~slamkit.optim.grow_initialization`); ``None`` or ``"auto"``: chosen by
+    :func:`~slamkit.optim.choose_start`: on a pose graph the lower-cost of the file's
+    vertices (odometry when it has none) and chordal, on a landmark graph the file's vertices,
+    else grow (their chordal or odometry start lies in a bad basin: Victoria Park). The
+    metrics' ``start`` says which and why."""
     robust_kernel: str = "none"
     """``"none"``, ``"huber"``, ``"cauchy"``, ``"geman_mcclure"`` (or ``geman-mcclure``),
     ``"dcs"``."""
@@ -241,16 +245,15 @@ def _history(history: tuple[IterationInfo, ...]) -> list[dict[str, Any]]:
     ]
 
 
-def _has_landmark_edges(data: GraphData) -> bool:
-    return any(es.kind in LANDMARK_KINDS for es in data.edges)
+def _start_label(name: str) -> str:
+    """The CLI's name of a library start (the file's vertices are ``file``)."""
+    return "file" if name == "vertices" else name
 
 
 def _resolve_init(init: str | None, data: GraphData) -> str:
     has_vertices = data.poses.shape[0] > 0
     if init is None:
-        if has_vertices:
-            return "file"
-        return "grow" if data.landmarks.shape[0] or _has_landmark_edges(data) else "chordal"
+        return "auto"
     if init == "file" and not has_vertices:
         raise ConfigError(
             f"init 'file': {data.source or 'the graph'} has no vertex lines; use odometry or "
@@ -263,6 +266,7 @@ def _metrics(
     data: GraphData,
     path: Path,
     init: str,
+    start_record: dict[str, Any],
     cfg: OptimizerConfig,
     start: tuple[np.ndarray, np.ndarray],
     result: OptimizeResult,
@@ -289,6 +293,7 @@ def _metrics(
         "solver": result.method,
         "objective": result.objective,
         "initialization": init,
+        "start": start_record,
         "robust_kernel": cfg.robust.kernel,
         "linear_solver": result.linear_solver,
         "anchored_first_pose": result.anchored_first,
@@ -383,9 +388,8 @@ def optimize_graph_job(
     t1 = time.perf_counter()
     problem = GraphProblem.from_data(data, objective=cfg.objective, gauge=cfg.gauge)
     t2 = time.perf_counter()
-    init = _resolve_init(request.init, data)
-    method = _INIT_METHOD[init]
-    cfg = dataclasses.replace(cfg, initialization=method)
+    requested = _resolve_init(request.init, data)
+    cfg = dataclasses.replace(cfg, initialization=_INIT_METHOD[requested])
 
     def on_iteration(info: IterationInfo) -> None:
         if progress is not None:
@@ -395,10 +399,17 @@ def optimize_graph_job(
 
     # The folder check comes before the work; on any error the partial folder is removed.
     with atomic_folder(request.out_dir, overwrite=request.overwrite) as tmp:
-        if method == "grow":
-            p0, l0 = grow_initialization(problem, cfg)
-        else:
-            p0, l0 = initial_values(problem, method, cfg.linear_solver)
+        choice = choose_start(problem, cfg)
+        p0, l0 = choice.poses, choice.landmarks
+        init = _start_label(choice.name)
+        start_record = {
+            "requested": requested,
+            "used": init,
+            "costs": {_start_label(k): v for k, v in choice.costs.items()},
+            "reason": choice.reason,
+        }
+        # The start used, so that config.json re-runs exactly this solve.
+        cfg = dataclasses.replace(cfg, initialization=_INIT_METHOD[init])
         t3 = time.perf_counter()
         result = optimize(
             data, cfg, initial_poses=p0, initial_landmarks=l0, callback=on_iteration,
@@ -406,7 +417,7 @@ def optimize_graph_job(
         )  # fmt: skip
         output = _output(data, result)
         seconds = {"read_seconds": t1 - t0, "validate_seconds": t2 - t1, "init_seconds": t3 - t2}
-        metrics = _metrics(data, path, init, cfg, (p0, l0), result, output, seconds)
+        metrics = _metrics(data, path, init, start_record, cfg, (p0, l0), result, output, seconds)
         resolved = {
             "file": str(path),
             "solver": result.method,

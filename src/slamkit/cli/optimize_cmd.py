@@ -34,6 +34,7 @@ def _table(m: dict[str, Any]) -> Table:
 
     add("poses / landmarks / edges", f"{m['poses']} / {m['landmarks']} / {m['edges']}")
     add("solver, start", f"{m['solver']}, {m['initialization']} ({m['objective']} objective)")
+    add("start chosen because", m["start"]["reason"])
     add("χ² initial", f"{m['chi2_initial']:.6g}")
     add("χ² final", f"{m['chi2_final']:.6g}")
     add("SE-Sync F initial", f"{m['sesync_objective_initial']:.6g}")
@@ -65,11 +66,11 @@ def optimize_command(
     init: Annotated[
         str | None,
         typer.Option(
-            metavar="file|odometry|chordal|grow",
+            metavar="auto|file|odometry|chordal|grow",
             show_default=False,
             help="Start: file (its vertices), odometry, chordal or grow (solves over growing "
-            "prefixes; default: file when it has vertices, else grow for landmark graphs and "
-            "chordal for pose graphs).",
+            "prefixes); default auto: for pose graphs the lower-cost of file (odometry when "
+            "it has no vertices) and chordal, for landmark graphs file, else grow.",
         ),
     ] = None,
     robust: Annotated[

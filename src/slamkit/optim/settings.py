@@ -177,8 +177,9 @@ class OptimizerConfig(Section):
     relative-pose edges (other edge kinds keep their g2o error)."""
     initialization: InitName = "auto"
     """``"vertices"``, ``"odometry"`` (spanning tree), ``"chordal"``, ``"grow"`` (batch solves
-    over growing time-ordered prefixes, settings in ``grow``), or ``"auto"``: vertices when the
-    file has them, else ``"grow"`` when the graph has landmark readings, else odometry.
+    over growing time-ordered prefixes, settings in ``grow``), or ``"auto"``: on a pose graph
+    the lower-cost of the file's vertices (odometry when it has none) and the chordal start;
+    on a landmark graph the vertices, else ``"grow"`` (:func:`~slamkit.optim.choose_start`).
     Ignored when initial values are passed."""
     gauge: GaugeMode = "anchor_first"
     """``"anchor_first"``: with no fixed pose and no prior, hold the first pose fixed;
