@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,7 +45,8 @@ from slamkit.datasets.paths import find_data_root
 from slamkit.errors import ConfigError, DataNotFoundError, InputError
 from slamkit.io import atomic_folder, write_json
 from slamkit.io.graphfiles.families import FAMILIES, LANDMARK_KINDS, POSE_PAIR_KINDS
-from slamkit.io.posegraph import read_graph, write_graph
+from slamkit.io.graphfiles.reader import MAX_REPORTED_LINES, REPAIR_MODES, RepairedEdge
+from slamkit.io.posegraph import RepairWarning, read_graph_report, repair_summary, write_graph
 from slamkit.optim import (
     GraphData,
     GraphProblem,
@@ -56,8 +58,10 @@ from slamkit.optim import (
     optimize,
     sesync_objective,
 )
+from slamkit.optim.repair import REPAIR_RTOL
 
 if TYPE_CHECKING:
+    from slamkit.io.graphfiles.reader import RepairMode
     from slamkit.optim.data import GraphFamily
     from slamkit.optim.settings import InitName
     from slamkit.viz.plots import Figure  # app never imports matplotlib itself
@@ -107,6 +111,11 @@ class OptimizeRequest:
     """``"g2o"`` (the file's χ²) or ``"sesync"`` (SE-Sync's F on the relative-pose edges)."""
     max_iterations: int | None = None
     """Linearisations at most (``None``: the optimiser's default, 100)."""
+    repair_information: str = "none"
+    """``"none"``: an information matrix that is not positive definite is an error naming
+    its line; ``"clamp"``: it is repaired by eigenvalue clamping
+    (:mod:`slamkit.optim.repair`) and every repaired edge is counted in the metrics'
+    ``information_repair``."""
     plots: bool = True
     overwrite: bool = False
 
@@ -142,6 +151,7 @@ def _optimizer_config(request: OptimizeRequest) -> OptimizerConfig:
     }
     if request.init is not None:
         _choice(request.init, "init", INITS)
+    _choice(request.repair_information, "repair information", REPAIR_MODES)
     if request.robust_width is not None:
         robust["width"] = request.robust_width
     if request.max_iterations is not None:
@@ -245,6 +255,10 @@ def _history(history: tuple[IterationInfo, ...]) -> list[dict[str, Any]]:
     ]
 
 
+def _repair_mode(request: OptimizeRequest) -> RepairMode:
+    return "clamp" if request.repair_information == "clamp" else "none"
+
+
 def _start_label(name: str) -> str:
     """The CLI's name of a library start (the file's vertices are ``file``)."""
     return "file" if name == "vertices" else name
@@ -260,6 +274,30 @@ def _resolve_init(init: str | None, data: GraphData) -> str:
             "chordal"
         )
     return init
+
+
+def _repair_record(mode: str, path: Path, repaired: tuple[RepairedEdge, ...]) -> dict[str, Any]:
+    """The metrics' ``information_repair``: the mode, the exact count (and per tag), the
+    first edges as ``file:line`` with their eigenvalues, and the warning's sentence."""
+    by_tag: dict[str, int] = {}
+    for r in repaired:
+        by_tag[r.tag] = by_tag.get(r.tag, 0) + 1
+    return {
+        "mode": mode,
+        "floor_relative_to_largest_eigenvalue": REPAIR_RTOL if mode == "clamp" else None,
+        "repaired": len(repaired),
+        "repaired_by_tag": by_tag,
+        "first": [
+            {
+                "location": f"{path}:{r.line}",
+                "tag": r.tag,
+                "eigenvalue_min": r.eigenvalue_min,
+                "eigenvalue_max": r.eigenvalue_max,
+            }
+            for r in repaired[:MAX_REPORTED_LINES]
+        ],
+        "warning": repair_summary(path, repaired) if repaired else None,
+    }
 
 
 def _metrics(
@@ -384,7 +422,12 @@ def optimize_graph_job(
     cfg = _optimizer_config(request)
     path = Path(request.path)
     t0 = time.perf_counter()
-    data = read_graph(path)
+    with warnings.catch_warnings():
+        # The report carries every repaired edge; the caller shows the warning's sentence.
+        warnings.simplefilter("ignore", RepairWarning)
+        read = read_graph_report(path, repair_information=_repair_mode(request))
+    data = read.graph
+    repair = _repair_record(request.repair_information, path, read.repaired)
     t1 = time.perf_counter()
     problem = GraphProblem.from_data(data, objective=cfg.objective, gauge=cfg.gauge)
     t2 = time.perf_counter()
@@ -418,6 +461,7 @@ def optimize_graph_job(
         output = _output(data, result)
         seconds = {"read_seconds": t1 - t0, "validate_seconds": t2 - t1, "init_seconds": t3 - t2}
         metrics = _metrics(data, path, init, start_record, cfg, (p0, l0), result, output, seconds)
+        metrics["information_repair"] = repair
         resolved = {
             "file": str(path),
             "solver": result.method,
@@ -426,6 +470,7 @@ def optimize_graph_job(
             "robust_width": cfg.kernel.width if cfg.robust.kernel != "none" else None,
             "objective": cfg.objective,
             "max_iterations": cfg.stopping.max_iterations,
+            "repair_information": request.repair_information,
             "output": metrics["output"],
             "optimizer": config_to_dict(cfg),
         }

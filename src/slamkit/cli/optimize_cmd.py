@@ -88,6 +88,15 @@ def optimize_command(
     max_iterations: Annotated[
         int | None, typer.Option(help="Linearisations at most (default 100).")
     ] = None,
+    repair_information: Annotated[
+        str,
+        typer.Option(
+            metavar="none|clamp",
+            help="Information matrices that are not positive definite: none (an error naming "
+            "the line) or clamp (raise their eigenvalues to 1e-6 of the largest; each "
+            "repaired edge is counted in metrics.json and a warning printed).",
+        ),
+    ] = "none",
     plots: Annotated[bool, typer.Option(help="Write graph.png (before and after).")] = True,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
     data_root: Annotated[
@@ -117,6 +126,7 @@ def optimize_command(
         robust_width=robust_width,
         objective=objective,
         max_iterations=max_iterations,
+        repair_information=repair_information,
         plots=plots,
         overwrite=overwrite,
     )
@@ -131,6 +141,9 @@ def optimize_command(
 
     with progress_bar(f"optimising {file.name}", unit="iterations") as progress:
         report = optimize_graph_job(request, progress, show)
+    repair = report.metrics["information_repair"]
+    if repair["warning"]:
+        err_console.print(f"[yellow]warning:[/] {escape(repair['warning'])}", soft_wrap=True)
     console.print(_table(report.metrics))
     for note in report.metrics["output"]["notes"]:
         console.print(f"note: {escape(note)}", soft_wrap=True)
