@@ -102,6 +102,7 @@ def test_synthetic_g2o_loop_recovers_the_true_poses(tmp_path):
     assert m["start"]["costs"]["chordal"] < 1e-18 and m["chi2_initial"] < 1e-18
     assert m["start"]["requested"] == "auto" and m["start"]["used"] == "chordal"
     assert m["start"]["reason"].startswith("chordal: cost")
+    assert m["information_repair"]["mode"] == "none" and m["information_repair"]["repaired"] == 0
     assert m["chi2_final"] < 1e-18 and m["converged"]
     assert (m["poses"], m["landmarks"], m["edges"]) == (6, 0, 7)
     assert m["solver"] == "lm" and m["initialization"] == "chordal"
@@ -398,3 +399,39 @@ def test_victoria_park_graph_reaches_its_optimum_from_the_default_start(data_roo
     assert (m["poses"], m["landmarks"]) == (6969, 151)
     assert m["initialization"] == "grow" and m["converged"]
     assert m["chi2_final"] == pytest.approx(6184.12, rel=1e-5)
+
+
+def test_information_repair_is_an_explicit_option_reported_in_the_metrics(tmp_path):
+    """A hexagon whose edges 1 and 4 have [[100, 200], [200, 100]] translation blocks
+    (eigenvalue -100): refused naming the first line and the option; with
+    ``--repair-information clamp`` both are repaired, counted, listed and warned about."""
+    ok, bad = "100 0 0 100 0 1000", "100 200 0 100 0 1000"
+    lines = [f"VERTEX_SE2 {k} {x!r} {y!r} {t!r}" for k, (x, y, t) in enumerate(HEXAGON.tolist())]
+    edge_line = {}
+    for k in range(6):
+        z = between(HEXAGON[k], HEXAGON[(k + 1) % 6]).tolist()
+        lines.append(
+            f"EDGE_SE2 {k} {(k + 1) % 6} {z[0]!r} {z[1]!r} {z[2]!r} {bad if k in (1, 4) else ok}"
+        )
+        edge_line[k] = len(lines)
+    src = tmp_path / "np.g2o"
+    src.write_text("\n".join(lines) + "\n")
+    res = runner.invoke(app, ["optimize", str(src), "--out", str(tmp_path / "refused")])
+    message = _error_line(res)
+    assert f"{src}:{edge_line[1]}:" in message and "--repair-information clamp" in message
+    assert not (tmp_path / "refused").exists()
+    out = tmp_path / "repaired"
+    m = _optimize(src, out, "--repair-information", "clamp", "--no-plots")
+    repair = m["information_repair"]
+    assert repair["mode"] == "clamp" and repair["repaired"] == 2
+    assert repair["repaired_by_tag"] == {"EDGE_SE2": 2}
+    assert [r["location"] for r in repair["first"]] == [f"{src}:{edge_line[k]}" for k in (1, 4)]
+    assert repair["first"][0]["eigenvalue_min"] == pytest.approx(-100.0, rel=1e-12)
+    res = runner.invoke(
+        app, ["optimize", str(src), "--out", str(out), "--repair-information", "clamp",
+              "--overwrite", "--no-plots"],
+    )  # fmt: skip
+    assert "warning: 2 information matrices were not positive definite" in res.output
+    assert m["chi2_final"] < 1e-12 and m["converged"]  # exact measurements: χ² = 0
+    config = json.loads((out / "config.json").read_text())
+    assert config["repair_information"] == "clamp"
