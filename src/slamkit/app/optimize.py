@@ -17,8 +17,9 @@ Files written (``OUT`` the output folder):
   objective minimised), ``sesync_objective_initial``/``_final`` (SE-Sync's F over the
   relative-pose edges), ``cost_initial``/``cost_final`` (the objective minimised, with the
   robust kernel), ``start`` (``requested``, ``used``, the cost of every start compared in
-  ``costs`` and the ``reason``), ``iterations``, ``factorizations``, ``converged``,
-  ``reason``, counts,
+  ``costs`` and the ``reason``), ``information_repair`` (``mode``, the exact count
+  ``repaired`` of edges whose information was clamped, per tag, the first 20 as
+  ``file:line``), ``iterations``, ``factorizations``, ``converged``, ``reason``, counts,
   solver and linear solver, the per-iteration history and the times: ``solve_seconds`` is
   the optimiser alone (sparsity pattern, symbolic analysis and iterations; not reading,
   validating or initialising, which are ``read_seconds``, ``validate_seconds`` and
