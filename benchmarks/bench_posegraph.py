@@ -15,8 +15,9 @@ g2o error is ``(t, q_v)`` (translation, quaternion vector part) while GTSAM's is
 it ``Ω`` unchanged, as GTSAM's own g2o reader does, weights rotations 4x more and is a
 different problem). GTSAM's LM runs with default parameters (relative and absolute error
 tolerance 1e-5, λ₀ = 1e-5, multifrontal Cholesky, COLAMD). slamkit runs ``optimize`` with
-default settings (LM, λ₀ = 1e-5, relative tolerance 1e-6, CHOLMOD through cvxopt when
-installed); a second 2D slamkit row forces SciPy's SuperLU, the dependency-free fallback.
+default settings (LM with ``D = H`` and the gain-ratio schedule, λ₀ = 1e-5, relative
+tolerance 1e-6, CHOLMOD through cvxopt when installed) from the given start; a second 2D
+slamkit row forces SciPy's SuperLU, the dependency-free fallback.
 
 Timed, alternating the two so that both see the same load: slamkit's whole ``optimize`` call
 (validation, indexing, sparsity pattern, symbolic analysis, iterations) and GTSAM's optimiser

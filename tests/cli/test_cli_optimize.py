@@ -78,7 +78,9 @@ def _chi2(poses: np.ndarray, edges: list[tuple[int, int]], truth: np.ndarray) ->
 def test_synthetic_g2o_loop_recovers_the_true_poses(tmp_path):
     """Six poses on a hexagon with exact measurements (odometry, the loop closure 5→0 and a
     chord 0→3) and vertices perturbed by up to 0.3 m / 0.2 rad (pose 0 exact: the anchor):
-    the optimum is the truth with χ² = 0; the reported initial χ² equals a hand computation."""
+    the optimum is the truth with χ² = 0; the reported initial χ² equals a hand computation.
+    The chordal relaxation of exact measurements is the truth, so the default start (auto)
+    takes it over the file's vertices and records both costs."""
     rng = np.random.default_rng(7)
     start = HEXAGON + np.vstack([np.zeros(3), rng.uniform(-1, 1, (5, 3)) * [0.3, 0.3, 0.2]])
     edges = [(k, (k + 1) % 6) for k in range(6)] + [(0, 3)]
@@ -95,11 +97,15 @@ def test_synthetic_g2o_loop_recovers_the_true_poses(tmp_path):
         "config.json", "graph.png", "metrics.json", "optimized.g2o",
     ]  # fmt: skip
     assert (out / "graph.png").read_bytes()[:8] == PNG
-    assert m["chi2_initial"] == pytest.approx(_chi2(start, edges, HEXAGON), rel=1e-12)
-    assert m["chi2_initial"] > 100.0
+    hand = _chi2(start, edges, HEXAGON)
+    assert m["start"]["costs"]["file"] == pytest.approx(hand, rel=1e-12) and hand > 100.0
+    assert m["start"]["costs"]["chordal"] < 1e-18 and m["chi2_initial"] < 1e-18
+    assert m["start"]["requested"] == "auto" and m["start"]["used"] == "chordal"
+    assert m["start"]["reason"].startswith("chordal: cost")
+    assert m["information_repair"]["mode"] == "none" and m["information_repair"]["repaired"] == 0
     assert m["chi2_final"] < 1e-18 and m["converged"]
     assert (m["poses"], m["landmarks"], m["edges"]) == (6, 0, 7)
-    assert m["solver"] == "lm" and m["initialization"] == "file" and m["iterations"] >= 1
+    assert m["solver"] == "lm" and m["initialization"] == "chordal"
     assert m["linear_solver"] in ("cholmod", "superlu")
     assert m["output"] == {
         "graph_file": "optimized.g2o",
@@ -113,10 +119,18 @@ def test_synthetic_g2o_loop_recovers_the_true_poses(tmp_path):
     np.testing.assert_allclose(graph.poses, HEXAGON, atol=1e-9)
     assert chi2 == pytest.approx(m["chi2_final"], rel=1e-9, abs=1e-20)
     config = json.loads((out / "config.json").read_text())
-    assert config["solver"] == "lm" and config["init"] == "file"
+    assert config["solver"] == "lm" and config["init"] == "chordal"
     assert config["objective"] == "g2o" and config["robust_kernel"] == "none"
     assert config["optimizer"]["solver"] == "lm"
+    assert config["optimizer"]["initialization"] == "chordal"
     assert config["optimizer"]["stopping"]["max_iterations"] == 100
+    m = _optimize(src, tmp_path / "from-file", "--init", "file")
+    assert m["chi2_initial"] == pytest.approx(hand, rel=1e-12) and m["iterations"] >= 1
+    assert m["start"] == {
+        "requested": "file", "used": "file", "costs": {},
+        "reason": "initialization 'vertices' was asked for",
+    }  # fmt: skip
+    assert m["chi2_final"] < 1e-18 and m["initialization"] == "file"
 
 
 def test_synthetic_isam_landmark_graph_is_written_as_g2o_with_renumbered_landmarks(tmp_path):
@@ -182,7 +196,7 @@ def test_missing_file_and_missing_vertex_are_one_line_errors(tmp_path):
         (["--objective", "chordal"], "objective: expected one of g2o, sesync"),
         (["--robust", "tukey"], "robust kernel: expected one of none, huber"),
         (["--robust", "huber", "--robust-width", "-1"], "expected a number > 0"),
-        (["--init", "magic"], "init: expected one of file, odometry, chordal"),
+        (["--init", "magic"], "init: expected one of auto, file, odometry, chordal, grow"),
         (["--max-iterations", "-3"], "stopping.max_iterations: expected an integer >= 0"),
     ],
 )
@@ -203,7 +217,7 @@ def test_existing_output_folder_needs_overwrite(tmp_path):
     res = runner.invoke(app, ["optimize", str(src), "--out", str(out)])
     assert "use --overwrite" in _error_line(res)
     assert [p.name for p in out.iterdir()] == ["keep.txt"]
-    m = _optimize(src, out, "--overwrite", "--no-plots", "--solver", "gn")
+    m = _optimize(src, out, "--overwrite", "--no-plots", "--solver", "gn", "--init", "file")
     # One edge, start 0.2 m off: χ² = 0.2² · 1 = 0.04, solved exactly by one GN step.
     assert m["chi2_initial"] == pytest.approx(0.04, rel=1e-12) and m["chi2_final"] < 1e-20
     assert not (out / "keep.txt").exists()
@@ -224,7 +238,9 @@ def test_intel_sesync_objective_reaches_the_published_optimum(data_root, tmp_pat
     """SE-Sync's certified optimum of intel.g2o is F* = 5.235e1 (Rosen et al., IJRR 2019);
     measured 52.3483 after 8 LM iterations from the file's vertices (χ² 551.74 → 46.31)."""
     out = tmp_path / "intel"
-    m = _optimize(_real(data_root, "posegraph2d/intel.g2o"), out, "--objective", "sesync")
+    m = _optimize(
+        _real(data_root, "posegraph2d/intel.g2o"), out, "--objective", "sesync", "--init", "file"
+    )
     assert f"{m['sesync_objective_final']:.4g}" == "52.35"
     assert m["cost_final"] == pytest.approx(m["sesync_objective_final"], rel=1e-12)
     assert m["chi2_initial"] == pytest.approx(551.7357, rel=1e-6)
@@ -291,7 +307,7 @@ def test_toro_file_is_written_as_toro(data_root, tmp_path):
     TORO again, with the equivalences."""
     out = tmp_path / "w100"
     src = _real(data_root, "posegraph2d/w100.graph")
-    m = _optimize(src, out, "--no-plots")
+    m = _optimize(src, out, "--no-plots", "--init", "file")
     assert m["output"]["family"] == "toro" and m["output"]["graph_file"] == "optimized.graph"
     assert m["chi2_initial"] == pytest.approx(17.9972, rel=1e-5)
     assert m["chi2_final"] == pytest.approx(1.03618, rel=1e-5)
@@ -383,3 +399,39 @@ def test_victoria_park_graph_reaches_its_optimum_from_the_default_start(data_roo
     assert (m["poses"], m["landmarks"]) == (6969, 151)
     assert m["initialization"] == "grow" and m["converged"]
     assert m["chi2_final"] == pytest.approx(6184.12, rel=1e-5)
+
+
+def test_information_repair_is_an_explicit_option_reported_in_the_metrics(tmp_path):
+    """A hexagon whose edges 1 and 4 have [[100, 200], [200, 100]] translation blocks
+    (eigenvalue -100): refused naming the first line and the option; with
+    ``--repair-information clamp`` both are repaired, counted, listed and warned about."""
+    ok, bad = "100 0 0 100 0 1000", "100 200 0 100 0 1000"
+    lines = [f"VERTEX_SE2 {k} {x!r} {y!r} {t!r}" for k, (x, y, t) in enumerate(HEXAGON.tolist())]
+    edge_line = {}
+    for k in range(6):
+        z = between(HEXAGON[k], HEXAGON[(k + 1) % 6]).tolist()
+        lines.append(
+            f"EDGE_SE2 {k} {(k + 1) % 6} {z[0]!r} {z[1]!r} {z[2]!r} {bad if k in (1, 4) else ok}"
+        )
+        edge_line[k] = len(lines)
+    src = tmp_path / "np.g2o"
+    src.write_text("\n".join(lines) + "\n")
+    res = runner.invoke(app, ["optimize", str(src), "--out", str(tmp_path / "refused")])
+    message = _error_line(res)
+    assert f"{src}:{edge_line[1]}:" in message and "--repair-information clamp" in message
+    assert not (tmp_path / "refused").exists()
+    out = tmp_path / "repaired"
+    m = _optimize(src, out, "--repair-information", "clamp", "--no-plots")
+    repair = m["information_repair"]
+    assert repair["mode"] == "clamp" and repair["repaired"] == 2
+    assert repair["repaired_by_tag"] == {"EDGE_SE2": 2}
+    assert [r["location"] for r in repair["first"]] == [f"{src}:{edge_line[k]}" for k in (1, 4)]
+    assert repair["first"][0]["eigenvalue_min"] == pytest.approx(-100.0, rel=1e-12)
+    res = runner.invoke(
+        app, ["optimize", str(src), "--out", str(out), "--repair-information", "clamp",
+              "--overwrite", "--no-plots"],
+    )  # fmt: skip
+    assert "warning: 2 information matrices were not positive definite" in res.output
+    assert m["chi2_final"] < 1e-12 and m["converged"]  # exact measurements: χ² = 0
+    config = json.loads((out / "config.json").read_text())
+    assert config["repair_information"] == "clamp"

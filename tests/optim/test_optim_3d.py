@@ -73,7 +73,8 @@ def test_noise_free_3d_graph_is_solved_exactly(method: str) -> None:
     start = f3.retract_poses3(truth, np.random.default_rng(0).normal(size=(20, 6)) * 0.1)
     start[0] = truth[0]
     data = _graph(truth, start)
-    res = optimize(data, OptimizerConfig(solver=method))  # type: ignore[arg-type]
+    cfg = OptimizerConfig(solver=method, initialization="vertices")  # type: ignore[arg-type]
+    res = optimize(data, cfg)
     assert res.converged and res.initial_cost > 10.0 and res.cost < 1e-14
     assert res.poses.shape == (20, 7)
     _assert_same(res.poses, truth, 1e-7)

@@ -136,7 +136,9 @@ def test_too_narrow_a_kernel_stays_at_the_odometry_start(data_root: Path) -> Non
     hundreds or more, so with ``c² = 1`` (or ``φ = 1``) all get IRLS weight ≈ 0; the odometry
     edges alone are already satisfied, so the start is a stationary point of the robust cost
     and the first step changes it by ~1e-8 relative. The result is the odometry (5.86x the
-    reference ATE, measured); the default widths move off it (previous test).
+    reference ATE, measured); the default widths move off it (previous test). The one step
+    is LM's shortened Gauss-Newton step (``damping="hessian"``), which moves the trajectory's
+    soft modes on the flat robust cost by 1.5 % of its ATE (within 1 % with ``D = I``).
     """
     _, corrupted, truth, false = _with_false_closures(data_root, "ring", np.random.default_rng(0))
     odometry = absolute_trajectory_error(corrupted.poses, truth, align="se2").rmse
@@ -148,7 +150,7 @@ def test_too_narrow_a_kernel_stays_at_the_odometry_start(data_root: Path) -> Non
         res = optimize(corrupted, cfg)
         assert res.converged and res.iterations == 1
         moved = absolute_trajectory_error(res.poses, truth, align="se2").rmse
-        assert moved == pytest.approx(odometry, rel=0.01)
+        assert moved == pytest.approx(odometry, rel=0.03)
         (s,) = problem.block_terms(res.poses, np.zeros((0, 2)))
         _, w = robust_rho_and_weight(cfg.kernel, s)
         assert w[true_closure].max() < 1e-3  # the true closures are rejected too

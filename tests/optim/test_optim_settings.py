@@ -48,7 +48,7 @@ def test_defaults_are_those_of_the_flat_config() -> None:
         "auto",
     )
     assert cfg.stopping == StoppingConfig(100, 1e-6, 1e-9, 0.0, 1e-12)
-    assert cfg.lm == LmConfig(1e-5, 10.0, 1e10, "levenberg")
+    assert cfg.lm == LmConfig(1e-5, 10.0, 1e10, "hessian", "gain_ratio")
     assert cfg.dogleg == DoglegConfig(1.0, 1e-12)
     assert cfg.grow == GrowConfig(250, 1500, 1e-3)
     assert cfg.robust == RobustConfig("none", None)
@@ -128,7 +128,10 @@ def test_flat_configs_read_as_before() -> None:
         (lambda: StoppingConfig(step_tolerance=float("nan")), r"stopping\.step_tolerance"),
         (lambda: LmConfig(lambda_factor=1.0), r"lm\.lambda_factor: expected a finite number > 1"),
         (lambda: LmConfig(lambda_initial=0.0), r"lm\.lambda_initial: expected a finite number > 0"),
-        (lambda: LmConfig(damping="x"), r"lm\.damping: expected one of 'levenberg', 'marquardt'"),
+        (
+            lambda: LmConfig(damping="x"),
+            r"lm\.damping: expected one of 'hessian', 'levenberg', 'marquardt'",
+        ),
         (lambda: DoglegConfig(trust_radius_initial=-1.0), r"dogleg\.trust_radius_initial"),
         (lambda: GrowConfig(max_step=0), r"grow\.max_step: expected an integer >= 1"),
         (lambda: RobustConfig(kernel="tukey"), r"robust\.kernel: expected one of"),

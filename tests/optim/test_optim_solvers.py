@@ -133,7 +133,8 @@ def test_noise_free_loop_is_solved_exactly(method: str) -> None:
     rng = np.random.default_rng(0)
     truth = _loop_truth()
     data = _pose_graph(truth, vertices=_perturb(truth, rng))
-    res = optimize(data, OptimizerConfig(solver=method))  # type: ignore[arg-type]
+    cfg = OptimizerConfig(solver=method, initialization="vertices")  # type: ignore[arg-type]
+    res = optimize(data, cfg)
     assert res.converged and res.anchored_first
     assert res.initial_cost > 100.0
     assert res.cost < 1e-12
@@ -527,11 +528,14 @@ def test_dogleg_first_step_is_the_gauss_newton_step() -> None:
     truth = _loop_truth()
     data = _pose_graph(truth, rng, sigma=0.05, vertices=_perturb(truth, rng))
     one = StoppingConfig(max_iterations=1)
-    gn = optimize(data, OptimizerConfig(solver="gn", stopping=one))
+    gn = optimize(data, OptimizerConfig(solver="gn", initialization="vertices", stopping=one))
     dl = optimize(
         data,
         OptimizerConfig(
-            solver="dogleg", stopping=one, dogleg=DoglegConfig(trust_radius_initial=1e-3)
+            solver="dogleg",
+            initialization="vertices",
+            stopping=one,
+            dogleg=DoglegConfig(trust_radius_initial=1e-3),
         ),
     )
     assert gn.initial_cost > 100.0 * gn.cost  # the GN step is a big one, far beyond 1e-3
@@ -553,8 +557,8 @@ def test_dogleg_reaches_the_gauss_newton_optimum_on_hard_graphs(data_root, name,
     if not path.exists():
         pytest.skip(f"{path} not found")
     graph = read_graph(path)
-    dl = optimize(graph, OptimizerConfig(solver="dogleg"))
-    gn = optimize(graph, OptimizerConfig(solver="gn"))
+    dl = optimize(graph, OptimizerConfig(solver="dogleg", initialization="vertices"))
+    gn = optimize(graph, OptimizerConfig(solver="gn", initialization="vertices"))
     assert dl.converged and gn.converged
     assert dl.chi2 == pytest.approx(gn.chi2, rel=1e-5)
     assert dl.chi2 == pytest.approx(chi2, abs=0.01)

@@ -75,6 +75,9 @@ def test_the_loop_is_closed_and_no_closure_is_false(slam) -> None:
     d = output.diagnostics
     assert d["loops_kept"] == len(closures) and d["keyframes"] == len(est.graph)
     assert d["matched"] >= 0.95 * d["scans"]
+    # Every solve starts from the running estimate, and each one converges.
+    assert d["optimizations"] >= 1 and d["optimizations_not_converged"] == 0
+    assert d["optimization_start"].startswith("the current estimate")
     assert output.grid is not None and output.graph is not None
     assert output.graph.poses.shape == (len(est.graph), 3)
 

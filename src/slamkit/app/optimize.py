@@ -16,7 +16,10 @@ Files written (``OUT`` the output folder):
 * ``metrics.json`` — ``chi2_initial``/``chi2_final`` (g2o's χ² of every edge, whatever the
   objective minimised), ``sesync_objective_initial``/``_final`` (SE-Sync's F over the
   relative-pose edges), ``cost_initial``/``cost_final`` (the objective minimised, with the
-  robust kernel), ``iterations``, ``factorizations``, ``converged``, ``reason``, counts,
+  robust kernel), ``start`` (``requested``, ``used``, the cost of every start compared in
+  ``costs`` and the ``reason``), ``information_repair`` (``mode``, the exact count
+  ``repaired`` of edges whose information was clamped, per tag, the first 20 as
+  ``file:line``), ``iterations``, ``factorizations``, ``converged``, ``reason``, counts,
   solver and linear solver, the per-iteration history and the times: ``solve_seconds`` is
   the optimiser alone (sparsity pattern, symbolic analysis and iterations; not reading,
   validating or initialising, which are ``read_seconds``, ``validate_seconds`` and
@@ -30,6 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,21 +46,23 @@ from slamkit.datasets.paths import find_data_root
 from slamkit.errors import ConfigError, DataNotFoundError, InputError
 from slamkit.io import atomic_folder, write_json
 from slamkit.io.graphfiles.families import FAMILIES, LANDMARK_KINDS, POSE_PAIR_KINDS
-from slamkit.io.posegraph import read_graph, write_graph
+from slamkit.io.graphfiles.reader import MAX_REPORTED_LINES, REPAIR_MODES, RepairedEdge
+from slamkit.io.posegraph import RepairWarning, read_graph_report, repair_summary, write_graph
 from slamkit.optim import (
     GraphData,
     GraphProblem,
     IterationInfo,
     OptimizerConfig,
     OptimizeResult,
+    choose_start,
     g2o_chi2,
-    grow_initialization,
-    initial_values,
     optimize,
     sesync_objective,
 )
+from slamkit.optim.repair import REPAIR_RTOL
 
 if TYPE_CHECKING:
+    from slamkit.io.graphfiles.reader import RepairMode
     from slamkit.optim.data import GraphFamily
     from slamkit.optim.settings import InitName
     from slamkit.viz.plots import Figure  # app never imports matplotlib itself
@@ -64,10 +70,11 @@ if TYPE_CHECKING:
 __all__ = ["OptimizeReport", "OptimizeRequest", "find_graph_file", "optimize_graph_job"]
 
 SOLVERS = ("lm", "gn", "dogleg")
-INITS = ("file", "odometry", "chordal", "grow")
+INITS = ("auto", "file", "odometry", "chordal", "grow")
 OBJECTIVES = ("g2o", "sesync")
 KERNELS = ("none", "huber", "cauchy", "geman_mcclure", "dcs")
 _INIT_METHOD: dict[str, InitName] = {
+    "auto": "auto",
     "file": "vertices",
     "odometry": "odometry",
     "chordal": "chordal",
@@ -90,9 +97,11 @@ class OptimizeRequest:
     init: str | None = None
     """``"file"`` (the file's vertices), ``"odometry"`` (spanning tree), ``"chordal"`` or
     ``"grow"`` (batch solves over growing time-ordered prefixes,
-    :func:`~slamkit.optim.grow_initialization`); ``None``: the file's vertices when it has
-    them, else grow for landmark graphs (their chordal or odometry start lies in a bad basin:
-    Victoria Park) and chordal for pose graphs."""
+    :func:`~slamkit.optim.grow_initialization`); ``None`` or ``"auto"``: chosen by
+    :func:`~slamkit.optim.choose_start`: on a pose graph the lower-cost of the file's
+    vertices (odometry when it has none) and chordal, on a landmark graph the file's vertices,
+    else grow (their chordal or odometry start lies in a bad basin: Victoria Park). The
+    metrics' ``start`` says which and why."""
     robust_kernel: str = "none"
     """``"none"``, ``"huber"``, ``"cauchy"``, ``"geman_mcclure"`` (or ``geman-mcclure``),
     ``"dcs"``."""
@@ -103,6 +112,11 @@ class OptimizeRequest:
     """``"g2o"`` (the file's χ²) or ``"sesync"`` (SE-Sync's F on the relative-pose edges)."""
     max_iterations: int | None = None
     """Linearisations at most (``None``: the optimiser's default, 100)."""
+    repair_information: str = "none"
+    """``"none"``: an information matrix that is not positive definite is an error naming
+    its line; ``"clamp"``: it is repaired by eigenvalue clamping
+    (:mod:`slamkit.optim.repair`) and every repaired edge is counted in the metrics'
+    ``information_repair``."""
     plots: bool = True
     overwrite: bool = False
 
@@ -138,6 +152,7 @@ def _optimizer_config(request: OptimizeRequest) -> OptimizerConfig:
     }
     if request.init is not None:
         _choice(request.init, "init", INITS)
+    _choice(request.repair_information, "repair information", REPAIR_MODES)
     if request.robust_width is not None:
         robust["width"] = request.robust_width
     if request.max_iterations is not None:
@@ -241,16 +256,19 @@ def _history(history: tuple[IterationInfo, ...]) -> list[dict[str, Any]]:
     ]
 
 
-def _has_landmark_edges(data: GraphData) -> bool:
-    return any(es.kind in LANDMARK_KINDS for es in data.edges)
+def _repair_mode(request: OptimizeRequest) -> RepairMode:
+    return "clamp" if request.repair_information == "clamp" else "none"
+
+
+def _start_label(name: str) -> str:
+    """The CLI's name of a library start (the file's vertices are ``file``)."""
+    return "file" if name == "vertices" else name
 
 
 def _resolve_init(init: str | None, data: GraphData) -> str:
     has_vertices = data.poses.shape[0] > 0
     if init is None:
-        if has_vertices:
-            return "file"
-        return "grow" if data.landmarks.shape[0] or _has_landmark_edges(data) else "chordal"
+        return "auto"
     if init == "file" and not has_vertices:
         raise ConfigError(
             f"init 'file': {data.source or 'the graph'} has no vertex lines; use odometry or "
@@ -259,10 +277,35 @@ def _resolve_init(init: str | None, data: GraphData) -> str:
     return init
 
 
+def _repair_record(mode: str, path: Path, repaired: tuple[RepairedEdge, ...]) -> dict[str, Any]:
+    """The metrics' ``information_repair``: the mode, the exact count (and per tag), the
+    first edges as ``file:line`` with their eigenvalues, and the warning's sentence."""
+    by_tag: dict[str, int] = {}
+    for r in repaired:
+        by_tag[r.tag] = by_tag.get(r.tag, 0) + 1
+    return {
+        "mode": mode,
+        "floor_relative_to_largest_eigenvalue": REPAIR_RTOL if mode == "clamp" else None,
+        "repaired": len(repaired),
+        "repaired_by_tag": by_tag,
+        "first": [
+            {
+                "location": f"{path}:{r.line}",
+                "tag": r.tag,
+                "eigenvalue_min": r.eigenvalue_min,
+                "eigenvalue_max": r.eigenvalue_max,
+            }
+            for r in repaired[:MAX_REPORTED_LINES]
+        ],
+        "warning": repair_summary(path, repaired) if repaired else None,
+    }
+
+
 def _metrics(
     data: GraphData,
     path: Path,
     init: str,
+    start_record: dict[str, Any],
     cfg: OptimizerConfig,
     start: tuple[np.ndarray, np.ndarray],
     result: OptimizeResult,
@@ -289,6 +332,7 @@ def _metrics(
         "solver": result.method,
         "objective": result.objective,
         "initialization": init,
+        "start": start_record,
         "robust_kernel": cfg.robust.kernel,
         "linear_solver": result.linear_solver,
         "anchored_first_pose": result.anchored_first,
@@ -379,13 +423,17 @@ def optimize_graph_job(
     cfg = _optimizer_config(request)
     path = Path(request.path)
     t0 = time.perf_counter()
-    data = read_graph(path)
+    with warnings.catch_warnings():
+        # The report carries every repaired edge; the caller shows the warning's sentence.
+        warnings.simplefilter("ignore", RepairWarning)
+        read = read_graph_report(path, repair_information=_repair_mode(request))
+    data = read.graph
+    repair = _repair_record(request.repair_information, path, read.repaired)
     t1 = time.perf_counter()
     problem = GraphProblem.from_data(data, objective=cfg.objective, gauge=cfg.gauge)
     t2 = time.perf_counter()
-    init = _resolve_init(request.init, data)
-    method = _INIT_METHOD[init]
-    cfg = dataclasses.replace(cfg, initialization=method)
+    requested = _resolve_init(request.init, data)
+    cfg = dataclasses.replace(cfg, initialization=_INIT_METHOD[requested])
 
     def on_iteration(info: IterationInfo) -> None:
         if progress is not None:
@@ -395,10 +443,17 @@ def optimize_graph_job(
 
     # The folder check comes before the work; on any error the partial folder is removed.
     with atomic_folder(request.out_dir, overwrite=request.overwrite) as tmp:
-        if method == "grow":
-            p0, l0 = grow_initialization(problem, cfg)
-        else:
-            p0, l0 = initial_values(problem, method, cfg.linear_solver)
+        choice = choose_start(problem, cfg)
+        p0, l0 = choice.poses, choice.landmarks
+        init = _start_label(choice.name)
+        start_record = {
+            "requested": requested,
+            "used": init,
+            "costs": {_start_label(k): v for k, v in choice.costs.items()},
+            "reason": choice.reason,
+        }
+        # The start used, so that config.json re-runs exactly this solve.
+        cfg = dataclasses.replace(cfg, initialization=_INIT_METHOD[init])
         t3 = time.perf_counter()
         result = optimize(
             data, cfg, initial_poses=p0, initial_landmarks=l0, callback=on_iteration,
@@ -406,7 +461,8 @@ def optimize_graph_job(
         )  # fmt: skip
         output = _output(data, result)
         seconds = {"read_seconds": t1 - t0, "validate_seconds": t2 - t1, "init_seconds": t3 - t2}
-        metrics = _metrics(data, path, init, cfg, (p0, l0), result, output, seconds)
+        metrics = _metrics(data, path, init, start_record, cfg, (p0, l0), result, output, seconds)
+        metrics["information_repair"] = repair
         resolved = {
             "file": str(path),
             "solver": result.method,
@@ -415,6 +471,7 @@ def optimize_graph_job(
             "robust_width": cfg.kernel.width if cfg.robust.kernel != "none" else None,
             "objective": cfg.objective,
             "max_iterations": cfg.stopping.max_iterations,
+            "repair_information": request.repair_information,
             "output": metrics["output"],
             "optimizer": config_to_dict(cfg),
         }

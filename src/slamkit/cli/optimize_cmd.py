@@ -34,6 +34,7 @@ def _table(m: dict[str, Any]) -> Table:
 
     add("poses / landmarks / edges", f"{m['poses']} / {m['landmarks']} / {m['edges']}")
     add("solver, start", f"{m['solver']}, {m['initialization']} ({m['objective']} objective)")
+    add("start chosen because", m["start"]["reason"])
     add("χ² initial", f"{m['chi2_initial']:.6g}")
     add("χ² final", f"{m['chi2_final']:.6g}")
     add("SE-Sync F initial", f"{m['sesync_objective_initial']:.6g}")
@@ -65,11 +66,11 @@ def optimize_command(
     init: Annotated[
         str | None,
         typer.Option(
-            metavar="file|odometry|chordal|grow",
+            metavar="auto|file|odometry|chordal|grow",
             show_default=False,
             help="Start: file (its vertices), odometry, chordal or grow (solves over growing "
-            "prefixes; default: file when it has vertices, else grow for landmark graphs and "
-            "chordal for pose graphs).",
+            "prefixes); default auto: for pose graphs the lower-cost of file (odometry when "
+            "it has no vertices) and chordal, for landmark graphs file, else grow.",
         ),
     ] = None,
     robust: Annotated[
@@ -87,6 +88,15 @@ def optimize_command(
     max_iterations: Annotated[
         int | None, typer.Option(help="Linearisations at most (default 100).")
     ] = None,
+    repair_information: Annotated[
+        str,
+        typer.Option(
+            metavar="none|clamp",
+            help="Information matrices that are not positive definite: none (an error naming "
+            "the line) or clamp (raise their eigenvalues to 1e-6 of the largest; each "
+            "repaired edge is counted in metrics.json and a warning printed).",
+        ),
+    ] = "none",
     plots: Annotated[bool, typer.Option(help="Write graph.png (before and after).")] = True,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
     data_root: Annotated[
@@ -116,6 +126,7 @@ def optimize_command(
         robust_width=robust_width,
         objective=objective,
         max_iterations=max_iterations,
+        repair_information=repair_information,
         plots=plots,
         overwrite=overwrite,
     )
@@ -130,6 +141,9 @@ def optimize_command(
 
     with progress_bar(f"optimising {file.name}", unit="iterations") as progress:
         report = optimize_graph_job(request, progress, show)
+    repair = report.metrics["information_repair"]
+    if repair["warning"]:
+        err_console.print(f"[yellow]warning:[/] {escape(repair['warning'])}", soft_wrap=True)
     console.print(_table(report.metrics))
     for note in report.metrics["output"]["notes"]:
         console.print(f"note: {escape(note)}", soft_wrap=True)

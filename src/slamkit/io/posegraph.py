@@ -53,6 +53,10 @@ Decisions
   drops them. Malformed lines of known tags are errors either way.
 * **Information** must be symmetric positive definite after conversion: smallest eigenvalue
   above ``1e-12`` times the largest (:data:`~slamkit.io.graphfiles.families.PD_RTOL`).
+  ``repair_information="clamp"`` repairs the matrices that are not instead, never silently:
+  each one is clamped to eigenvalues ``≥ 1e-6 λ_max`` (:mod:`slamkit.optim.repair`),
+  :func:`read_graph_report` lists every one (line, tag, eigenvalues) and a
+  :class:`RepairWarning` gives the count and the first lines.
 * **Round trips.** Numbers are written with ``repr``. g2o and TORO data (a permutation)
   round-trip bit for bit. iSAM's ``RᵀR`` is written back as its Cholesky factor, GTSAM's
   covariance as an inverse, ``BR`` as ``1/sqrt``, and Euler angles through the quaternion:
@@ -76,6 +80,7 @@ from __future__ import annotations
 import gzip
 import os
 import tempfile
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -84,16 +89,24 @@ from types import MappingProxyType
 from slamkit.datasets.text import read_text
 from slamkit.errors import InputError
 from slamkit.io.graphfiles.families import FILE_FAMILIES, detect_family, family_for_suffix
-from slamkit.io.graphfiles.reader import group_lines, parse_graph_text
+from slamkit.io.graphfiles.reader import (
+    RepairedEdge,
+    RepairMode,
+    group_lines,
+    parse_graph_text,
+)
 from slamkit.io.graphfiles.writer import format_graph_text
 from slamkit.optim.data import GraphData, GraphFamily
 
 __all__ = [
     "GraphReadReport",
+    "RepairWarning",
+    "RepairedEdge",
     "detect_graph_family",
     "format_graph",
     "read_graph",
     "read_graph_report",
+    "repair_summary",
     "write_graph",
 ]
 
@@ -108,11 +121,32 @@ class GraphReadReport:
     """How many lines of each unknown tag were skipped (empty for a strict read)."""
     skipped_lines: tuple[int, ...] = ()
     """The first 20 skipped line numbers."""
+    repaired: tuple[RepairedEdge, ...] = ()
+    """Every edge whose information matrix was repaired (``repair_information="clamp"``),
+    in line order."""
 
     @property
     def skipped(self) -> int:
         """How many lines were skipped in all."""
         return sum(self.skipped_tags.values())
+
+
+class RepairWarning(UserWarning):
+    """Information matrices of a graph file were repaired (``repair_information="clamp"``)."""
+
+
+def repair_summary(path: Path | str, repaired: tuple[RepairedEdge, ...], first: int = 5) -> str:
+    """One sentence: how many information matrices of ``path`` were repaired, and the first
+    ``first`` of them as ``file:line`` with their smallest eigenvalue."""
+    shown = ", ".join(
+        f"{path}:{r.line} ({r.tag}, smallest eigenvalue {r.eigenvalue_min:.3g})"
+        for r in repaired[:first]
+    )
+    more = f" and {len(repaired) - first} more" if len(repaired) > first else ""
+    return (
+        f"{len(repaired)} information matrices were not positive definite and were "
+        f"repaired by eigenvalue clamping: {shown}{more}"
+    )
 
 
 def _check_family(family: str | None) -> GraphFamily | None:
@@ -126,17 +160,27 @@ def read_graph_report(
     *,
     family: GraphFamily | None = None,
     lenient: bool = False,
+    repair_information: RepairMode = "none",
 ) -> GraphReadReport:
-    """Read a graph file (``.gz``: gzip) and report what a lenient read skipped.
+    """Read a graph file (``.gz``: gzip) and report what a lenient read skipped and what
+    ``repair_information="clamp"`` repaired (then also a :class:`RepairWarning`).
 
     Raises :class:`~slamkit.errors.DatasetFormatError` naming the file and the first bad line,
     :class:`~slamkit.errors.DataNotFoundError` when the file is missing.
     """
     fam = _check_family(family)
     p = Path(path)
-    parsed = parse_graph_text(read_text(p), p, family=fam, lenient=lenient)
+    parsed = parse_graph_text(
+        read_text(p), p, family=fam, lenient=lenient, repair_information=repair_information
+    )
+    if parsed.repaired:
+        warnings.warn(repair_summary(p, parsed.repaired), RepairWarning, stacklevel=2)
     return GraphReadReport(
-        parsed.graph, parsed.family, MappingProxyType(parsed.skipped_tags), parsed.skipped_lines
+        parsed.graph,
+        parsed.family,
+        MappingProxyType(parsed.skipped_tags),
+        parsed.skipped_lines,
+        parsed.repaired,
     )
 
 
@@ -145,9 +189,14 @@ def read_graph(
     *,
     family: GraphFamily | None = None,
     lenient: bool = False,
+    repair_information: RepairMode = "none",
 ) -> GraphData:
-    """Read a graph file into slamkit's conventions (see the module docstring)."""
-    return read_graph_report(path, family=family, lenient=lenient).graph
+    """Read a graph file into slamkit's conventions (see the module docstring);
+    ``repair_information="clamp"`` repairs information matrices that are not positive
+    definite (with a :class:`RepairWarning`; :func:`read_graph_report` lists them)."""
+    return read_graph_report(
+        path, family=family, lenient=lenient, repair_information=repair_information
+    ).graph
 
 
 def detect_graph_family(path: str | os.PathLike[str]) -> GraphFamily:

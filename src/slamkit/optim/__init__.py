@@ -49,7 +49,13 @@ from slamkit.optim.settings import (
     RobustConfig,
     StoppingConfig,
 )
-from slamkit.optim.solvers import OptimizeResult, grow_initialization, optimize
+from slamkit.optim.solvers import (
+    OptimizeResult,
+    StartChoice,
+    choose_start,
+    grow_initialization,
+    optimize,
+)
 from slamkit.optim.sparse import cholmod_available
 
 __all__ = [
@@ -71,9 +77,11 @@ __all__ = [
     "OptimizerConfig",
     "RobustConfig",
     "RobustKernel",
+    "StartChoice",
     "StoppingConfig",
     "UpdateInfo",
     "cholmod_available",
+    "choose_start",
     "chordal_initialization",
     "g2o_chi2",
     "grow_initialization",

@@ -131,7 +131,9 @@ def _sqrt_information(data: GraphData, es: EdgeSet) -> FloatArray:
         k = int(np.argmin(eig.min(axis=1)))
         raise CovarianceError(
             f"{edge_location(data, es, k)}: information matrix not positive definite "
-            f"(smallest eigenvalue {float(eig[k].min()):.3g})"
+            f"(smallest eigenvalue {float(eig[k].min()):.3g}); a file read with "
+            "repair_information='clamp' has such matrices repaired, or repair them with "
+            "slamkit.optim.repair.clamp_information"
         ) from None
     return np.ascontiguousarray(np.swapaxes(L, 1, 2))
 

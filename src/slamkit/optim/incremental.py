@@ -654,7 +654,9 @@ class IncrementalOptimizer:
             # with the same problem and tolerance.
             lm_rule = replace(rule, absolute_tolerance=StoppingConfig().absolute_tolerance)
             before = ctx.factorizations
-            lm = LevenbergMarquardtStep(LmConfig())
+            # Levenberg's D = I: the Gauss-Newton direction just failed, so its shortened
+            # copy (damping="hessian") would fail too.
+            lm = LevenbergMarquardtStep(LmConfig(damping="levenberg", schedule="fixed"))
             out = run_least_squares(ctx, out.estimate, lm, lm_rule, [])
             iterations += ctx.factorizations - before
         return out.estimate, iterations, out.converged

@@ -81,19 +81,31 @@ class StoppingConfig(Section):
 
 @dataclass(frozen=True)
 class LmConfig(Section):
-    """Levenberg-Marquardt: solve ``(H + λD) δ = -g``; accept when ``f`` decreases, then
-    ``λ ← max(λ / lambda_factor, 1e-20)``, else ``λ ← λ · lambda_factor`` and refactor."""
+    """Levenberg-Marquardt: solve ``(H + λD) δ = -g`` and accept when ``f`` decreases; ``λ``
+    moves by ``schedule`` (the gain-ratio rule of :mod:`slamkit.optim.steps` by default)."""
 
     SECTION: ClassVar[str] = "lm"
 
     lambda_initial: float = setting(1e-5, finite_above(0.0), "a finite number > 0")
-    """The first damping ``λ`` (cost per squared tangent unit)."""
+    """The first damping ``λ`` (``damping="levenberg"``: cost per squared tangent unit;
+    ``"marquardt"`` and ``"hessian"``: dimensionless)."""
     lambda_factor: float = setting(10.0, finite_above(1.0), "a finite number > 1")
-    """``λ`` is divided by this after an accepted step and multiplied after a rejected one."""
+    """``schedule="fixed"`` only: ``λ`` is divided by this after an accepted step and
+    multiplied after a rejected one."""
     lambda_max: float = setting(1e10, finite_above(0.0), "a finite number > 0")
     """Stop (``converged = False``) when ``λ`` exceeds this without finding a decrease."""
-    damping: Literal["levenberg", "marquardt"] = "levenberg"
-    """``D = I`` (``"levenberg"``, GTSAM's default) or ``D = diag(H)`` (``"marquardt"``)."""
+    damping: Literal["hessian", "levenberg", "marquardt"] = "hessian"
+    """The damping matrix ``D``: ``"hessian"`` (``D = H``: the Gauss-Newton step shortened
+    to ``δ_gn / (1 + λ)``, one factorisation per iteration; a singular ``H`` falls back to
+    ``D = I`` for that iteration), ``"levenberg"`` (``D = I``, GTSAM's default) or
+    ``"marquardt"`` (``D = diag(H)``). Why ``"hessian"`` is the default: the measurements in
+    ``docs/estimators/optim.md``."""
+    schedule: Literal["gain_ratio", "fixed"] = "gain_ratio"
+    """How ``λ`` moves. ``"gain_ratio"`` (Nielsen 1999): with ``ϱ`` the actual over the
+    predicted cost reduction, on an accepted step (``ϱ > 0``)
+    ``λ ← max(λ · max(1/3, 1 - (2ϱ - 1)³), 1e-20)`` and ``ν ← 2``; on a rejected one
+    ``λ ← λ · ν`` and ``ν ← 2ν`` (``ν`` starts at 2). ``"fixed"``: ``λ ← max(λ /
+    lambda_factor, 1e-20)`` on accept, ``λ ← λ · lambda_factor`` on reject."""
 
 
 @dataclass(frozen=True)
@@ -165,8 +177,9 @@ class OptimizerConfig(Section):
     relative-pose edges (other edge kinds keep their g2o error)."""
     initialization: InitName = "auto"
     """``"vertices"``, ``"odometry"`` (spanning tree), ``"chordal"``, ``"grow"`` (batch solves
-    over growing time-ordered prefixes, settings in ``grow``), or ``"auto"``: vertices when the
-    file has them, else ``"grow"`` when the graph has landmark readings, else odometry.
+    over growing time-ordered prefixes, settings in ``grow``), or ``"auto"``: on a pose graph
+    the lower-cost of the file's vertices (odometry when it has none) and the chordal start;
+    on a landmark graph the vertices, else ``"grow"`` (:func:`~slamkit.optim.choose_start`).
     Ignored when initial values are passed."""
     gauge: GaugeMode = "anchor_first"
     """``"anchor_first"``: with no fixed pose and no prior, hold the first pose fixed;

@@ -21,7 +21,9 @@ sections of :class:`~slamkit.optim.settings.OptimizerConfig`.
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from types import MappingProxyType
 
 import numpy as np
 
@@ -42,10 +44,31 @@ __all__ = [
     "IterationInfo",
     "OptimizeResult",
     "OptimizerConfig",
+    "StartChoice",
+    "choose_start",
     "grow_initialization",
     "optimize",
     "resolve_initialization",
 ]
+
+_NO_COSTS: Mapping[str, float] = MappingProxyType({})
+
+
+@dataclass(frozen=True)
+class StartChoice:
+    """The starting values :func:`choose_start` picked, and why.
+
+    ``name``: ``"vertices"``, ``"odometry"``, ``"chordal"`` or ``"grow"``; ``poses`` and
+    ``landmarks`` in file formats (rows of the problem's ``pose_ids`` / ``landmark_ids``);
+    ``costs``: the cost (the configured objective and robust kernel) of every candidate
+    evaluated, by name (empty when a start was named, not chosen); ``reason``: one sentence.
+    """
+
+    name: str
+    poses: FloatArray
+    landmarks: FloatArray
+    costs: Mapping[str, float]
+    reason: str
 
 
 @dataclass(frozen=True)
@@ -75,6 +98,11 @@ class OptimizeResult:
     initialization: str = "given"
     """The initialisation used (``"vertices"``, ``"odometry"``, ``"chordal"``, ``"grow"``),
     ``"given"`` when the caller passed the initial poses."""
+    start_costs: Mapping[str, float] = field(default_factory=dict, repr=False)
+    """``initialization="auto"``: the cost of every start it compared, by name
+    (:class:`StartChoice`); empty otherwise."""
+    start_reason: str = ""
+    """Why this start was used (:attr:`StartChoice.reason`)."""
     g2o_chi2: float = float("nan")
     """g2o's χ² of the solution over every edge (:func:`slamkit.optim.g2o_chi2`), whatever
     the objective minimised (set by :func:`optimize`)."""
@@ -115,17 +143,17 @@ def optimize(
     t_start = time.perf_counter()
     if problem is None:
         problem = GraphProblem.from_data(data, objective=cfg.objective, gauge=cfg.gauge)
-    init_used = "given"
+    init_used, start_costs, start_reason = "given", _NO_COSTS, "initial values given"
     if initial_poses is None or (initial_landmarks is None and problem.landmark_ids.shape[0]):
-        init_used = resolve_initialization(problem, cfg.initialization)
-        if init_used == "grow":
-            p0, l0 = grow_initialization(problem, cfg)
-        else:
-            p0, l0 = initial_values(problem, init_used, cfg.linear_solver)
+        choice = choose_start(problem, cfg)
+        init_used, start_costs, start_reason = choice.name, choice.costs, choice.reason
         if initial_poses is not None:
-            init_used = "given"
-        poses = p0 if initial_poses is None else np.array(initial_poses, dtype=np.float64)
-        landmarks = l0 if initial_landmarks is None else np.array(initial_landmarks, float)
+            init_used, start_costs = "given", _NO_COSTS
+            start_reason = f"initial poses given; landmarks from the {choice.name} start"
+        poses = choice.poses if initial_poses is None else np.array(initial_poses, float)
+        landmarks = (
+            choice.landmarks if initial_landmarks is None else np.array(initial_landmarks, float)
+        )
     else:
         poses = np.array(initial_poses, dtype=np.float64)
         landmarks = (
@@ -179,16 +207,19 @@ def optimize(
         total_seconds=total,
         history=tuple(history),
         initialization=init_used,
+        start_costs=start_costs,
+        start_reason=start_reason,
         g2o_chi2=g2o_value,
         sesync_objective=sesync_value,
     )
 
 
 def resolve_initialization(problem: GraphProblem, name: str) -> str:
-    """The initialisation ``"auto"`` stands for: the file's vertices when it has them, else
-    ``"grow"`` for graphs with landmark readings (the odometry start of a long trajectory
-    whose landmarks close loops lies in a bad basin, as on Victoria Park: see
-    ``docs/estimators/optim.md``), else the odometry spanning tree."""
+    """The initialisation ``"auto"`` stands for before any cost is evaluated: the file's
+    vertices when it has them, else ``"grow"`` for graphs with landmark readings (the
+    odometry start of a long trajectory whose landmarks close loops lies in a bad basin, as
+    on Victoria Park: see ``docs/estimators/optim.md``), else the odometry spanning tree.
+    :func:`choose_start` compares that start of a pose graph with the chordal one."""
     if name != "auto":
         return name
     if problem.data.poses.shape[0]:
@@ -196,6 +227,65 @@ def resolve_initialization(problem: GraphProblem, name: str) -> str:
     if any(blk.b_is_landmark for blk in problem.blocks):
         return "grow"
     return "odometry"
+
+
+def _start_values(
+    problem: GraphProblem, name: str, cfg: OptimizerConfig
+) -> tuple[FloatArray, FloatArray]:
+    if name == "grow":
+        return grow_initialization(problem, cfg)
+    return initial_values(problem, name, cfg.linear_solver)
+
+
+def _start_cost(
+    problem: GraphProblem, poses: FloatArray, landmarks: FloatArray, cfg: OptimizerConfig
+) -> float:
+    lin = problem.linearize(problem.to_internal(poses), landmarks, cfg.kernel, jacobians=False)
+    return float(lin.cost)
+
+
+def choose_start(problem: GraphProblem, config: OptimizerConfig | None = None) -> StartChoice:
+    """The starting values of ``config.initialization``, chosen by evidence for ``"auto"``.
+
+    A named start is computed as asked. ``"auto"`` on a graph with landmark readings is the
+    file's vertices, else the grown-prefix start (:func:`resolve_initialization`). On a pose
+    graph it evaluates the cost (objective and robust kernel of ``config``) of two starts, the
+    file's vertices (odometry chaining when the file has none) and the chordal relaxation,
+    and takes the lower, the file's on a tie or when the chordal system is singular. Why: a
+    start far from the optimum can leave the solver in another basin or short of its
+    iteration limit, and the cost is the one evidence available before solving (a file
+    whose vertices carry large rotation noise: ``docs/estimators/optim.md``).
+    """
+    cfg = config if config is not None else OptimizerConfig()
+    base = resolve_initialization(problem, cfg.initialization)
+    if cfg.initialization != "auto":
+        p0, l0 = _start_values(problem, base, cfg)
+        return StartChoice(base, p0, l0, _NO_COSTS, f"initialization {base!r} was asked for")
+    if base == "grow" or any(blk.b_is_landmark for blk in problem.blocks):
+        p0, l0 = _start_values(problem, base, cfg)
+        why = (
+            "the file's vertices (a landmark graph: the chordal start covers pose edges only)"
+            if base == "vertices"
+            else "a landmark graph without vertices: solves over growing prefixes"
+        )
+        return StartChoice(base, p0, l0, _NO_COSTS, why)
+    p0, l0 = _start_values(problem, base, cfg)
+    own = _start_cost(problem, p0, l0, cfg)
+    costs = {base: own}
+    label = "the file's vertices" if base == "vertices" else "odometry chaining"
+    try:
+        pc, lc = _start_values(problem, "chordal", cfg)
+    except GeometryError as exc:
+        reason = f"{label}: the chordal relaxation failed ({exc})"
+        return StartChoice(base, p0, l0, MappingProxyType(costs), reason)
+    chordal = _start_cost(problem, pc, lc, cfg)
+    costs["chordal"] = chordal
+    frozen = MappingProxyType(costs)
+    if chordal < own:
+        return StartChoice(
+            "chordal", pc, lc, frozen, f"chordal: cost {chordal:.6g} < {own:.6g} of {label}"
+        )
+    return StartChoice(base, p0, l0, frozen, f"{label}: cost {own:.6g} <= {chordal:.6g} of chordal")
 
 
 def _carry(X: FloatArray, X0: FloatArray, anchor: int, rows: slice, dim: int) -> FloatArray:

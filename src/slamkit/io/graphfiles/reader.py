@@ -12,7 +12,9 @@ problem as a :class:`~slamkit.errors.DatasetFormatError`:
 3. **graph checks**: positive definite information, duplicate vertex ids, edges from a
    pose to itself, and references to vertices that have no vertex line — the last only
    when the file has vertex lines of that role at all (iSAM files have none; a TORO ``BR``
-   file has pose vertices but no landmark vertices).
+   file has pose vertices but no landmark vertices). With ``repair_information="clamp"``
+   an information matrix that is not positive definite is repaired by eigenvalue clamping
+   (:mod:`slamkit.optim.repair`) and listed in :attr:`ParsedGraph.repaired` instead.
 """
 
 from __future__ import annotations
@@ -39,8 +41,20 @@ from slamkit.io.graphfiles.families import (
     detect_family,
 )
 from slamkit.optim.data import EdgeKind, EdgeSet, GraphData, GraphFamily, IntArray
+from slamkit.optim.repair import REPAIR_RTOL, clamp_information, not_positive_definite
 
-__all__ = ["MAX_REPORTED_LINES", "ParsedGraph", "group_lines", "parse_graph_text"]
+__all__ = [
+    "MAX_REPORTED_LINES",
+    "REPAIR_MODES",
+    "ParsedGraph",
+    "RepairMode",
+    "RepairedEdge",
+    "group_lines",
+    "parse_graph_text",
+]
+
+RepairMode = Literal["none", "clamp"]
+REPAIR_MODES: tuple[RepairMode, ...] = ("none", "clamp")
 
 #: How many skipped line numbers a lenient read keeps (the counts are always exact).
 MAX_REPORTED_LINES = 20
@@ -56,11 +70,25 @@ class _Group:
 
 
 @dataclass(frozen=True)
+class RepairedEdge:
+    """One edge whose information matrix was repaired: its line, tag and the smallest and
+    largest eigenvalue of the matrix as the file gave it (after conversion)."""
+
+    line: int
+    tag: str
+    eigenvalue_min: float
+    eigenvalue_max: float
+
+
+@dataclass(frozen=True)
 class ParsedGraph:
     graph: GraphData
     family: GraphFamily
     skipped_tags: dict[str, int]
     skipped_lines: tuple[int, ...]
+    repaired: tuple[RepairedEdge, ...] = ()
+    """Every edge whose information was repaired (``repair_information="clamp"``), in line
+    order."""
 
 
 class _Problems:
@@ -198,8 +226,17 @@ def parse_graph_text(
     *,
     family: GraphFamily | None = None,
     lenient: bool = False,
+    repair_information: RepairMode = "none",
 ) -> ParsedGraph:
-    """Parse ``text`` (the content of ``path``, named in errors) as a graph file."""
+    """Parse ``text`` (the content of ``path``, named in errors) as a graph file;
+    ``repair_information="clamp"`` repairs information matrices that are not positive
+    definite (module docstring) instead of refusing them."""
+    if repair_information not in REPAIR_MODES:
+        raise DatasetFormatError(
+            f"repair_information: expected one of {', '.join(REPAIR_MODES)}, "
+            f"got {repair_information!r}",
+            path,
+        )
     groups = group_lines(text)
     if family is None:
         base = path.with_suffix("") if path.suffix == ".gz" else path
@@ -276,7 +313,10 @@ def parse_graph_text(
     # ------------------------------------------------------------ pass 3: graph checks
     pose_ids, poses, pose_lines = _vertices(vertex_rows, "pose", dim, spec)
     lm_ids, landmarks, lm_lines = _vertices(vertex_rows, "landmark", dim, spec)
+    repaired: list[RepairedEdge] = []
     for e in edge_rows:
+        if repair_information == "clamp":
+            repaired.extend(_repair_information(e, problems))
         _check_information(e, problems)
         _check_references(e, pose_ids, lm_ids, problems)
     _check_duplicates(
@@ -308,7 +348,13 @@ def parse_graph_text(
         edge_order=order,
     )
     skipped_lines.sort()
-    return ParsedGraph(graph, family, skipped, tuple(skipped_lines[:MAX_REPORTED_LINES]))
+    return ParsedGraph(
+        graph,
+        family,
+        skipped,
+        tuple(skipped_lines[:MAX_REPORTED_LINES]),
+        tuple(sorted(repaired, key=lambda r: r.line)),
+    )
 
 
 # ------------------------------------------------------------------------------ helpers
@@ -379,8 +425,39 @@ def _check_information(e: _EdgeRows, problems: _Problems) -> None:
         problems.add(
             int(e.lines[r]),
             f"{e.spec.tag}: the {e.spec.noise} gives an information matrix that is not "
-            f"positive definite (eigenvalues from {eig[r, 0]:.3g} to {eig[r, -1]:.3g})",
+            f"positive definite (eigenvalues from {eig[r, 0]:.3g} to {eig[r, -1]:.3g}); "
+            "repair_information='clamp' (slamkit optimize --repair-information clamp) "
+            "repairs such matrices by eigenvalue clamping and reports each one",
         )
+
+
+def _repair_information(e: _EdgeRows, problems: _Problems) -> list[RepairedEdge]:
+    """Clamp the eigenvalues of the rows of ``e`` that are not positive definite (in place)
+    and return their records; a matrix with no positive eigenvalue stays for
+    :func:`_check_information`'s error, and non-finite ones for its own."""
+    info = e.information
+    if not np.isfinite(info).all():
+        return []
+    bad = not_positive_definite(info, PD_RTOL)
+    if not bad.any():
+        return []
+    eig = np.linalg.eigvalsh(info[bad])
+    rows = np.flatnonzero(bad)
+    hopeless = eig[:, -1] <= 0
+    if hopeless.any():
+        r = int(rows[np.flatnonzero(hopeless)[0]])
+        problems.add(
+            int(e.lines[r]),
+            f"{e.spec.tag}: the {e.spec.noise} gives an information matrix with no positive "
+            f"eigenvalue (largest {float(eig[hopeless][0, -1]):.3g}): there is no information "
+            "to repair from",
+        )
+        return []
+    e.information = clamp_information(info, rows, REPAIR_RTOL)
+    return [
+        RepairedEdge(int(e.lines[r]), e.spec.tag, float(lo), float(hi))
+        for r, lo, hi in zip(rows.tolist(), eig[:, 0].tolist(), eig[:, -1].tolist(), strict=True)
+    ]
 
 
 def _check_member(

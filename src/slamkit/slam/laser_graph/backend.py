@@ -48,7 +48,8 @@ def edge_chi2(
 @dataclass(frozen=True)
 class OptimizationRecord:
     """One solve: keyframes and edges at the time, LM iterations, cost before and after,
-    wall time [s]."""
+    wall time [s], whether the solver converged and the start it used (``"given"``: the
+    current estimate, the last optimum extended by the front end; no start is chosen)."""
 
     keyframes: int
     edges: int
@@ -56,6 +57,8 @@ class OptimizationRecord:
     initial_cost: float
     cost: float
     seconds: float
+    converged: bool = True
+    start: str = "given"
 
 
 class PoseGraph:
@@ -182,6 +185,8 @@ class PoseGraph:
             initial_cost=float(result.initial_cost),
             cost=float(result.cost),
             seconds=time.perf_counter() - tic,
+            converged=result.converged,
+            start=result.initialization,
         )
         self.solves.append(record)
         return record

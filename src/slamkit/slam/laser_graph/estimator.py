@@ -319,6 +319,12 @@ class LaserGraphSlam(EstimatorShell):
             },
             "keyframes_refused": sum(v for k, v in c.items() if k.startswith("keyframe_refused:")),
             "optimizations": len(solves),
+            "optimizations_not_converged": sum(1 for r in solves if not r.converged),
+            "optimization_start": (
+                "the current estimate (the last optimum extended by the front end)"
+                if all(r.start == "given" for r in solves)
+                else sorted({r.start for r in solves})
+            ),
             "optimization_seconds": float(sum(r.seconds for r in solves)),
             "final_cost": solves[-1].cost if solves else None,
         }
