@@ -305,6 +305,9 @@ def test_options_are_checked():
     with pytest.raises(ConfigError, match="unknown"):
         read_rosbag("x.bag", {"scan_topik": "/scan"})
     assert RosbagOptions(max_odom_gap=math.inf).max_odom_gap == math.inf
+    for bad in (0.0, -1.0, math.nan, math.inf):
+        with pytest.raises(ConfigError, match="max_duration_s"):
+            RosbagOptions(max_duration_s=bad)
 
 
 # ------------------------------------------------------------------------ the Freiburg bags
@@ -345,6 +348,22 @@ def test_freiburg_bags_counts_geometry_and_relation_stamps(freiburg, name):
     times = np.array([e.t for e in _scans(ds)])
     # every relation stamp is a scan stamp, exactly (float64 sec + nanosec·1e-9)
     assert np.isin(rel.stamps, times).all()
+
+
+@pytest.mark.realdata
+def test_a_cut_log_keeps_its_first_seconds_and_the_relations_within_them(freiburg, data_root):
+    whole = freiburg["intel-raw"]
+    cut = load_dataset("intel-raw", options={"max_duration_s": 300.0}, data_root=data_root)
+    times = np.array([e.t for e in _scans(cut)])
+    every = np.array([e.t for e in _scans(whole)])
+    assert times[0] == every[0] and np.array_equal(times, every[every <= every[0] + 300.0])
+    rel, all_rel = cut.truth.relations, whole.truth.relations
+    inside = (all_rel.t1 <= times[-1]) & (all_rel.t2 <= times[-1])
+    assert 0 < len(rel) == int(inside.sum()) < len(all_rel)
+    assert np.array_equal(rel.deltas, all_rel.deltas[inside])
+    assert cut.metadata["cut_at_s"] == 300.0 and f"{len(rel)} reference relations" in (
+        cut.description
+    )
 
 
 @pytest.mark.realdata

@@ -61,6 +61,14 @@ class Relations:
         """Every distinct stamp the relations refer to, sorted."""
         return np.unique(np.concatenate([self.t1, self.t2]))
 
+    def until(self, t_end: float) -> Relations | None:
+        """The relations whose two stamps are at most ``t_end`` [s] (a data set cut there);
+        None when no relation is left."""
+        keep = (self.t1 <= t_end) & (self.t2 <= t_end)
+        if not keep.any():
+            return None
+        return Relations(self.t1[keep], self.t2[keep], self.deltas[keep], source=self.source)
+
 
 def read_relations(path: str | Path) -> Relations:
     """Read a ``*.relations`` file (plain or ``.gz``); a malformed line, a non-zero ``z``,

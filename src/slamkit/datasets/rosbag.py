@@ -150,6 +150,9 @@ class RosbagOptions:
     """Nominal per-step rotation noise of the odometry [deg] (for the MotionSpec)."""
     lenient: bool = False
     """Drop bad messages (mark bad beams no return) and count them instead of raising."""
+    max_duration_s: float | None = None
+    """Keep only the scans of the first this many seconds after the first scan, and the
+    reference relations within them (all when ``None``): studies on a part of a long log."""
 
     def __post_init__(self) -> None:
         for name in ("scan_topic", "odom_topic"):
@@ -167,6 +170,9 @@ class RosbagOptions:
             raise ConfigError(f"stamps: expected 'header' or 'bag', got {self.stamps!r}")
         for name in ("range_sigma", "odometry_sigma_trans", "odometry_sigma_rot_deg"):
             _check_nonneg(getattr(self, name), name)
+        d = self.max_duration_s
+        if d is not None and not (math.isfinite(d) and d > 0):
+            raise ConfigError(f"max_duration_s: expected a number > 0 [s] or nothing, got {d!r}")
 
 
 class _Problems:
@@ -361,6 +367,10 @@ def _convert(
             f"stamp {t[~order][0]:.9f} not later than the scans before it (out of order)",
         )
     index, t, raw = index[order], t[order], raw[order]
+    if opts.max_duration_s is not None:
+        within = t <= t[0] + opts.max_duration_s
+        index, t, raw = index[within], t[within], raw[within]
+        relations = None if relations is None else relations.until(float(t[-1]))
     max_range = opts.max_range if opts.max_range is not None else float(s.range_max[index[0]])
     ranges, reading_counts = _clean_ranges(
         raw, s.range_min[index], s.range_max[index], max_range, index, topic, problems
@@ -399,6 +409,7 @@ def _convert(
         "readings": reading_counts,
         "lenient": {"counts": dict(problems.counts), "first": list(problems.first)},
         "topics": dict(bag.topics),
+        "cut_at_s": opts.max_duration_s,
     }
     return raw_laser_dataset(
         name=name,
@@ -477,9 +488,12 @@ def _freiburg(name: str, options: Mapping[str, Any], data_root: Path | None) -> 
     opts = _options({**entry.defaults, **dict(options)}, name)
     relations = read_relations(require_file(entry.relations, root))
     ds = read_rosbag(require_file(entry.bag, root), opts, name=name, relations=relations)
+    kept = ds.truth.relations if ds.truth is not None else None
     summary = (
         f"{_DESCRIPTIONS[name]}, raw log: {ds.metadata['scans']} scans × "
-        f"{ds.metadata['beams']} beams, raw odometry, {len(relations)} reference relations"
+        f"{ds.metadata['beams']} beams, raw odometry, "
+        f"{0 if kept is None else len(kept)} reference relations"
+        + ("" if opts.max_duration_s is None else f" (first {opts.max_duration_s:g} s)")
     )
     return Dataset(
         name=ds.name,
