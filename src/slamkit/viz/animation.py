@@ -25,6 +25,7 @@ from slamkit.geometry.alignment import Similarity
 from slamkit.viz.layout import legend_outside, pick_frames, set_box
 from slamkit.viz.maps import plot_map
 from slamkit.viz.plots import (
+    TRUTH_STYLE,
     new_figure,
     plot_covariance_ellipses,
     plot_landmark_estimates,
@@ -87,9 +88,7 @@ def animation_frames(
         zorder=1,
         label="GPS (aligned)" if gps_xy is not None else None,
     )
-    (truth_line,) = ax.plot(
-        [], [], color="black", linestyle=(0, (4, 3)), linewidth=1.0, label="ground truth", zorder=4
-    )
+    (truth_line,) = ax.plot([], [], linewidth=1.0, label="ground truth", zorder=4, **TRUTH_STYLE)
     set_box(ax, reference_extent(result, dataset, grid))
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")

@@ -38,6 +38,7 @@ from slamkit.maps.types import LandmarkMap, OccupancyGrid, SegmentMap
 from slamkit.prob.gaussian import ellipse_points
 
 __all__ = [
+    "TRUTH_STYLE",
     "new_figure",
     "plot_consistency",
     "plot_covariance_ellipses",
@@ -48,11 +49,16 @@ __all__ = [
     "plot_segments",
     "plot_trajectories",
     "plot_trajectory",
+    "plot_truth",
     "save_figure",
 ]
 
+TRUTH_STYLE: dict[str, Any] = {"color": "black", "linestyle": (0, (4, 3))}
+"""How every figure draws the true path: dashed black, over the estimate."""
+
+
 # The one place the trajectory colours and labels are fixed, so every figure slamkit makes
-# reads the same way: truth black, estimate blue, dead reckoning grey dashed.
+# reads the same way: truth black dashed, estimate blue, dead reckoning grey dashed.
 _TRAJECTORY_STYLES: Mapping[str, Mapping[str, Any]] = {
     "dead_reckoning": {
         "color": "0.55",
@@ -60,7 +66,7 @@ _TRAJECTORY_STYLES: Mapping[str, Mapping[str, Any]] = {
         "linewidth": 1.0,
         "label": "dead reckoning",
     },
-    "truth": {"color": "black", "linestyle": "-", "linewidth": 1.5, "label": "ground truth"},
+    "truth": {**TRUTH_STYLE, "linewidth": 1.5, "label": "ground truth", "zorder": 4},
     "estimate": {"color": "tab:blue", "linestyle": "-", "linewidth": 1.5, "label": "estimate"},
 }
 
@@ -136,6 +142,21 @@ def save_figure(
 # --------------------------------------------------------------------------------------------
 # trajectories and uncertainty
 # --------------------------------------------------------------------------------------------
+
+
+def plot_truth(
+    ax: Axes,
+    poses: ArrayLike,
+    *,
+    label: str = "ground truth",
+    linewidth: float = 1.0,
+    zorder: float = 4,
+) -> list[Artist]:
+    """Draw the true path ``poses (N, 3)`` in :data:`TRUTH_STYLE` (see
+    :func:`plot_trajectory`)."""
+    return plot_trajectory(
+        ax, poses, label=label, linewidth=linewidth, zorder=zorder, **TRUTH_STYLE
+    )
 
 
 def plot_trajectory(

@@ -41,6 +41,7 @@ from slamkit.viz.plots import (
     plot_pose_errors,
     plot_segments,
     plot_trajectory,
+    plot_truth,
 )
 from slamkit.viz.relations import plot_relation_errors
 
@@ -145,15 +146,7 @@ def plot_estimate_over_truth(
             ax, result.poses, label="estimate", color="tab:blue", linewidth=1.6, zorder=2
         )
     if dataset.truth.poses is not None:
-        plot_trajectory(
-            ax,
-            dataset.truth.poses,
-            label="ground truth",
-            color="black",
-            linestyle=(0, (4, 3)),
-            linewidth=1.0,
-            zorder=4,
-        )
+        plot_truth(ax, dataset.truth.poses)
     if markers and result.estimator not in POINT_ESTIMATORS:
         plot_start_end(ax, result.poses)
     ax.set_aspect("equal")

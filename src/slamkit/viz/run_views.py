@@ -25,6 +25,7 @@ from slamkit.viz.plots import (
     plot_particles,
     plot_segments,
     plot_trajectory,
+    plot_truth,
 )
 from slamkit.viz.report import plot_estimate_over_truth, reference_extent
 
@@ -116,15 +117,7 @@ def loop_figure(result: Result, dataset: Dataset) -> Figure:
         ends = np.unique(loops.ravel())
         ax.plot(kf[ends, 0], kf[ends, 1], "o", ms=4, mfc="none", mec="tab:red", zorder=5)
     if dataset.truth.poses is not None:
-        plot_trajectory(
-            ax,
-            dataset.truth.poses,
-            label="ground truth",
-            color="black",
-            linestyle=(0, (4, 3)),
-            linewidth=0.8,
-            zorder=4,
-        )
+        plot_truth(ax, dataset.truth.poses, linewidth=0.8)
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
@@ -177,14 +170,8 @@ def particle_figure(result: Result, dataset: Dataset) -> Figure:
         if truth.times is not None and truth.poses is not None and truth.times.size:
             k = int(np.argmin(np.abs(truth.times - snap.t)))
             true_pose = truth.poses[k]
-            plot_trajectory(
-                ax,
-                truth.poses[: k + 1],
-                label="ground truth so far",
-                color="black",
-                linestyle=(0, (4, 3)),
-                linewidth=0.8,
-                zorder=3,
+            plot_truth(
+                ax, truth.poses[: k + 1], label="ground truth so far", linewidth=0.8, zorder=3
             )
         cloud = plot_particles(
             ax, snap.particles, snap.weights, true_pose=true_pose, max_points=PARTICLES_DRAWN
