@@ -12,10 +12,10 @@ the motion models allow since they are invariant under a change of world frame).
 becomes a keyframe when the offset reaches the keyframe distance or angle, or its match
 overlaps too little; the edge from the previous keyframe is its offset with the match's
 covariance (floored), or the odometry's covariance when the match failed. With the map
-reference (the default) a scan is matched instead against the local map of the last few
-keyframes in the current keyframe's frame (:func:`local_map`), by point-to-normal ICP with
-the odometry's prediction as a prior, so that a direction the map leaves unconstrained (a
-corridor) keeps the prediction.
+reference (``reference = "map"``; the default is the keyframe) a scan is matched instead
+against the local map of the last few keyframes in the current keyframe's frame
+(:func:`local_map`), by point-to-normal ICP with the odometry's prediction as a prior, so
+that a direction the map leaves unconstrained (a corridor) keeps the prediction.
 """
 
 from __future__ import annotations
