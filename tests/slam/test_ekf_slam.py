@@ -44,7 +44,6 @@ from slamkit.slam import (
     slam_update,
 )
 from slamkit.slam.common import OWN_ID_BASE, reading_jacobians
-from slamkit.slam.ekf_slam import estimator as ekf_estimator
 from slamkit.slam.ekf_slam.update import check_diagonal
 
 R_RB = np.diag([0.1**2, np.deg2rad(2.0) ** 2])

@@ -33,8 +33,8 @@ from slamkit.models.measurement import LandmarkModelBase
 from slamkit.models.motion import motion_kernels
 
 __all__ = [
-    "angular_indices",
     "DEFINITENESS_TOLERANCE",
+    "angular_indices",
     "check_covariance",
     "check_finite_covariance",
     "check_state_covariance",
