@@ -22,7 +22,7 @@ so a consistent run is flagged with probability about ``1 − p`` per statistic.
   (their window means range over [0.95, 6.2] for a consistent filter, against a band of
   [1.99, 4.27] for 50 independent χ²(3) values at 0.999). The window then counts as
   ``⌊W / τ⌋`` independent values, ``τ`` the integrated autocorrelation time of the run's
-  NEES sequence (``1 + 2 Σ ρ_k`` over the initial positive correlations, at most ``W``).
+  NEES sequence (:func:`autocorrelation_time`, at most ``W``).
 
 Numbers only: the records say what was found; :mod:`slamkit.cli` prints them.
 """
@@ -126,10 +126,12 @@ class ConsistencyWarning:
 
 
 def autocorrelation_time(values: ArrayLike, max_lag: int | None = None) -> float:
-    """Integrated autocorrelation time ``τ = 1 + 2 Σ_{k ≥ 1} ρ_k`` of a sequence ``(K,)``,
-    summed over the initial run of positive autocorrelations ``ρ_k`` (lags up to
-    ``max_lag``, default ``K // 4``); 1 for an independent sequence, ``K / τ`` the
-    effective number of independent values. A constant sequence gives 1."""
+    """Integrated autocorrelation time ``τ = 1 + 2 Σ_{k=1}^{M} ρ_k`` of a sequence ``(K,)``:
+    1 for an independent sequence, ``K / τ`` the effective number of independent values.
+
+    The sum stops at Sokal's automatic window, the first ``M`` with ``M ≥ 5 τ(M)`` (the
+    estimated ``ρ_k`` beyond a few correlation times are noise, and summing them biases
+    ``τ``); lags up to ``max_lag`` (default ``K // 4``). A constant sequence gives 1."""
     x = as_array(values, "values", (None,))
     k = x.size
     if k < 2:
@@ -143,10 +145,9 @@ def autocorrelation_time(values: ArrayLike, max_lag: int | None = None) -> float
     size = 1 << (2 * k - 1).bit_length()
     f = np.fft.rfft(d, size)
     acov = np.fft.irfft(f * np.conj(f), size)[: lags + 1]
-    rho = acov[1:] / acov[0]
-    stop = np.flatnonzero(rho <= 0.0)
-    positive = rho[: stop[0]] if stop.size else rho
-    return float(1.0 + 2.0 * positive.sum())
+    tau = 1.0 + 2.0 * np.cumsum(acov[1:] / acov[0])  # τ(M) for M = 1 .. lags
+    stop = np.flatnonzero(np.arange(1, lags + 1) >= 5.0 * tau)
+    return float(max(1.0, tau[stop[0]] if stop.size else tau[-1]))
 
 
 def _windows(values: FloatArray, window: int) -> FloatArray:
