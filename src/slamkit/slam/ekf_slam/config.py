@@ -76,8 +76,8 @@ class EkfSlamConfig:
     factorisation, ``O(n³)``, eigenvalues when it fails). The pose block is tested at every
     step, and the cheap checks (positive innovation covariance, finite gain, non-negative
     diagonal) run on every update regardless. ``None``: the pose block and the cheap checks
-    only. The default costs under 2 % of a run's time on ``landmark-loop-closure``
-    (``docs/estimators/ekf_slam.md``)."""
+    only. With the default the checks take about 2 % of a run's time on ``landmark-loop``
+    and ``landmark-loop-closure`` (``docs/estimators/ekf_slam.md``)."""
     record_innovations: bool = True
     """Keep the NIS of every map update in the output's :class:`InnovationLog`."""
 
