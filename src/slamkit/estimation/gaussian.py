@@ -5,7 +5,10 @@ innovations, and the evaluation of motion and landmark models on already-validat
 
 These are the estimators' fast path: they trust their arguments (finite float arrays of the
 right shapes, validated once by the caller) and never return NaN — a result that is not a
-covariance any more raises :class:`~slamkit.errors.ConvergenceError`. The Joseph form
+covariance any more raises :class:`~slamkit.errors.ConvergenceError`, from
+:func:`check_covariance`: the one definiteness test, with one tolerance
+(:data:`DEFINITENESS_TOLERANCE`) and one message, that every Gaussian filter runs
+(``docs/consistency.md`` lists where). The Joseph form
 ``P ← (I − K H) P (I − K H)ᵀ + K R Kᵀ`` is a sum of two PSD terms, so it stays positive
 semi-definite up to rounding where the short form ``(I − K H) P`` can cancel into an
 indefinite matrix (see :mod:`slamkit.localization.kalman`).
