@@ -15,6 +15,7 @@ from slamkit.errors import ConvergenceError
 from slamkit.estimation.gaussian import (
     DEFINITENESS_TOLERANCE,
     check_covariance,
+    check_covariance_entries,
     check_state_covariance,
 )
 from slamkit.localization import GaussianBelief
@@ -170,3 +171,26 @@ def test_the_ukf_update_message_is_the_shared_one() -> None:
     z = RangeOnly().predict([0.1, 0.0, 0.2], landmark)
     with pytest.raises(ConvergenceError, match="^ukf_update: " + LOST):
         ukf_update(b, z, landmark, RangeOnly(), [[1e-4]], params)
+
+
+def test_the_entry_form_agrees_with_the_matrix_form() -> None:
+    # FastSLAM's landmarks are struct-of-arrays entries (c00, c01, c11)
+    rng = np.random.default_rng(3)
+    for _ in range(500):
+        A = rng.normal(size=(2, 2))
+        P = A @ A.T + np.diag(rng.uniform(-1.0, 0.3, 2))
+        P = 0.5 * (P + P.T)
+        c00, c01, c11 = (np.full((4, 5), P[i, j]) for i, j in ((0, 0), (0, 1), (1, 1)))
+        try:
+            check_covariance(P, "matrix")
+        except ConvergenceError as exc:
+            with pytest.raises(ConvergenceError, match="^entries: " + LOST) as info:
+                check_covariance_entries(c00, c01, c11, "entries")
+            # the same smallest eigenvalue in both messages
+            assert str(info.value).split("(")[1] == str(exc).split("(")[1]
+        else:
+            check_covariance_entries(c00, c01, c11, "entries")
+    # rounding-sized negative eigenvalues pass, like the matrix form
+    check_covariance_entries(np.array([1.0]), np.array([1.0 + 1e-15]), np.array([1.0]), "r")
+    with pytest.raises(ConvergenceError, match="became non-finite"):
+        check_covariance_entries(np.array([np.nan]), np.zeros(1), np.ones(1), "nan")

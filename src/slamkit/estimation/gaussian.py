@@ -39,6 +39,7 @@ __all__ = [
     "DEFINITENESS_TOLERANCE",
     "angular_indices",
     "check_covariance",
+    "check_covariance_entries",
     "check_finite_covariance",
     "check_state_covariance",
     "gain_update",
@@ -86,8 +87,9 @@ def _sylvester_3x3(cov: FloatArray) -> bool:
 def check_covariance(cov: FloatArray, where: str, what: str = "covariance") -> None:
     """Raise :class:`ConvergenceError` unless ``cov`` is finite and positive semi-definite
     within :data:`DEFINITENESS_TOLERANCE`: the one definiteness check of every Gaussian filter
-    (EKF, KF and UKF localization, EKF-SLAM, EKF mapping, SEIF's information matrix with
-    ``what="information matrix"``). ``cov`` is one ``(n, n)`` matrix or a stack ``(..., n, n)``
+    (EKF, KF and UKF localization, dead reckoning, EKF-SLAM, EKF mapping, SEIF's information
+    matrix with ``what="information matrix"``; FastSLAM's landmarks through
+    :func:`check_covariance_entries`). ``cov`` is one ``(n, n)`` matrix or a stack ``(..., n, n)``
     (EKF mapping's per-landmark blocks), each judged against its own largest eigenvalue.
 
     The messages: ``"{where}: the {what} became non-finite"`` and ``"{where}: the {what} lost
@@ -116,6 +118,33 @@ def check_covariance(cov: FloatArray, where: str, what: str = "covariance") -> N
                 f"{where}: the {what} lost positive definiteness (smallest eigenvalue "
                 f"{eig[i, 0]:.3g}, largest |eigenvalue| {scale[i]:.3g})"
             ) from None
+
+
+def check_covariance_entries(
+    c00: FloatArray, c01: FloatArray, c11: FloatArray, where: str, what: str = "covariance"
+) -> None:
+    """:func:`check_covariance` of the symmetric ``2 × 2`` matrices ``[[c00, c01], [c01,
+    c11]]`` given by their entries (arrays of one shape: the struct-of-arrays landmarks of
+    FastSLAM's particles), with the same tolerance and messages. Their eigenvalues are
+    ``m ± r`` with ``m = (c00 + c11) / 2``, ``r = hypot((c00 − c11) / 2, c01)``, so the test
+    is ``m − r ≥ −DEFINITENESS_TOLERANCE (|m| + r)``, run only when Sylvester's criterion
+    (``c00 > 0``, ``c00 c11 − c01² > 0``: four elementwise operations) fails somewhere."""
+    if bool(np.all((c00 > 0.0) & (c00 * c11 - c01 * c01 > 0.0))):
+        return
+    m = 0.5 * (c00 + c11)
+    r = np.hypot(0.5 * (c00 - c11), c01)
+    low = m - r
+    scale = np.abs(m) + r  # max |eigenvalue|
+    ok = low >= -DEFINITENESS_TOLERANCE * scale  # False for NaN, too
+    if bool(np.all(ok)):
+        return
+    if not (np.isfinite(c00).all() and np.isfinite(c01).all() and np.isfinite(c11).all()):
+        raise ConvergenceError(f"{where}: the {what} became non-finite")
+    i = int(np.flatnonzero(~np.asarray(ok).ravel())[0])
+    raise ConvergenceError(
+        f"{where}: the {what} lost positive definiteness (smallest eigenvalue "
+        f"{float(np.ravel(low)[i]):.3g}, largest |eigenvalue| {float(np.ravel(scale)[i]):.3g})"
+    )
 
 
 def check_state_covariance(
