@@ -8,15 +8,37 @@ expected and what arrived.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from slamkit.errors import CovarianceError, NonFiniteError, ShapeError
+from slamkit.errors import CovarianceError, DatasetFormatError, NonFiniteError, ShapeError
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["FloatArray", "as_array", "as_covariance", "as_positive", "describe_shape"]
+__all__ = [
+    "FloatArray",
+    "as_array",
+    "as_covariance",
+    "as_positive",
+    "check_unique_ids",
+    "describe_shape",
+]
+
+
+def check_unique_ids(ids: ArrayLike, lines: ArrayLike, what: str, path: str | Path) -> None:
+    """Raise :class:`~slamkit.errors.DatasetFormatError` at the line of the first id of
+    ``ids (N,)`` that repeats an earlier one (``lines (N,)``: each id's line in the file at
+    ``path``): ``"{path}:{line}: {what} {id} is listed twice (first on line {first})"``.
+    The one check of every reader of a landmark, beacon or ground-truth map file."""
+    first: dict[int, int] = {}
+    for i, line in zip(np.asarray(ids).tolist(), np.asarray(lines).tolist(), strict=True):
+        seen = first.setdefault(int(i), int(line))
+        if seen != int(line):
+            raise DatasetFormatError(
+                f"{what} {int(i)} is listed twice (first on line {seen})", path, int(line)
+            )
 
 
 def describe_shape(shape: Sequence[int | type(Ellipsis) | None]) -> str:  # type: ignore[valid-type]

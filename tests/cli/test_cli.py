@@ -198,3 +198,17 @@ def test_a_run_job_lays_the_matching_preset_under_the_config(tmp_path, monkeypat
         jobs.run_job(
             jobs.RunRequest("ekf-slam", "five-features", tmp_path / "x", preset="test-preset")
         )
+
+
+def test_run_prints_the_consistency_warning_and_writes_it_to_metrics(tmp_path):
+    # σ = 1e-6 readings: EKF localization keeps going, over-confident by ~10⁶ (the monitor)
+    out = tmp_path / "tiny-noise"
+    args = ["run", "ekf-localization", "--no-plots", "--out", str(out)]
+    args += ["--set", "dataset.sigma_range=1e-6", "--set", "dataset.sigma_bearing_deg=1e-6"]
+    res = runner.invoke(app, args)
+    assert res.exit_code == 0, res.output
+    assert "warning: NEES inconsistent (over-confident)" in " ".join(res.output.split())
+    warnings = json.loads((out / "metrics.json").read_text())["warnings"]
+    nees = [w for w in warnings if w["statistic"] == "nees"]
+    assert len(nees) == 1 and nees[0]["value"] > 1e5 * nees[0]["band"][1]
+    assert nees[0]["first"] == 0 and nees[0]["last"] == 49

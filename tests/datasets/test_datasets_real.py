@@ -505,6 +505,7 @@ def test_plaza_malformed_files_without_a_line(tmp_path: Path) -> None:
     with pytest.raises(DatasetFormatError, match="beacon id 1 is listed twice") as err:
         load_plaza1({}, seed=0, data_root=tmp_path)
     assert err.value.path == folder / _TL and err.value.line == 5
+    assert f"{_TL}:5: beacon id 1 is listed twice (first on line " in str(err.value)
     (folder / _GT).write_text(_PLAZA_HEAD[_GT][0] + "\n" + _PLAZA_HEAD[_GT][1] + "\n")
     (folder / _TL).write_text("\n".join(_PLAZA_HEAD[_TL]) + "\n")
     with pytest.raises(DatasetFormatError, match="at least 2 rows") as err:

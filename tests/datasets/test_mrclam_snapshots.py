@@ -99,7 +99,7 @@ def _replace_line(path: Path, line: int, text: str) -> None:
         (MEASUREMENT_FILE, 7, "2 99 2.8 0.1", "landmark 99"),
         (GROUNDTRUTH_FILE, 4, "3 2.29 -2.47", "expected 4 columns, got 3"),
         (LANDMARK_FILE, 3, "2 nan 5.5", "finite"),
-        (LANDMARK_FILE, 4, "2 3.7 4.5", "landmark id 2 appears twice"),
+        (LANDMARK_FILE, 4, "2 3.7 4.5", r"landmark id 2 is listed twice \(first on line 3\)"),
         (MEASUREMENT_FILE, 3, "1 7.5 3.801 -0.238", "expected an integer landmark id"),
     ],
 )

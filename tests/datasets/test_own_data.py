@@ -112,6 +112,14 @@ def test_a_csv_with_odometry_and_unknown_ids_reads_in_order(tmp_path):
         ("kind,t,a,b,c\ncontrol,1,1,0,1\n", "no reading rows"),
         ("kind,t,a,b,c\nreading,1,2,0,\n", "no control or odometry rows"),
         ("kind,t,a,b,c\nreading,1,2,0,\ncontrol,1,1,0,1\nodometry,1,0,0,0\n", "give one"),
+        (
+            "kind,t,a,b,c\nreading,1,2,0,\ncontrol,1,1,0,1\nlandmark,,3,0,7\nlandmark,,3,2,7\n",
+            "bad.csv:5: landmark id 7 is listed twice (first on line 4)",
+        ),
+        (
+            "kind,t,a,b,c\nreading,1,2,0,\ncontrol,1,1,0,1\nlandmark,,3,0,7.5\n",
+            "bad.csv:4: landmark id: expected an integer, got 7.5",
+        ),
     ],
 )
 def test_malformed_csv_files_name_the_file_and_line(tmp_path, text, message):

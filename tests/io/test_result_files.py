@@ -40,6 +40,11 @@ def test_landmark_csv_errors_name_the_line(tmp_path):
     p.write_text("id,x,y,cov_xx,cov_xy,cov_yy\n1,2,3,,,\n2,x,3,,,\n")
     with pytest.raises(DatasetFormatError, match=r"bad\.csv:3"):
         read_landmarks_csv(p)
+    p.write_text("id,x,y,cov_xx,cov_xy,cov_yy\n1,2,3,,,\n4,2,3,,,\n1,4,5,,,\n")
+    with pytest.raises(DatasetFormatError) as info:
+        read_landmarks_csv(p)
+    assert str(info.value) == f"{p}:4: landmark id 1 is listed twice (first on line 2)"
+    assert info.value.line == 4
 
 
 def test_kitti_round_trips_planar_poses_and_agrees_with_tum(tmp_path, rng):

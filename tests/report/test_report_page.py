@@ -96,3 +96,15 @@ def test_bad_folders_are_named(tmp_path: Path) -> None:
 def test_page_without_figures_says_so(tmp_path: Path) -> None:
     page = RunPage(tmp_path, "dead-reckoning", "five-features", metrics={"seed": 0})
     assert "no figures" in run_html(page)
+    assert "Warnings" not in run_html(page)
+
+
+def test_consistency_warnings_are_listed_on_the_page(tmp_path: Path) -> None:
+    message = "NEES inconsistent (over-confident): mean 7.2e+06 over steps 0-49 <b>"
+    metrics = {"seed": 0, "warnings": [{"statistic": "nees", "message": message}]}
+    text = run_html(RunPage(tmp_path, "ekf-localization", "five-features", metrics=metrics))
+    assert "<h2>Warnings</h2>" in text
+    assert (
+        '<ul id="warnings"><li>NEES inconsistent (over-confident): mean 7.2e+06 over steps' in text
+    )
+    assert "&lt;b&gt;</li>" in text  # escaped

@@ -28,6 +28,7 @@ from slamkit.errors import (
     NonFiniteError,
     ShapeError,
 )
+from slamkit.estimation import gaussian
 from slamkit.estimation.gaussian import check_covariance
 from slamkit.maps import LandmarkMap
 from slamkit.models import RangeBearing, RelativePosition, UnicycleEuler
@@ -43,7 +44,6 @@ from slamkit.slam import (
     slam_update,
 )
 from slamkit.slam.common import OWN_ID_BASE, reading_jacobians
-from slamkit.slam.ekf_slam import estimator as ekf_estimator
 from slamkit.slam.ekf_slam.update import check_diagonal
 
 R_RB = np.diag([0.1**2, np.deg2rad(2.0) ** 2])
@@ -705,18 +705,24 @@ def test_a_covariance_that_loses_definiteness_raises_with_the_step(
         est.handle(dataclasses.replace(bad, u=np.array([np.nan, 0.1])))
     assert info.value.step == 3 and "t = 0.3" in str(info.value)
     # check_every=1: the full test runs on the whole covariance at every step, and an
-    # indefinite matrix with a healthy diagonal fails it.
+    # indefinite matrix with a healthy diagonal fails it; check_every=None: the pose block.
     checked: list[np.ndarray] = []
 
-    def spy(c: np.ndarray, where: str) -> None:
+    def spy(c: np.ndarray, where: str, what: str = "covariance") -> None:
         checked.append(c.copy())
-        check_covariance(c, where)
+        check_covariance(c, where, what)
 
-    monkeypatch.setattr(ekf_estimator, "check_covariance", spy)
+    monkeypatch.setattr(gaussian, "check_covariance", spy)
     est = EkfSlam(dataset, EkfSlamConfig(check_every=1), np.random.default_rng(0))
     for ev in events[:4]:
         est.handle(ev)
     assert len(checked) == 4 and np.array_equal(checked[-1], est.cov)  # after every event
+    checked.clear()
+    est = EkfSlam(dataset, EkfSlamConfig(check_every=None), np.random.default_rng(0))
+    for ev in events[:4]:
+        est.handle(ev)
+    assert [c.shape for c in checked] == [(3, 3)] * 4
+    assert np.array_equal(checked[-1], est.cov[:3, :3])
     c = est.cov
     check_diagonal(c)
     c[3, 5] = c[5, 3] = 10.0 * math.sqrt(c[3, 3] * c[5, 5])  # |ρ| = 10

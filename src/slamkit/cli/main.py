@@ -177,6 +177,8 @@ def _run(
         used = ", ".join(f"{k}={v}" for k, v in report.preset_settings.items())
         console.print(f"preset {report.preset} (config.json has every setting): {used}")
     console.print(_render_metrics(report.scores))
+    for warning in report.scores.warnings:  # the consistency monitor (slamkit.eval.monitor)
+        console.print(f"[bold yellow]warning:[/] {escape(warning.message)}")
     console.print(f"wrote {', '.join(report.files)} to [bold]{report.out_dir}[/]")
     if "report.html" in report.files:
         console.print(f"report: [bold]{report.out_dir / 'report.html'}[/] (open it in a browser)")

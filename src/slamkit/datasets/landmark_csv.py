@@ -34,6 +34,7 @@ from typing import Any, ClassVar, Literal
 
 import numpy as np
 
+from slamkit._validation import check_unique_ids
 from slamkit.config import (
     Section,
     config_from_mapping,
@@ -204,6 +205,11 @@ def read_landmark_csv(path: str | Path, options: Any = None, *, name: str | None
                 for n, c in rows["landmark"]
             ]
         )
+        lines = [n for n, _ in rows["landmark"]]
+        for n, ident in zip(lines, lm[:, 2].tolist(), strict=True):
+            if not float(ident).is_integer():
+                raise DatasetFormatError(f"landmark id: expected an integer, got {ident}", p, n)
+        check_unique_ids(lm[:, 2].astype(np.int64), lines, "landmark id", p)
         landmarks = LandmarkMap(lm[:, :2], lm[:, 2].astype(np.int64))
     s, st = opts.initial_sigma_xy, math.radians(opts.initial_sigma_theta_deg)
     has_prior = opts.initial_pose is not None

@@ -104,6 +104,7 @@ from typing import Any
 
 import numpy as np
 
+from slamkit._validation import check_unique_ids
 from slamkit.config import config_from_mapping, config_to_dict
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.stream import (
@@ -224,12 +225,7 @@ def _barcode_table(table: NumericTable, path: Path) -> dict[int, int]:
 
 def _landmark_map(table: NumericTable, path: Path) -> LandmarkMap:
     ids = integer_column(table, 0, "subject", path)
-    _, first = np.unique(ids, return_index=True)
-    if first.size != ids.size:
-        dup = np.setdiff1d(np.arange(ids.size), first)[0]
-        raise DatasetFormatError(
-            f"subject {ids[dup]} listed twice", path, int(table.line_numbers[dup])
-        )
+    check_unique_ids(ids, table.line_numbers, "subject", path)
     if ids.size == 0:
         raise DatasetFormatError("no landmarks", path)
     return LandmarkMap(table.values[:, 1:3].copy(), ids)

@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from slamkit._validation import check_unique_ids
 from slamkit.config import config_from_mapping
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.stream import Dataset, GroundTruth, LandmarkReadings, LandmarkSensorSpec
@@ -108,13 +109,7 @@ def _read_landmarks(path: Path) -> LandmarkMap:
     if len(table) == 0:
         raise DatasetFormatError("no landmarks in the file", path)
     ids = _integer_column(table, 0, "landmark id", path)
-    _, first = np.unique(ids, return_index=True)
-    repeated = np.ones(ids.size, dtype=bool)
-    repeated[first] = False
-    if repeated.any():
-        line = _first_bad(table, repeated)
-        lid = int(ids[np.flatnonzero(repeated)[0]])
-        raise DatasetFormatError(f"landmark id {lid} appears twice", path, line)
+    check_unique_ids(ids, table.line_numbers, "landmark id", path)
     return LandmarkMap(table.values[:, 1:3].copy(), ids)
 
 

@@ -76,7 +76,7 @@ from typing import Any
 
 import numpy as np
 
-from slamkit._validation import FloatArray
+from slamkit._validation import FloatArray, check_unique_ids
 from slamkit.config import config_from_mapping, config_to_dict
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.stream import (
@@ -170,12 +170,7 @@ def _check_increasing(table: NumericTable, path: Path, *, strict: bool) -> None:
 
 def _beacons(table: NumericTable, path: Path) -> LandmarkMap:
     ids = integer_column(table, 0, "beacon id", path)
-    _, first = np.unique(ids, return_index=True)
-    if first.size != ids.size:
-        dup = int(np.setdiff1d(np.arange(ids.size), first)[0])
-        raise DatasetFormatError(
-            f"beacon id {int(ids[dup])} is listed twice", path, int(table.line_numbers[dup])
-        )
+    check_unique_ids(ids, table.line_numbers, "beacon id", path)
     return LandmarkMap(table.values[:, 1:3].copy(), ids)
 
 

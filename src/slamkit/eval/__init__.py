@@ -24,6 +24,15 @@ from slamkit.eval.landmarks import (
     landmark_map_error,
     match_landmarks,
 )
+from slamkit.eval.monitor import (
+    MONITOR_MARGIN,
+    MONITOR_PROBABILITY,
+    MONITOR_WINDOW,
+    ConsistencyWarning,
+    autocorrelation_time,
+    nees_warning,
+    nis_warning,
+)
 from slamkit.eval.relations import (
     RelationError,
     poses_at_stamps,
@@ -42,9 +51,13 @@ from slamkit.eval.trajectory import (
 )
 
 __all__ = [
+    "MONITOR_MARGIN",
+    "MONITOR_PROBABILITY",
+    "MONITOR_WINDOW",
     "AlignMode",
     "AssociationScores",
     "ConsistencyReport",
+    "ConsistencyWarning",
     "ConvergenceReport",
     "ErrorStats",
     "GpsError",
@@ -60,6 +73,7 @@ __all__ = [
     "absolute_trajectory_error",
     "associate",
     "association_scores",
+    "autocorrelation_time",
     "chi2_bounds",
     "consistency_report",
     "convergence",
@@ -69,8 +83,10 @@ __all__ = [
     "landmark_map_error",
     "match_landmarks",
     "nees",
+    "nees_warning",
     "nis",
     "nis_summary",
+    "nis_warning",
     "pose_errors",
     "poses_at_stamps",
     "relation_errors",

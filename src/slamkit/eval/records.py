@@ -14,6 +14,7 @@ from slamkit.eval.convergence import ConvergenceReport
 from slamkit.eval.gps import GpsError
 from slamkit.eval.innovations import NisSummary
 from slamkit.eval.landmarks import LandmarkError
+from slamkit.eval.monitor import ConsistencyWarning
 from slamkit.eval.relations import RelationError
 from slamkit.eval.trajectory import RelativeError, TrajectoryError
 
@@ -101,6 +102,10 @@ class RunScores:
     relations: RelationError | Skipped | None = None
     """The relation metric against the data set's reference relations
     (:func:`slamkit.eval.relation_errors`); skipped when the run covers none of them."""
+    warnings: tuple[ConsistencyWarning, ...] = ()
+    """The consistency monitor's findings (:mod:`slamkit.eval.monitor`): NEES or NIS far
+    outside its χ² band over a window; empty for a run that looks consistent (or has
+    neither statistic). ``metrics.json`` always holds the list."""
 
     def as_dict(self) -> dict[str, Any]:
         """The ``metrics.json`` form, in field order: plain values, records through their
@@ -109,6 +114,8 @@ class RunScores:
         out: dict[str, Any] = {}
         for f in fields(self):
             value = getattr(self, f.name)
-            if value is not None:
+            if isinstance(value, tuple):  # a list of records
+                out[f.name] = [v.as_dict() for v in value]
+            elif value is not None:
                 out[f.name] = value.as_dict() if hasattr(value, "as_dict") else value
         return out

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike
 
-from slamkit._validation import FloatArray, as_array
+from slamkit._validation import FloatArray, as_array, check_unique_ids
 from slamkit.errors import DatasetFormatError, ShapeError
 from slamkit.maps import LandmarkMap
 
@@ -55,6 +55,7 @@ def read_landmarks_csv(path: str | Path) -> tuple[LandmarkMap, FloatArray | None
     if not lines or tuple(c.strip() for c in lines[0].split(",")) != LANDMARK_COLUMNS:
         raise DatasetFormatError(f"expected the header {','.join(LANDMARK_COLUMNS)}", p, 1)
     ids: list[int] = []
+    id_lines: list[int] = []
     rows: list[list[float]] = []
     with_cov: list[bool] = []
     for lineno, line in enumerate(lines[1:], start=2):
@@ -67,6 +68,7 @@ def read_landmarks_csv(path: str | Path) -> tuple[LandmarkMap, FloatArray | None
             )
         try:
             ids.append(int(parts[0]))
+            id_lines.append(lineno)
             has_cov = all(parts[3:])
             values = [float(v) for v in parts[1:3]] + (
                 [float(v) for v in parts[3:]] if has_cov else [np.nan] * 3
@@ -77,6 +79,7 @@ def read_landmarks_csv(path: str | Path) -> tuple[LandmarkMap, FloatArray | None
         rows.append(values)
     if not rows:
         raise ShapeError(f"{p}: no landmarks in the file")
+    check_unique_ids(ids, id_lines, "landmark id", p)
     a = np.asarray(rows)
     landmarks = LandmarkMap(a[:, :2], np.asarray(ids, dtype=np.int64))
     if not all(with_cov):

@@ -15,6 +15,7 @@ from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset
 from slamkit.errors import ConfigError, InputError
 from slamkit.estimation.contract import EstimatorOutput, PoseEstimate
+from slamkit.estimation.gaussian import check_covariance
 from slamkit.estimation.shell import EstimatorShell
 from slamkit.localization.belief import GaussianBelief, predict_unchecked
 
@@ -56,6 +57,11 @@ class DeadReckoning(EstimatorShell):
         # The Dataset validated u and dt, MotionSpec the noise: no re-checks per step.
         self._belief = predict_unchecked(self._belief, u, dt, self._motion.model, self._Q)
         self._steps += 1
+
+    def after_event(self, step: int) -> None:
+        # the check every Gaussian filter shares (a prediction can only carry a bad
+        # covariance forward, or overflow)
+        check_covariance(self._belief.cov, "dead reckoning")
 
     def estimate(self) -> PoseEstimate:
         return PoseEstimate(self._belief.pose, self._belief.pose_cov)

@@ -33,7 +33,7 @@ from slamkit.errors import ConfigError, GeometryError, InputError, SlamkitError
 from slamkit.estimation.contract import EstimatorOutput, LandmarkIds, PoseEstimate
 from slamkit.estimation.gaussian import (
     angular_indices,
-    check_finite_covariance,
+    check_covariance,
     gain_update,
     innovation_unchecked,
     measure_unchecked,
@@ -99,7 +99,7 @@ def ekf_predict_unchecked(
         new_cov[:3, 3:] = G @ cov[:3, 3:]
         new_cov[3:, :3] = new_cov[:3, 3:].T
     new_cov = 0.5 * (new_cov + new_cov.T)
-    check_finite_covariance(new_cov, "ekf predict")
+    check_covariance(new_cov, "ekf_predict")
     return new_mean, new_cov
 
 

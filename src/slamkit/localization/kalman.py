@@ -34,7 +34,7 @@ from numpy.typing import ArrayLike
 
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.errors import ShapeError
-from slamkit.estimation.gaussian import check_finite_covariance, gain_update
+from slamkit.estimation.gaussian import check_covariance, gain_update
 from slamkit.geometry import wrap_angle
 from slamkit.localization.belief import GaussianBelief
 
@@ -82,7 +82,7 @@ def _kf_predict_arrays(
     new_mean = A @ mean if Bu is None else A @ mean + Bu
     new_cov = A @ cov @ A.T + Q
     new_cov = 0.5 * (new_cov + new_cov.T)
-    check_finite_covariance(new_cov, "predict")
+    check_covariance(new_cov, "predict")
     return new_mean, new_cov
 
 

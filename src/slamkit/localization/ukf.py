@@ -118,13 +118,8 @@ def psd_sqrt(P: FloatArray, where: str) -> FloatArray:
     try:
         return np.asarray(np.linalg.cholesky(P), dtype=np.float64)
     except np.linalg.LinAlgError:
+        check_covariance(P, where)  # the shared test: PSD within its rounding tolerance
         w, V = np.linalg.eigh(P)
-        scale = max(float(np.abs(w).max()), 1e-300)
-        if w[0] < -1e-9 * scale:
-            raise ConvergenceError(
-                f"{where}: the covariance lost positive definiteness (smallest eigenvalue "
-                f"{w[0]:.3g})"
-            ) from None
         return np.asarray(V * np.sqrt(np.clip(w, 0.0, None)), dtype=np.float64)
 
 

@@ -11,7 +11,7 @@ import numpy as np
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset
 from slamkit.errors import CovarianceError, InputError, SlamkitError
-from slamkit.estimation.contract import LandmarkIds
+from slamkit.estimation.contract import InnovationLog, LandmarkIds
 from slamkit.eval import (
     AssociationScores,
     absolute_trajectory_error,
@@ -27,6 +27,7 @@ from slamkit.eval import (
     relation_errors,
     relative_pose_error,
 )
+from slamkit.eval.monitor import ConsistencyWarning, nees_warning, nis_warning
 from slamkit.eval.records import NeesSummary, RunScores, RunTime, Skipped
 from slamkit.pipeline.runner import Result
 
@@ -78,7 +79,8 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
     says its ids are the data set's, by position otherwise), data-association scores
     against the true association of the readings, the relation metric against the data set's
     reference relations (:func:`~slamkit.eval.relation_errors`, default interpolation rule),
-    and run times. Steps are matched by time
+    and run times; the consistency monitor's warnings (:mod:`slamkit.eval.monitor`: NEES
+    and NIS over sliding windows against their χ² bands). Steps are matched by time
     stamp within ``max_dt`` (default: half the median step of the result)."""
     n = len(result)
     scores = RunScores(
@@ -126,7 +128,21 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
             scores,
             relations=_scored(lambda: relation_errors(result.times, result.poses, relations)),
         )
+    scores = replace(scores, warnings=_monitor(arrays, log))
     return Evaluation(scores, **arrays)
+
+
+def _monitor(arrays: dict[str, Any], log: InnovationLog | None) -> tuple[ConsistencyWarning, ...]:
+    """The consistency monitor over the run's NEES (steps with a regular covariance) and
+    NIS (every update of the innovation log)."""
+    found: list[ConsistencyWarning | None] = []
+    values, times = arrays.get("nees"), arrays.get("matched_times")
+    if values is not None and times is not None:
+        ok = np.isfinite(values)
+        found.append(nees_warning(times[ok], values[ok], 3))
+    if log is not None and len(log) > 0:
+        found.append(nis_warning(log.times, log.nis, log.dof))
+    return tuple(w for w in found if w is not None)
 
 
 def _same_ids(result: Result) -> bool:

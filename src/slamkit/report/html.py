@@ -295,6 +295,11 @@ def run_html(page: RunPage) -> str:
     flat = flatten_metrics(page.metrics)
     facts += [(label, flat[key]) for key, label in HEADLINE if key in flat]
     body.append(_table(None, facts, "summary"))
+    warnings = page.metrics.get("warnings") or []
+    if warnings:  # the consistency monitor's findings (slamkit.eval.monitor)
+        body.append("<h2>Warnings</h2>")
+        items = (w.get("message", w) if isinstance(w, Mapping) else w for w in warnings)
+        body.append('<ul id="warnings">' + "".join(f"<li>{_e(t)}</li>" for t in items) + "</ul>")
     body.append("<h2>Estimator</h2>")
     body.append(f"<p>{_e(page.estimator_description or page.estimator)}</p>")
     body.append("<h2>Data set</h2>")

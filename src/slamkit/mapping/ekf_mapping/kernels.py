@@ -13,6 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray
 from slamkit.errors import InputError
+from slamkit.estimation.gaussian import check_covariance
 from slamkit.mapping.ekf_mapping.beliefs import LandmarkBelief, trusted_belief
 from slamkit.mapping.ekf_mapping.inputs import (
     as_landmark_ids,
@@ -70,6 +71,7 @@ def update_unchecked(
     A = np.eye(2) - gain @ H  # I − K H, (K, 2, 2)
     # Joseph form: (I − K H) P (I − K H)ᵀ + K R Kᵀ stays PSD under round-off.
     P_new = symmetrize(A @ P @ np.swapaxes(A, -1, -2) + gain @ R @ np.swapaxes(gain, -1, -2))
+    check_covariance(P_new, "ekf-mapping update")  # the check every Gaussian filter shares
     means, covs = belief.means.copy(), belief.covs.copy()
     means[rows] = mu + np.einsum("kij,kj->ki", gain, nu)  # μ + K ν
     covs[rows] = P_new

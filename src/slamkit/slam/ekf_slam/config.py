@@ -70,10 +70,14 @@ class EkfSlamConfig:
     ``jcbb_incomplete`` counts it."""
     initial_capacity: int = 32
     """Landmarks the state buffers hold before their first doubling."""
-    check_every: int | None = None
-    """Every this many time steps a full Cholesky test of the whole covariance (``O(n³)``).
-    The cheap checks (positive innovation covariance, finite gain, non-negative diagonal)
-    run on every update regardless. ``None``: only the cheap checks."""
+    check_every: int | None = 50
+    """Every this many time steps the whole covariance is tested for positive
+    semi-definiteness (:func:`~slamkit.estimation.gaussian.check_covariance`: a Cholesky
+    factorisation, ``O(n³)``, eigenvalues when it fails). The pose block is tested at every
+    step, and the cheap checks (positive innovation covariance, finite gain, non-negative
+    diagonal) run on every update regardless. ``None``: the pose block and the cheap checks
+    only. With the default the checks take about 2 % of a run's time on ``landmark-loop``
+    and ``landmark-loop-closure`` (``docs/estimators/ekf_slam.md``)."""
     record_innovations: bool = True
     """Keep the NIS of every map update in the output's :class:`InnovationLog`."""
 

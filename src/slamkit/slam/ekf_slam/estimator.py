@@ -25,7 +25,7 @@ from slamkit.estimation.contract import (
     LandmarkIds,
     PoseEstimate,
 )
-from slamkit.estimation.gaussian import angular_indices, check_covariance
+from slamkit.estimation.gaussian import angular_indices, check_state_covariance
 from slamkit.estimation.shell import EstimatorShell
 from slamkit.mapping.ekf_mapping import (
     DISCARDED,
@@ -140,8 +140,10 @@ class EkfSlam(EstimatorShell):
     landmarks with their marginal covariances and the diagnostics: counts (see
     :data:`COUNTS`), ``n_landmarks``, ``n_provisional``, NIS statistics of the map updates
     Divergence — a non-finite state, an innovation covariance that is not positive
-    definite, a negative variance, or (every ``check_every`` steps) a covariance that fails
-    a Cholesky test — raises :class:`~slamkit.errors.ConvergenceError` with the step (the
+    definite, a negative variance, a pose covariance that is not positive semi-definite
+    (every step) or a whole covariance that is not (every ``check_every`` steps; both
+    :func:`~slamkit.estimation.gaussian.check_state_covariance`, the check every Gaussian
+    filter shares) — raises :class:`~slamkit.errors.ConvergenceError` with the step (the
     runner's numbering: one step per distinct time stamp).
     """
 
@@ -204,8 +206,7 @@ class EkfSlam(EstimatorShell):
         self._scan(event)
 
     def after_event(self, step: int) -> None:
-        if self._config.check_every is not None and step % self._config.check_every == 0:
-            check_covariance(self._state.views()[1], "ekf-slam")
+        check_state_covariance(self._state.views()[1], "ekf-slam", step, self._config.check_every)
 
     def estimate(self) -> PoseEstimate:
         return PoseEstimate(self._state.mean_buf[:3].copy(), self._state.cov_buf[:3, :3].copy())

@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray
+from slamkit.estimation.gaussian import check_covariance_entries
 from slamkit.models import MIN_RANGE, RangeBearing
 from slamkit.models.measurement import InvertibleLandmarkModel, LandmarkModelBase
 from slamkit.slam.fastslam.particles import LOG_2PI, IntArray
@@ -232,12 +233,15 @@ def update_landmarks(
     new = landmark_ekf_update(F, g, nu0, nu1, R)
     w.all_ok = ok is ALL_OK or bool(ok.all())
     if w.all_ok:
+        check_covariance_entries(new[2], new[3], new[4], "fastslam landmark update")
         w.lm[full] = new
         if mark:
             w.seen[index] = True
             w.updated[index] = True
         return ll
-    w.lm[full] = np.where(ok, new, g)
+    kept = np.where(ok, new, g)  # a landmark at the sensor keeps its belief
+    check_covariance_entries(kept[2], kept[3], kept[4], "fastslam landmark update")
+    w.lm[full] = kept
     w.seen[index] |= ok
     w.updated[index] |= ok
     return np.where(ok, ll, -np.inf)

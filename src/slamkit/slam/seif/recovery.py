@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 from slamkit._validation import FloatArray
 from slamkit.errors import ConvergenceError
 from slamkit.estimation.contract import LandmarkEstimate
+from slamkit.estimation.gaussian import check_covariance
 from slamkit.maps import LandmarkMap
 from slamkit.slam.seif.kernels import landmark_indices, pose_indices
 from slamkit.slam.seif.state import SeifState, link_active
@@ -89,12 +90,15 @@ def relax(
 
 def check_pose_block(Om: FloatArray) -> None:
     """Raise :class:`~slamkit.errors.ConvergenceError` unless the pose block ``Ω_xx`` (the
-    pose's information given the map) is positive definite; a cheap 3 × 3 Cholesky test."""
+    pose's information given the map) is positive definite: the shared definiteness check
+    (:func:`~slamkit.estimation.gaussian.check_covariance`, ~1 µs at 3 × 3), then — as an
+    information block must be regular, not only PSD — a Cholesky test."""
+    check_covariance(Om[:3, :3], "seif", "information matrix")
     try:
         np.linalg.cholesky(Om[:3, :3])
     except np.linalg.LinAlgError:
         raise ConvergenceError(
-            "the information matrix lost positive definiteness (the pose block)"
+            "seif: the information matrix is singular (the pose block)"
         ) from None
 
 
