@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from slamkit.datasets import LaserScan, Odometry, load_dataset
+from slamkit.datasets.raw_odometry import RAW_ODOMETRY_SIGMA_ROT_DEG, RAW_ODOMETRY_SIGMA_TRANS
 from slamkit.datasets.rosbag import FREIBURG_BAGS, RosbagOptions, read_rosbag
 from slamkit.errors import ConfigError, DataNotFoundError, DatasetFormatError
 from slamkit.geometry import wrap_angle
@@ -89,8 +90,10 @@ def _check_standard(ds) -> None:
     assert got[2, 2] == pytest.approx(3.5 - 2 * math.pi, abs=1e-12)  # past +pi: wrapped
     np.testing.assert_allclose(ds.laser.mounting, (0.04, 0.02, 0.1), atol=1e-12)
     np.testing.assert_array_equal(ds.initial_pose, got[0])
-    sr = math.radians(2.0)
-    np.testing.assert_allclose(ds.motion.noise_cov, np.diag([sr**2, 0.05**2, sr**2]))
+    sr = math.radians(RAW_ODOMETRY_SIGMA_ROT_DEG)  # the nominal per-step noise, unscaled
+    np.testing.assert_allclose(
+        ds.motion.noise_cov, np.diag([sr**2, RAW_ODOMETRY_SIGMA_TRANS**2, sr**2]), rtol=1e-15
+    )
     assert ds.motion.source == "odometry"
     md = ds.metadata
     assert md["readings"] == {"no_return_far": 3, "no_return_near": 2, "invalid_readings": 0}
