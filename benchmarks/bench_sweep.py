@@ -1,11 +1,13 @@
 """Sweeps on Dask: runs per minute with 1 and 2 local workers, against the same runs done
 one after another in one process (``slamkit.app.run_job``, what ``slamkit run`` does).
 
-The workload: EKF localization on ``five-features`` driven three laps (about a second a
-run with loading and evaluation), 16 seeds, no plots. The workers are started and warmed up
-(slamkit imported) before the clock starts; cluster start-up is reported apart. The
-overhead per task is ``(sweep with 1 worker − sequential) / runs``: keying, scheduling,
-shipping the outcome, the table written as results arrive.
+The workload: EKF localization on ``five-features`` driven ten laps (a little over a
+second a run with loading, evaluation and the output folder), 16 seeds, no plots. The
+workers are started and warmed up (slamkit imported) before the clock starts; cluster
+start-up is reported apart. The overhead per task is ``(sweep with 1 worker − sequential) /
+runs``: keying, scheduling, shipping the outcome, the table written as results arrive. The
+machine is shared and its timings wander by ±20 %, so the three measurements are taken
+``REPEATS`` times, interleaved, and the medians compared.
 
     python benchmarks/bench_sweep.py
 """
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -24,6 +27,7 @@ from slamkit.app import RunRequest, run_job
 from slamkit.sweep import local_cluster, parse_spec, run_sweep
 
 RUNS = 16
+REPEATS = 3
 SPEC: dict[str, Any] = {
     "sweep": {
         "name": "bench",
@@ -31,7 +35,7 @@ SPEC: dict[str, Any] = {
         "datasets": ["five-features"],
         "seeds": RUNS,
     },
-    "dataset": {"laps": 3},
+    "dataset": {"laps": 10},
 }
 
 
@@ -73,18 +77,27 @@ def _sweep(workers: int, folder: Path) -> tuple[float, float]:
     return seconds, startup
 
 
+def _spread(times: list[float]) -> str:
+    return f"{min(times):.1f}-{max(times):.1f}"
+
+
 def main() -> str:
     root = Path(tempfile.mkdtemp(prefix="bench-sweep-"))
     load_before = os.getloadavg()[0]
     try:
         # warm this process too (imports, caches), then time the sequential loop
         run_job(RunRequest("ekf-localization", "five-features", root / "warm", plots=False))
-        t_seq = _sequential(root / "seq")
-        t_one, start_one = _sweep(1, root / "one")
-        t_two, start_two = _sweep(2, root / "two")
+        seq, one, two = [], [], []
+        for i in range(REPEATS):
+            seq.append(_sequential(root / f"seq-{i}"))
+            one.append(_sweep(1, root / f"one-{i}"))
+            two.append(_sweep(2, root / f"two-{i}"))
     finally:
         shutil.rmtree(root, ignore_errors=True)
     load_after = os.getloadavg()[0]
+    t_seq = statistics.median(seq)
+    t_one, start_one = (statistics.median(x) for x in zip(*one, strict=True))
+    t_two, start_two = (statistics.median(x) for x in zip(*two, strict=True))
     per_run = t_seq / RUNS
     overhead = (t_one - t_seq) / RUNS
     records = [
@@ -93,7 +106,9 @@ def main() -> str:
         Record(f"{RUNS} runs, sweep on 2 workers", t_two, "sweep on 1 worker", t_one),
     ]
     notes = (
-        f"EKF localization on five-features, 3 laps, {RUNS} seeds, no plots; "
+        f"EKF localization on five-features, 10 laps, {RUNS} seeds, no plots; medians of "
+        f"{REPEATS} interleaved repeats (sequential {_spread(seq)} s, 1 worker "
+        f"{_spread([t for t, _ in one])} s, 2 workers {_spread([t for t, _ in two])} s); "
         f"{per_run:.2f} s per run sequentially. Runs per minute: sequential "
         f"{60 * RUNS / t_seq:.1f}, 1 worker {60 * RUNS / t_one:.1f}, 2 workers "
         f"{60 * RUNS / t_two:.1f} ({t_one / t_two:.2f}x the 1-worker rate). Overhead per task "
