@@ -106,7 +106,8 @@ def main() -> str:
         Record(f"{RUNS} runs, sweep on 2 workers", t_two, "sweep on 1 worker", t_one),
     ]
     notes = (
-        f"EKF localization on five-features, 10 laps, {RUNS} seeds, no plots; medians of "
+        f"EKF localization on five-features, {SPEC['dataset']['laps']} laps, {RUNS} seeds, "
+        f"no plots; medians of "
         f"{REPEATS} interleaved repeats (sequential {_spread(seq)} s, 1 worker "
         f"{_spread([t for t, _ in one])} s, 2 workers {_spread([t for t, _ in two])} s); "
         f"{per_run:.2f} s per run sequentially. Runs per minute: sequential "
