@@ -3,14 +3,14 @@
 The driver (:func:`run_sweep`) keys every point (:mod:`slamkit.sweep.keys`), skips those
 whose ``DIR/runs/<key>/metrics.json`` exists (run folders are written atomically, so one
 that exists is complete) or whose failure is recorded in ``DIR/failures/<key>.json``, and
-submits the rest to a Dask cluster: a :class:`~distributed.LocalCluster` of worker
-processes with one thread (and one BLAS thread) each, or the scheduler at an address. A
-worker thread hands its task to a runner process of its own (:mod:`slamkit.sweep.runner`),
-where the job runs as fast as in a plain ``slamkit run``. Each task catches its own errors and returns them as a failed outcome, so a failing run stops no
-other; a worker that dies has its task re-run elsewhere by the scheduler (Dask's
-``distributed.scheduler.allowed-failures``, 3 by default; past that the run is recorded as
-failed). The results table is rewritten as results arrive, from what is on disk, so an
-interrupted sweep loses nothing that finished.
+submits the rest to a Dask cluster: a :class:`~distributed.LocalCluster` of worker processes
+with one thread (and one BLAS thread) each, or the scheduler at an address. A worker thread
+hands its task to a job process of its own (:mod:`slamkit.sweep.job_process`), where the job
+runs as fast as in a plain ``slamkit run``. Each task catches its own errors and returns
+them as a failed outcome, so a failing run stops no other; a worker that dies has its task
+re-run elsewhere by the scheduler (Dask's ``distributed.scheduler.allowed-failures``, 3 by
+default; past that the run is recorded as failed). The results table is rewritten as results
+arrive, from what is on disk, so an interrupted sweep loses nothing that finished.
 """
 
 from __future__ import annotations
@@ -93,16 +93,16 @@ def one_line(exc: BaseException) -> str:
 
 
 def execute_task(task: RunTask) -> RunOutcome:
-    """Run one point exactly as ``slamkit run`` does, in this thread's runner process
-    (:mod:`slamkit.sweep.runner`: a Dask worker thread runs a job measurably slower than a
-    plain process does); any exception, the runner's death included, becomes a failed
+    """Run one point exactly as ``slamkit run`` does, in this thread's job process
+    (:mod:`slamkit.sweep.job_process`: a Dask worker thread runs a job measurably slower than a
+    plain process does); any exception, the job process's death included, becomes a failed
     outcome."""
-    from slamkit.sweep.runner import RunnerDied, run_in_runner
+    from slamkit.sweep.job_process import JobProcessDied, run_in_job_process
 
     start = time.perf_counter()
     try:
-        outcome: RunOutcome = run_in_runner(execute_in_process, task)
-    except RunnerDied as exc:  # the run took its process down: a result, like any failure
+        outcome: RunOutcome = run_in_job_process(execute_in_process, task)
+    except JobProcessDied as exc:  # the run took its process down: a result, like any failure
         return RunOutcome(
             task.key,
             False,

@@ -1,19 +1,19 @@
-"""Runner processes: each run of a sweep in a single-threaded Python process of its own.
+"""Job processes: each run of a sweep in a single-threaded Python process of its own.
 
 A Dask worker runs its tasks on a thread beside the threads of its event loop, heartbeats
 and profiler. Measured on this project's sweep benchmark, that alone makes a one-second run
-25-40 % slower than in a plain process (``docs/sweeps.md``, "What Dask costs"), the cause
+20-50 % slower than in a plain process (``docs/sweeps.md``, "What Dask costs"), the cause
 inside CPython and NumPy rather than Dask. So a worker thread does not run the job itself:
-it hands the task to a *runner*, a child process that imports slamkit once and then runs
+it hands the task to a *job process*, a child process that imports slamkit once and then runs
 one task after another, reading pickled tasks on its stdin and writing the outcomes on its
-stdout. Each worker thread has its own runner (a thread never waits on another's).
+stdout. Each worker thread has its own job process (a thread never waits on another's).
 
-A runner does not outlive its worker: on Linux it asks the kernel for ``SIGKILL`` when the
+A job process does not outlive its worker: on Linux it asks the kernel for ``SIGKILL`` when the
 thread that started it ends (``PR_SET_PDEATHSIG``), so a killed worker leaves no orphan
 writing a run folder the scheduler is about to re-run elsewhere; elsewhere it ends at the end
-of the task it is on, when it reads the end of its closed stdin. A run that kills its runner
+of the task it is on, when it reads the end of its closed stdin. A run that kills its job process
 (a crash in compiled code, the kernel's out-of-memory killer) is a failed run with the exit
-status; the next task starts a fresh runner.
+status; the next task starts a fresh job process.
 
 This module imports neither Dask nor NumPy: it moves pickles.
 """
@@ -30,26 +30,26 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["RunnerDied", "RunnerProcess", "run_in_runner"]
+__all__ = ["JobProcess", "JobProcessDied", "run_in_job_process"]
 
 PR_SET_PDEATHSIG = 1
 """``prctl`` option: the signal the kernel sends a process when its parent thread ends."""
 
 
-class RunnerDied(RuntimeError):
-    """The runner process ended while running a task (its exit status in the message)."""
+class JobProcessDied(RuntimeError):
+    """The job process ended while running a task (its exit status in the message)."""
 
 
 def _source_root() -> str:
     """The folder that holds the ``slamkit`` package this process imported, so that the
-    runner imports the same one."""
+    job process imports the same one."""
     import slamkit
 
     return str(Path(slamkit.__file__).resolve().parents[1])
 
 
-class RunnerProcess:
-    """One runner: start it, give it a call ``(function, argument)``, get the result back.
+class JobProcess:
+    """One job process: start it, give it a call ``(function, argument)``, get the result back.
 
     ``function`` must be importable by name (a module-level function of an installed
     package), as it is pickled by reference.
@@ -61,7 +61,7 @@ class RunnerProcess:
             p for p in (_source_root(), env.get("PYTHONPATH", "")) if p
         )
         self._proc = subprocess.Popen(
-            [sys.executable, "-m", "slamkit.sweep.runner", str(os.getpid())],
+            [sys.executable, "-m", "slamkit.sweep.job_process", str(os.getpid())],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             env=env,
@@ -75,7 +75,8 @@ class RunnerProcess:
         return self._proc.poll() is None
 
     def call(self, function: Callable[[Any], Any], argument: Any) -> Any:
-        """``function(argument)`` in the runner; :class:`RunnerDied` if it ends meanwhile."""
+        """``function(argument)`` in the job process; :class:`JobProcessDied` if it ends
+        meanwhile."""
         stdin, stdout = self._proc.stdin, self._proc.stdout
         assert stdin is not None and stdout is not None
         try:
@@ -85,13 +86,13 @@ class RunnerProcess:
         except (EOFError, BrokenPipeError, pickle.UnpicklingError):
             status = self._proc.wait()
             how = f"signal {-status}" if status < 0 else f"exit status {status}"
-            raise RunnerDied(f"the runner process {self.pid} ended ({how})") from None
+            raise JobProcessDied(f"the job process {self.pid} ended ({how})") from None
         if not ok:
             raise result
         return result
 
     def close(self) -> None:
-        """End the runner (it reads the end of its stdin and returns)."""
+        """End the job process (it reads the end of its stdin and returns)."""
         if self._proc.stdin is not None:
             self._proc.stdin.close()
         self._proc.wait()
@@ -100,16 +101,16 @@ class RunnerProcess:
 _LOCAL = threading.local()
 
 
-def run_in_runner(function: Callable[[Any], Any], argument: Any) -> Any:
-    """``function(argument)`` in this thread's runner process, started on first use (and
+def run_in_job_process(function: Callable[[Any], Any], argument: Any) -> Any:
+    """``function(argument)`` in this thread's job process, started on first use (and
     again after one died)."""
-    runner: RunnerProcess | None = getattr(_LOCAL, "runner", None)
-    if runner is None or not runner.alive():
-        runner = _LOCAL.runner = RunnerProcess()
+    proc: JobProcess | None = getattr(_LOCAL, "proc", None)
+    if proc is None or not proc.alive():
+        proc = _LOCAL.proc = JobProcess()
     try:
-        return runner.call(function, argument)
-    except RunnerDied:
-        _LOCAL.runner = None
+        return proc.call(function, argument)
+    except JobProcessDied:
+        _LOCAL.proc = None
         raise
 
 
@@ -153,7 +154,7 @@ def _exception_reply(exc: Exception) -> bytes:
 
 
 def main(argv: list[str]) -> None:
-    """The runner: the replies go to a private copy of stdout, and anything a run prints on
+    """The job process: the replies go to a private copy of stdout, and anything a run prints on
     stdout goes to stderr instead. Ctrl-C is the parent's to handle."""
     _die_with_parent(int(argv[0]))
     signal.signal(signal.SIGINT, signal.SIG_IGN)

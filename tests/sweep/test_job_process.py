@@ -1,5 +1,6 @@
-"""Runner processes: calls go there and back, a run that kills its runner is a typed
-failure and the next call gets a fresh runner, a runner ends with the thread that made it."""
+"""Job processes: calls go there and back, a run that kills its job process is a typed
+failure and the next call gets a fresh job process, a job process ends with the thread that
+made it."""
 
 from __future__ import annotations
 
@@ -10,15 +11,15 @@ import time
 
 import pytest
 
-from slamkit.sweep import runner as runner_module
-from slamkit.sweep.runner import RunnerDied, RunnerProcess, run_in_runner
+from slamkit.sweep import job_process
+from slamkit.sweep.job_process import JobProcess, JobProcessDied, run_in_job_process
 
 
 def test_a_call_runs_in_another_process_and_prints_do_not_break_the_replies():
-    r = RunnerProcess()
+    r = JobProcess()
     try:
         assert r.call(abs, -3) == 3
-        assert r.call(print, "printed by the runner, on its stderr") is None
+        assert r.call(print, "printed by the job process, on its stderr") is None
         assert r.call(os.getpgid, 0) == os.getpgid(r.pid)
         assert r.pid != os.getpid()
     finally:
@@ -26,8 +27,8 @@ def test_a_call_runs_in_another_process_and_prints_do_not_break_the_replies():
     assert not r.alive()
 
 
-def test_an_exception_comes_back_typed_and_the_runner_goes_on():
-    r = RunnerProcess()
+def test_an_exception_comes_back_typed_and_the_process_goes_on():
+    r = JobProcess()
     try:
         with pytest.raises(ValueError, match="invalid literal"):
             r.call(int, "not a number")
@@ -36,19 +37,19 @@ def test_an_exception_comes_back_typed_and_the_runner_goes_on():
         r.close()
 
 
-def test_a_run_that_kills_its_runner_is_reported_and_the_next_gets_a_fresh_one():
-    assert run_in_runner(abs, -1) == 1
-    with pytest.raises(RunnerDied, match="exit status 7"):
-        run_in_runner(os._exit, 7)
-    assert run_in_runner(abs, -2) == 2  # a new runner
+def test_a_run_that_kills_its_process_is_reported_and_the_next_gets_a_fresh_one():
+    assert run_in_job_process(abs, -1) == 1
+    with pytest.raises(JobProcessDied, match="exit status 7"):
+        run_in_job_process(os._exit, 7)
+    assert run_in_job_process(abs, -2) == 2  # a new job process
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
-def test_a_runner_ends_with_the_thread_that_started_it():
-    made: list[RunnerProcess] = []
+def test_a_job_process_ends_with_the_thread_that_started_it():
+    made: list[JobProcess] = []
 
     def work() -> None:
-        r = RunnerProcess()
+        r = JobProcess()
         r.call(abs, -1)  # started and serving
         made.append(r)
 
@@ -62,16 +63,16 @@ def test_a_runner_ends_with_the_thread_that_started_it():
     assert not r.alive()
 
 
-def test_execute_task_records_a_dead_runner_as_a_failed_run(monkeypatch):
+def test_execute_task_records_a_dead_job_process_as_a_failed_run(monkeypatch):
     from slamkit.sweep.execute import RunTask, execute_task, plan_sweep
     from slamkit.sweep.spec import parse_spec
 
     def dies(function, argument):
-        raise RunnerDied("the runner process 1 ended (signal 11)")
+        raise JobProcessDied("the job process 1 ended (signal 11)")
 
-    monkeypatch.setattr(runner_module, "run_in_runner", dies)
+    monkeypatch.setattr(job_process, "run_in_job_process", dies)
     spec = parse_spec({"sweep": {"estimators": ["dead-reckoning"], "datasets": ["five-features"]}})
     ((key, point),) = plan_sweep(spec)
     outcome = execute_task(RunTask(key, point, "/nonexistent/never-written"))
     assert not outcome.ok
-    assert outcome.error == "RunnerDied: the runner process 1 ended (signal 11)"
+    assert outcome.error == "JobProcessDied: the job process 1 ended (signal 11)"
