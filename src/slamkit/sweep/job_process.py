@@ -27,7 +27,6 @@ import subprocess
 import sys
 import threading
 from collections.abc import Callable
-from pathlib import Path
 from typing import IO, Any
 
 __all__ = ["JobProcess", "JobProcessDied", "run_in_job_process"]
@@ -40,14 +39,6 @@ class JobProcessDied(RuntimeError):
     """The job process ended while running a task (its exit status in the message)."""
 
 
-def _source_root() -> str:
-    """The folder that holds the ``slamkit`` package this process imported, so that the
-    job process imports the same one."""
-    import slamkit
-
-    return str(Path(slamkit.__file__).resolve().parents[1])
-
-
 class JobProcess:
     """One job process: start it, give it a call ``(function, argument)``, get the result back.
 
@@ -56,15 +47,11 @@ class JobProcess:
     """
 
     def __init__(self) -> None:
-        env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join(
-            p for p in (_source_root(), env.get("PYTHONPATH", "")) if p
-        )
+        # The same interpreter, environment and working folder, so the same slamkit.
         self._proc = subprocess.Popen(
             [sys.executable, "-m", "slamkit.sweep.job_process", str(os.getpid())],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
-            env=env,
         )
 
     @property
