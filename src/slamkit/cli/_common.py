@@ -1,12 +1,13 @@
-"""What every ``slamkit`` command shares: consoles, the known-error decorator, the progress
-bar and the splitting of a configuration file into its tables."""
+"""What every ``slamkit`` command shares: consoles, the command groups, the options several
+commands take, the known-error decorator, the progress bar and the splitting of a
+configuration file into its tables."""
 
 from __future__ import annotations
 
 import functools
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, ParamSpec, TypeVar
+from typing import Annotated, Any, ParamSpec, TypeVar
 
 import typer
 from rich.console import Console
@@ -16,7 +17,9 @@ from slamkit.cli.progress import ERR_CONSOLE, ProgressHandle, progress_bar
 from slamkit.errors import SlamkitError
 
 __all__ = [
+    "DataRootOption",
     "ProgressHandle",
+    "command_group",
     "console",
     "err_console",
     "known_errors",
@@ -30,6 +33,25 @@ R = TypeVar("R")
 
 console = Console()
 err_console = ERR_CONSOLE
+
+DataRootOption = Annotated[
+    Path | None,
+    typer.Option(help="Folder of the real data sets (else $SLAMKIT_DATA).", show_default=False),
+]
+"""The ``--data-root`` option of every command that loads a data set by name."""
+
+
+def command_group(help: str, **kwargs: Any) -> typer.Typer:
+    """A ``slamkit`` command group (``slamkit eval``, ``slamkit sweep``, ...): its help
+    when called without a command, no shell-completion options, slamkit's own error
+    lines instead of typer's tracebacks. ``kwargs`` go to :class:`typer.Typer`."""
+    return typer.Typer(
+        help=help,
+        no_args_is_help=True,
+        add_completion=False,
+        pretty_exceptions_enable=False,
+        **kwargs,
+    )
 
 
 def _quiet_types() -> None:

@@ -8,20 +8,16 @@ a file, edit it and pass it to ``slamkit run ESTIMATOR --config FILE``.
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from slamkit.cli._common import known_errors
+from slamkit.cli._common import DataRootOption, command_group, known_errors
 
 __all__ = ["config_app"]
 
-config_app = typer.Typer(
+config_app = command_group(
     help="Configuration files: the settings of an estimator with their documentation.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
 )
 
 
@@ -39,10 +35,7 @@ def show_command(
             show_default=False,
         ),
     ] = None,
-    data_root: Annotated[
-        Path | None,
-        typer.Option(help="Folder of the real data sets (else $SLAMKIT_DATA).", show_default=False),
-    ] = None,
+    data_root: DataRootOption = None,
 ) -> None:
     """Print ESTIMATOR's settings, their defaults and documentation, as a TOML config file
     (with --data, the data set's table first, so the file runs as it is)."""

@@ -22,7 +22,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from slamkit.cli._common import console, known_errors
+from slamkit.cli._common import command_group, console, known_errors
 
 if TYPE_CHECKING:
     from slamkit._validation import FloatArray
@@ -31,11 +31,8 @@ if TYPE_CHECKING:
 
 __all__ = ["eval_app", "pose_error_table", "relations_table"]
 
-eval_app = typer.Typer(
+eval_app = command_group(
     help="Score trajectory files against reference data.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
 )
 
 

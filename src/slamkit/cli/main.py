@@ -17,7 +17,14 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from slamkit.cli._common import console, known_errors, progress_bar, terminate
+from slamkit.cli._common import (
+    DataRootOption,
+    command_group,
+    console,
+    known_errors,
+    progress_bar,
+    terminate,
+)
 from slamkit.cli.compare_cmd import compare_command
 from slamkit.cli.config_cmd import config_app
 from slamkit.cli.eval_cmd import eval_app
@@ -28,14 +35,11 @@ from slamkit.cli.sweep_cmd import sweep_app
 if TYPE_CHECKING:
     from slamkit.eval.records import RunScores
 
-app = typer.Typer(
+app = command_group(
     name="slamkit",
     help="Probabilistic robot localization, mapping and SLAM.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
 )
-data_app = typer.Typer(help="Data sets: simulated scenarios and real-data loaders.")
+data_app = command_group("Data sets: simulated scenarios and real-data loaders.")
 app.add_typer(data_app, name="data")
 app.add_typer(map_app, name="map")
 app.add_typer(eval_app, name="eval")
@@ -228,10 +232,7 @@ def run_command(
         Path | None,
         typer.Option(help="Output folder (default results/ESTIMATOR-DATA).", show_default=False),
     ] = None,
-    data_root: Annotated[
-        Path | None,
-        typer.Option(help="Folder of the real data sets (else $SLAMKIT_DATA).", show_default=False),
-    ] = None,
+    data_root: DataRootOption = None,
     plots: Annotated[bool, typer.Option(help="Write PNG plots.")] = True,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
     animate: Annotated[
@@ -334,9 +335,7 @@ def estimators_command() -> None:
 @data_app.command("list")
 @known_errors
 def data_list_command(
-    data_root: Annotated[
-        Path | None, typer.Option(help="Folder of the real data sets (else $SLAMKIT_DATA).")
-    ] = None,
+    data_root: DataRootOption = None,
 ) -> None:
     """List the registered data sets and whether each is available here."""
     from slamkit.datasets import dataset_available, list_datasets

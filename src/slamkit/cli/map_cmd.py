@@ -19,7 +19,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from slamkit.cli._common import console, known_errors, progress_bar
+from slamkit.cli._common import DataRootOption, command_group, console, known_errors, progress_bar
 
 __all__ = ["DEFAULT_MAX_RANGE", "map_app"]
 
@@ -41,11 +41,8 @@ become max-range readings. The library's :class:`~slamkit.mapping.InverseSensorM
 the sensor's range as its default (``max_range=None``)."""
 
 
-map_app = typer.Typer(
+map_app = command_group(
     help="Maps with known poses (occupancy grids).",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
 )
 
 
@@ -141,9 +138,7 @@ def occupancy_command(
         ),
     ] = None,
     seed: Annotated[int | None, typer.Option(help="Seed (simulated data, odometry noise).")] = None,
-    data_root: Annotated[
-        Path | None, typer.Option(help="Folder of the real data sets (else $SLAMKIT_DATA).")
-    ] = None,
+    data_root: DataRootOption = None,
     agreement: Annotated[
         bool, typer.Option(help="Also map the even and the odd scans and compare them.")
     ] = True,

@@ -16,7 +16,7 @@ import typer
 from rich.markup import escape
 from typer.core import TyperGroup
 
-from slamkit.cli._common import console, err_console, known_errors
+from slamkit.cli._common import command_group, console, err_console, known_errors
 
 if TYPE_CHECKING:
     from slamkit.sweep import SweepReport
@@ -33,13 +33,10 @@ class DefaultRunGroup(TyperGroup):
         return super().parse_args(ctx, args)
 
 
-sweep_app = typer.Typer(
+sweep_app = command_group(
     cls=DefaultRunGroup,
     help="Sweeps over estimators × data sets × seeds × settings on Dask: "
     "`slamkit sweep SPEC.toml`, then `slamkit sweep report DIR`.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
 )
 
 
