@@ -13,18 +13,31 @@ pose as a :class:`~slamkit.scanmatch.normal_icp.NormalCloud`.
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray, as_array, as_positive
 from slamkit.geometry.pose2 import transform_points
 from slamkit.scanmatch.covariance import estimate_normals, neighbour_table
 from slamkit.scanmatch.normal_icp import NormalCloud
 
-__all__ = ["PointMap"]
+__all__ = ["PointMap", "ScanNormals", "scan_normals"]
 
 #: Points in a scan's neighbourhood for its normals (beam order), and their reach [m].
 NORMAL_NEIGHBOURS = 7
 NORMAL_RADIUS = 0.3
+
+
+ScanNormals = tuple[FloatArray, NDArray[np.bool_]]
+"""A scan's normals ``(K, 2)`` in its own frame and the mask ``(K,)`` of points that have
+one (:func:`scan_normals`)."""
+
+
+def scan_normals(points: ArrayLike) -> ScanNormals:
+    """The normals :meth:`PointMap.insert` gives a scan's ``points (K, 2)`` (sensor frame,
+    beam order): they depend on the scan alone, so a caller that inserts one scan many
+    times (at different poses) may compute them once and pass them in."""
+    p = as_array(points, "points", (None, 2))
+    return estimate_normals(p, neighbour_table(p, None, NORMAL_NEIGHBOURS), NORMAL_RADIUS)
 
 
 class PointMap:
@@ -40,15 +53,14 @@ class PointMap:
     def __len__(self) -> int:
         return int(self._keys.size)
 
-    def insert(self, pose: ArrayLike, points: ArrayLike) -> int:
+    def insert(self, pose: ArrayLike, points: ArrayLike, known: ScanNormals | None = None) -> int:
         """Insert a scan's ``points (K, 2)`` (sensor frame, beam order) taken from ``pose``;
-        returns how many went into empty voxels (points without a normal are left out)."""
+        returns how many went into empty voxels (points without a normal are left out).
+        ``known``: the scan's :func:`scan_normals`, when the caller has them already."""
         p = as_array(points, "points", (None, 2))
         if p.shape[0] < 3:
             return 0
-        normals, ok = estimate_normals(
-            p, neighbour_table(p, None, NORMAL_NEIGHBOURS), NORMAL_RADIUS
-        )
+        normals, ok = scan_normals(p) if known is None else known
         T = as_array(pose, "pose", (3,))
         world = transform_points(T, p[ok])
         c, s = np.cos(T[2]), np.sin(T[2])

@@ -33,6 +33,7 @@ from slamkit.mapping.occupancy.config import OccupancyMappingConfig
 from slamkit.mapping.occupancy.mapper import OccupancyMapper
 from slamkit.scanmatch.icp import prepare_scan
 from slamkit.scanmatch.normal_icp import NormalCloud
+from slamkit.scanmatch.point_map import ScanNormals, scan_normals
 from slamkit.scanmatch.result import scan_points
 from slamkit.slam.laser_graph.backend import PoseGraph, optimize_consistent
 from slamkit.slam.laser_graph.config import LaserGraphConfig
@@ -89,6 +90,7 @@ class LaserGraphSlam(EstimatorShell):
         self._graph = PoseGraph(config.optimizer)
         self._keys: list[Keyframe] = []
         self._ranges: list[FloatArray] = []
+        self._normals: dict[int, ScanNormals] = {}  # each keyframe's, once in a submap
         self._counts: Counter[str] = Counter()
         self._pending = 0  # closures added since the last optimisation
         self._waiting: list[tuple[int, int, LoopMatch]] = []  # verified, no partner yet
@@ -234,13 +236,14 @@ class LaserGraphSlam(EstimatorShell):
         poses = self._graph.poses
         travelled = np.array([kf.travelled for kf in self._keys])
         drift = None if s.closure_travel is None else self._drift(travelled, k)
+        points = [kf.points for kf in self._keys]
         for j in loop_candidates(poses[:, :2], travelled, k, s, drift):
             self._counts["loop_candidates"] += 1
             window = search_window(
                 float(travelled[k] - travelled[j] if drift is None else drift[j]), s
             )
             ref_points, cloud = submap(
-                poses, [kf.points for kf in self._keys], j, s.submap_keyframes // 2
+                poses, points, j, s.submap_keyframes // 2, self._scan_normals
             )
             found = verify_closure(
                 ref_points, cloud, self._keys[k].points, between(poses[j], poses[k]),
@@ -251,6 +254,12 @@ class LaserGraphSlam(EstimatorShell):
                 continue
             self._counts["loops_verified"] += 1
             self._confirm(poses, (j, k, found))
+
+    def _scan_normals(self, i: int) -> ScanNormals:
+        """Keyframe ``i``'s normals in its own frame (computed once)."""
+        if i not in self._normals:
+            self._normals[i] = scan_normals(self._keys[i].points)
+        return self._normals[i]
 
     def _drift(self, travelled: FloatArray, k: int) -> FloatArray:
         return drift_distances(travelled, self.loop_closures(), k, self._cfg.loops)

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,7 +46,7 @@ from slamkit.geometry.angles import wrap_angle_float
 from slamkit.geometry.pose2 import between, compose, transform_points
 from slamkit.scanmatch.correlative import CorrelativeConfig, CorrelativeReference, correlative_match
 from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
-from slamkit.scanmatch.point_map import PointMap
+from slamkit.scanmatch.point_map import PointMap, ScanNormals
 from slamkit.scanmatch.result import MatchResult
 from slamkit.slam.laser_graph.config import LoopSettings
 
@@ -139,19 +140,24 @@ def loop_candidates(
 
 
 def submap(
-    poses: FloatArray, points: list[FloatArray], j: int, half: int
+    poses: FloatArray,
+    points: list[FloatArray],
+    j: int,
+    half: int,
+    scan_normals: Callable[[int], ScanNormals] | None = None,
 ) -> tuple[FloatArray, NormalCloud]:
     """Keyframe ``j``'s submap in its own frame: the points of keyframes ``j - half, ...,
     j + half`` (those that exist, ``points[i]`` in keyframe ``i``'s frame, ``poses (K, 3)``),
     concatenated in keyframe and beam order, and the same points with normals as a
-    :class:`NormalCloud` (one per 2.5 cm voxel)."""
+    :class:`NormalCloud` (one per 2.5 cm voxel). ``scan_normals(i)``: keyframe ``i``'s
+    :func:`~slamkit.scanmatch.point_map.scan_normals` (a cache; None: computed here)."""
     lo, hi = max(j - half, 0), min(j + half + 1, len(points))
     cloud = PointMap(0.025)
     parts = []
     for i in range(lo, hi):
         T_j_i = between(poses[j], poses[i])
         parts.append(transform_points(T_j_i, points[i]))
-        cloud.insert(T_j_i, points[i])
+        cloud.insert(T_j_i, points[i], None if scan_normals is None else scan_normals(i))
     pts, normals = cloud.arrays()
     return np.concatenate(parts), NormalCloud.build(pts, normals)
 
