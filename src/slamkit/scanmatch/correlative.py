@@ -21,10 +21,15 @@ between neighbouring rotations.
 **Branch and bound.** A node ``(k, i, j)`` at level ``h`` stands for the ``2^h × 2^h``
 translations ``[i, i + 2^h) × [j, j + 2^h)`` at rotation ``k``; its bound
 ``sum_p M_h[cell_p + (i, j)]`` (the max tables of the lookup grid) is at least the score of
-each of them. The search starts from all top-level nodes of all rotations (so whole
-rotations are pruned too), finds a good leaf by greedy descent from the best node, then goes
-down level by level: nodes whose bound is below the best leaf so far are dropped, the others
-split into four, and the best leaf is tightened by another greedy descent. A leaf that is
+each of them. The search scores all top-level nodes of all rotations (so whole rotations
+are pruned too) and takes them in rounds, those of the best bounds first (a few, then more,
+then all that are left whose bound still reaches the best leaf so far). Within a round it
+finds a good leaf by greedy descent from the best node, then goes down level by level:
+nodes whose bound is below the best leaf so far are dropped, the others split into four,
+and the best leaf is tightened by another greedy descent. The first rounds find a leaf near
+the optimum, which prunes the later ones hard. The best leaf starts as the initial guess's;
+since every table value is ``<= 0`` a node's partial sum only falls, so its sum stops as
+soon as it drops below the best leaf (the node would be dropped anyway). A leaf that is
 dropped had an ancestor bound below a score already reached, so the optimum found equals the
 exhaustive search over the same fine grid (``config.search = "exhaustive"``; ties go to the
 smallest ``(k, i, j)`` in both).
@@ -71,6 +76,11 @@ IntArray = NDArray[np.int64]
 # Gathers run in chunks of at most this many (node, point) pairs: 2^18 int64 indices and
 # float64 values are 2 MB each, small enough to stay in cache-friendly temporaries.
 _CHUNK_ELEMENTS = 1 << 18
+
+# Branch and bound searches the top nodes in rounds of at most these many (best bounds
+# first), then all that are left: on loop-closure searches of Intel, 1.3x faster than one
+# round, within 15 % of a search that knew the optimum's score from the start.
+_ROUNDS = (8, 128, 2048)
 
 # Fields that shape the lookup grid: a prepared reference fixes them.
 _GRID_FIELDS = ("resolution", "sigma", "floor_likelihood", "join_gap", "levels")
@@ -404,14 +414,57 @@ def _branch_and_bound(lookup: LookupGrid, cells: Cells, n: int) -> _Optimum:
     k, i, j = ks.ravel(), ii.ravel(), jj.ravel()
     # The best leaf so far starts as the initial guess's (the middle rotation, no shift). A
     # node whose bound falls below it is scored -inf, its sum cut short: with every table
-    # value <= 0 a partial sum only falls. Those nodes are dropped below anyway, and the
-    # node holding the best leaf is always scored in full, so the search visits the same
+    # value <= 0 a partial sum only falls. Those nodes are dropped below anyway, and a node
+    # that may hold the best leaf is always scored in full, so the search reaches the same
     # optimum as without the cut (and as the exhaustive search).
-    zero = np.zeros(1, dtype=np.int64)
     cut = float(lookup.tables[-1].max()) <= 0.0  # the top table's max is every table's
-    best = float(_score(lookup, 0, cells, zero + n_k // 2, zero, zero)[0])
-    bound = _score(lookup, level, cells, k, i, j, best if cut else -np.inf)
+    zero = np.zeros(1, dtype=np.int64)
+    mid = n_k // 2
+    best = _Optimum(mid, 0, 0, float(_score(lookup, 0, cells, zero + mid, zero, zero)[0]), 0)
+    bound = _score(lookup, level, cells, k, i, j, best.score if cut else -np.inf)
+    # The top nodes in rounds, best bounds first: the first round's leaves give the later
+    # rounds a threshold near the optimum. A node left when its bound is below the best
+    # leaf holds no leaf as good.
+    left = bound.copy()
+    for size in (*_ROUNDS, None):
+        open_ = np.flatnonzero(left >= best.score)
+        if open_.size == 0:
+            break
+        if size is not None and open_.size > size:
+            open_ = open_[np.argpartition(-left[open_], size - 1)[:size]]
+        left[open_] = -np.inf
+        found = _search_blocks(
+            lookup, cells, (k[open_], i[open_], j[open_]), bound[open_], level, n, best, cut
+        )
+        if found is not None and _better(found, best):
+            best = found
+    return _Optimum(best.k, best.i, best.j, best.score, lookup.levels)
+
+
+def _better(a: _Optimum, b: _Optimum) -> bool:
+    """Whether leaf ``a`` beats leaf ``b``: a higher score, or the same and a smaller
+    ``(k, i, j)`` (the exhaustive search's tie rule)."""
+    return a.score > b.score or (a.score == b.score and (a.k, a.i, a.j) < (b.k, b.i, b.j))
+
+
+def _search_blocks(
+    lookup: LookupGrid,
+    cells: Cells,
+    nodes: tuple[IntArray, IntArray, IntArray],
+    bound: FloatArray,
+    level: int,
+    n: int,
+    incumbent: _Optimum,
+    cut: bool,
+) -> _Optimum | None:
+    """Branch and bound below ``nodes`` (at ``level``, with their ``bound``): the first best
+    leaf (ties to the smallest ``(k, i, j)``) of those scoring at least ``incumbent``'s
+    score, None when there is none."""
+    k, i, j = nodes
+    best = incumbent.score
     while level > 0:
+        if k.size == 0:
+            return None
         u = int(np.argmax(bound))
         best = max(best, _descend(lookup, cells, int(k[u]), int(i[u]), int(j[u]), level, n))
         # A node whose bound is below a leaf already reached cannot hold the optimum.
@@ -419,8 +472,10 @@ def _branch_and_bound(lookup: LookupGrid, cells: Cells, n: int) -> _Optimum:
         k, i, j = _children(k[keep], i[keep], j[keep], 1 << (level - 1), n)
         level -= 1
         bound = _score(lookup, level, cells, k, i, j, best if cut else -np.inf)
+    if k.size == 0 or not bound.max() >= incumbent.score:
+        return None
     u = _first_best(bound, k, i, j)
-    return _Optimum(int(k[u]), int(i[u]), int(j[u]), float(bound[u]), lookup.levels)
+    return _Optimum(int(k[u]), int(i[u]), int(j[u]), float(bound[u]), 0)
 
 
 def _response_covariance(
