@@ -321,3 +321,29 @@ def test_a_smoothed_trajectory_is_checked() -> None:
         SmoothedTrajectory(np.array([1.0, 0.0]), np.zeros((2, 3)))
     with pytest.raises(NonFiniteError):
         SmoothedTrajectory(np.array([0.0, 1.0]), np.full((2, 3), np.nan))
+
+
+def test_pose_graph_grows_past_its_capacity_and_removes_edges() -> None:
+    rng = np.random.default_rng(5)
+    graph = PoseGraph(default_optimizer())
+    poses = rng.normal(size=(40, 3))
+    assert [graph.add_pose(p) for p in poses] == list(range(40))
+    kinds = ["odometry", "loop", "neighbour"]
+    edges = [
+        (int(a), int(a) + 1, rng.normal(size=3), np.eye(3) * (a + 1), kinds[a % 3])
+        for a in range(39)
+    ]
+    for e in edges:
+        graph.add_edge(*e)
+    np.testing.assert_array_equal(graph.poses, poses)
+    np.testing.assert_array_equal(graph.pose(7), poses[7])
+    graph.pose(7)[0] = 99.0  # a copy: the graph keeps its estimate
+    assert graph.poses[7, 0] == poses[7, 0]
+    graph.remove_edges([0, 5, 38])
+    kept = [e for n, e in enumerate(edges) if n not in (0, 5, 38)]
+    i, j, z, info = graph.edges()
+    assert i.tolist() == [e[0] for e in kept] and j.tolist() == [e[1] for e in kept]
+    np.testing.assert_array_equal(z, [e[2] for e in kept])
+    np.testing.assert_array_equal(info, [e[3] for e in kept])
+    assert graph.edge_kinds() == [e[4] for e in kept]
+    assert graph.loop_pairs() == [(e[0], e[1]) for e in kept if e[4] == "loop"]

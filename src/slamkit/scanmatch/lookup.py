@@ -176,18 +176,22 @@ def join_consecutive(points: FloatArray, max_gap: float, spacing: float) -> Floa
 
 def _max_pyramid(fine: FloatArray, levels: int) -> tuple[FloatArray, ...]:
     """``(L, M_1, ..., M_{levels-1})``: ``M_h`` is the max of four copies of ``M_{h-1}``
-    shifted by ``s = 2^(h-1)`` rows/columns, edge values repeated past the end."""
+    shifted by ``s = 2^(h-1)`` rows/columns, edge values repeated past the end. The max over
+    the 2 × 2 shifts is taken as one over rows, then one over columns (the same values)."""
     out = [fine]
     for h in range(1, levels):
         s = 1 << (h - 1)
         prev = out[-1]
-        # Edge padding by s at the far ends: index r + s reads min(r + s, last).
-        ext = np.pad(prev, ((0, s), (0, s)), mode="edge")
         rows, cols = prev.shape
-        m = np.maximum(ext[:rows, :cols], ext[s : s + rows, :cols])
-        m = np.maximum(m, ext[:rows, s : s + cols])
-        m = np.maximum(m, ext[s : s + rows, s : s + cols])
-        out.append(m)
+        # Over rows: row r with row min(r + s, last) (the edge repeated past the end) ...
+        a, m = max(rows - s, 0), np.empty_like(prev)
+        np.maximum(prev[:a], prev[s:], out=m[:a])
+        np.maximum(prev[a:], prev[-1], out=m[a:])
+        # ... then over columns, the same way.
+        b, r = max(cols - s, 0), np.empty_like(prev)
+        np.maximum(m[:, :b], m[:, s:], out=r[:, :b])
+        np.maximum(m[:, b:], m[:, -1:], out=r[:, b:])
+        out.append(r)
     return tuple(out)
 
 

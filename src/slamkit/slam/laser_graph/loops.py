@@ -152,12 +152,12 @@ def submap(
     :class:`NormalCloud` (one per 2.5 cm voxel). ``scan_normals(i)``: keyframe ``i``'s
     :func:`~slamkit.scanmatch.point_map.scan_normals` (a cache; None: computed here)."""
     lo, hi = max(j - half, 0), min(j + half + 1, len(points))
+    T_j = np.array([between(poses[j], poses[i]) for i in range(lo, hi)]).reshape(-1, 3)
+    scans = points[lo:hi]
+    parts = [transform_points(T_j[a], scans[a]) for a in range(hi - lo)]
     cloud = PointMap(0.025)
-    parts = []
-    for i in range(lo, hi):
-        T_j_i = between(poses[j], poses[i])
-        parts.append(transform_points(T_j_i, points[i]))
-        cloud.insert(T_j_i, points[i], None if scan_normals is None else scan_normals(i))
+    known = None if scan_normals is None else [scan_normals(i) for i in range(lo, hi)]
+    cloud.insert_many(T_j, scans, known)
     pts, normals = cloud.arrays()
     return np.concatenate(parts), NormalCloud.build(pts, normals)
 
