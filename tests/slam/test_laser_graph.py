@@ -24,9 +24,11 @@ from slamkit.slam.laser_graph import (
     LoopMatch,
     LoopSettings,
     PoseGraph,
+    SubmapCache,
     default_optimizer,
     edge_chi2,
     loop_candidates,
+    loop_reference,
     search_window,
     submap,
     verify_closure,
@@ -347,3 +349,28 @@ def test_pose_graph_grows_past_its_capacity_and_removes_edges() -> None:
     np.testing.assert_array_equal(info, [e[3] for e in kept])
     assert graph.edge_kinds() == [e[4] for e in kept]
     assert graph.loop_pairs() == [(e[0], e[1]) for e in kept if e[4] == "loop"]
+
+
+def test_submap_cache_reuses_a_submap_only_while_its_poses_stay(slam) -> None:
+    est, _, _ = slam
+    settings = LoopSettings()
+    poses = est.graph.poses
+    points = [kf.points for kf in est.keyframes]
+    j = len(poses) // 2
+    cache = SubmapCache(settings)
+    ref, cloud, reference = cache.get(poses, points, j)
+    fresh, fresh_cloud = submap(poses, points, j, settings.submap_keyframes // 2)
+    np.testing.assert_array_equal(ref, fresh)
+    np.testing.assert_array_equal(cloud.points, fresh_cloud.points)
+    np.testing.assert_array_equal(
+        reference.lookup.tables[0], loop_reference(fresh, settings).lookup.tables[0]
+    )
+    cache.advance()
+    assert cache.get(poses, points, j)[2] is reference  # nothing moved: the same
+    moved = poses.copy()
+    moved[j + 1, 0] += 1e-9
+    cache.advance()
+    assert cache.get(moved, points, j)[2] is not reference  # a pose moved: rebuilt
+    cache.advance()
+    cache.advance()  # not asked for at the last keyframe: forgotten
+    assert cache.get(moved, points, j)[2] is not reference

@@ -46,11 +46,11 @@ from slamkit.slam.laser_graph.frontend import (
 )
 from slamkit.slam.laser_graph.loops import (
     LoopMatch,
+    SubmapCache,
     drift_distances,
     loop_candidates,
     pair_consistent,
     search_window,
-    submap,
     verify_closure,
 )
 
@@ -91,6 +91,7 @@ class LaserGraphSlam(EstimatorShell):
         self._keys: list[Keyframe] = []
         self._ranges: list[FloatArray] = []
         self._normals: dict[int, ScanNormals] = {}  # each keyframe's, once in a submap
+        self._submaps = SubmapCache(config.loops, self._scan_normals)
         self._counts: Counter[str] = Counter()
         self._pending = 0  # closures added since the last optimisation
         self._waiting: list[tuple[int, int, LoopMatch]] = []  # verified, no partner yet
@@ -242,18 +243,17 @@ class LaserGraphSlam(EstimatorShell):
             window = search_window(
                 float(travelled[k] - travelled[j] if drift is None else drift[j]), s
             )
-            ref_points, cloud = submap(
-                poses, points, j, s.submap_keyframes // 2, self._scan_normals
-            )
+            ref_points, cloud, reference = self._submaps.get(poses, points, j)
             found = verify_closure(
                 ref_points, cloud, self._keys[k].points, between(poses[j], poses[k]),
-                window, s, self._cfg.normal_icp,
+                window, s, self._cfg.normal_icp, reference=reference,
             )  # fmt: skip
             if isinstance(found, str):
                 self._counts[f"loop_rejected:{found}"] += 1
                 continue
             self._counts["loops_verified"] += 1
             self._confirm(poses, (j, k, found))
+        self._submaps.advance()
 
     def _scan_normals(self, i: int) -> ScanNormals:
         """Keyframe ``i``'s normals in its own frame (computed once)."""
