@@ -8,7 +8,7 @@ import pytest
 from slamkit.errors import MatchError, ShapeError
 from slamkit.geometry.pose2 import between, compose
 from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
-from slamkit.scanmatch.point_map import PointMap
+from slamkit.scanmatch.point_map import PointMap, scan_normals
 from slamkit.sim import rooms_world
 from slamkit.sim.scans import corridor_world, random_scan_pairs, simulated_scan_pair
 
@@ -98,6 +98,23 @@ def test_point_map_keeps_the_first_point_of_a_voxel_and_rotates_normals() -> Non
     near = m2.near([0.0, 2.03], 0.5)
     within = np.hypot(points[:, 0], points[:, 1] - 2.03) <= 0.5
     assert near.points.shape[0] == np.count_nonzero(within)
+
+
+def test_point_map_insert_many_equals_one_by_one_with_or_without_known_normals() -> None:
+    rng = np.random.default_rng(3)
+    pairs = random_scan_pairs(
+        rooms_world(), 6, rng, beam_angles=BEAMS, max_range=12.0, range_sigma=0.01
+    )
+    scans = [p.reference for p in pairs] + [np.zeros((2, 2))]  # the last: too few points
+    poses = np.column_stack([rng.uniform(-0.5, 0.5, (7, 2)), rng.uniform(-0.3, 0.3, 7)])
+    one = PointMap(0.05)
+    added = sum(one.insert(poses[a], scans[a]) for a in range(7))
+    many = PointMap(0.05)
+    known = [scan_normals(s) if s.shape[0] >= 3 else None for s in scans]
+    assert many.insert_many(poses, scans, known) == added == len(one) == len(many)
+    for a, b in zip(one.arrays(), many.arrays(), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert PointMap(0.05).insert_many(poses[:1], scans[-1:]) == 0
 
 
 def test_config_is_validated() -> None:

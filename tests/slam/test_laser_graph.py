@@ -24,9 +24,11 @@ from slamkit.slam.laser_graph import (
     LoopMatch,
     LoopSettings,
     PoseGraph,
+    SubmapCache,
     default_optimizer,
     edge_chi2,
     loop_candidates,
+    loop_reference,
     search_window,
     submap,
     verify_closure,
@@ -321,3 +323,54 @@ def test_a_smoothed_trajectory_is_checked() -> None:
         SmoothedTrajectory(np.array([1.0, 0.0]), np.zeros((2, 3)))
     with pytest.raises(NonFiniteError):
         SmoothedTrajectory(np.array([0.0, 1.0]), np.full((2, 3), np.nan))
+
+
+def test_pose_graph_grows_past_its_capacity_and_removes_edges() -> None:
+    rng = np.random.default_rng(5)
+    graph = PoseGraph(default_optimizer())
+    poses = rng.normal(size=(40, 3))
+    assert [graph.add_pose(p) for p in poses] == list(range(40))
+    kinds = ["odometry", "loop", "neighbour"]
+    edges = [
+        (int(a), int(a) + 1, rng.normal(size=3), np.eye(3) * (a + 1), kinds[a % 3])
+        for a in range(39)
+    ]
+    for e in edges:
+        graph.add_edge(*e)
+    np.testing.assert_array_equal(graph.poses, poses)
+    np.testing.assert_array_equal(graph.pose(7), poses[7])
+    graph.pose(7)[0] = 99.0  # a copy: the graph keeps its estimate
+    assert graph.poses[7, 0] == poses[7, 0]
+    graph.remove_edges([0, 5, 38])
+    kept = [e for n, e in enumerate(edges) if n not in (0, 5, 38)]
+    i, j, z, info = graph.edges()
+    assert i.tolist() == [e[0] for e in kept] and j.tolist() == [e[1] for e in kept]
+    np.testing.assert_array_equal(z, [e[2] for e in kept])
+    np.testing.assert_array_equal(info, [e[3] for e in kept])
+    assert graph.edge_kinds() == [e[4] for e in kept]
+    assert graph.loop_pairs() == [(e[0], e[1]) for e in kept if e[4] == "loop"]
+
+
+def test_submap_cache_reuses_a_submap_only_while_its_poses_stay(slam) -> None:
+    est, _, _ = slam
+    settings = LoopSettings()
+    poses = est.graph.poses
+    points = [kf.points for kf in est.keyframes]
+    j = len(poses) // 2
+    cache = SubmapCache(settings)
+    ref, cloud, reference = cache.get(poses, points, j)
+    fresh, fresh_cloud = submap(poses, points, j, settings.submap_keyframes // 2)
+    np.testing.assert_array_equal(ref, fresh)
+    np.testing.assert_array_equal(cloud.points, fresh_cloud.points)
+    np.testing.assert_array_equal(
+        reference.lookup.tables[0], loop_reference(fresh, settings).lookup.tables[0]
+    )
+    cache.advance()
+    assert cache.get(poses, points, j)[2] is reference  # nothing moved: the same
+    moved = poses.copy()
+    moved[j + 1, 0] += 1e-9
+    cache.advance()
+    assert cache.get(moved, points, j)[2] is not reference  # a pose moved: rebuilt
+    cache.advance()
+    cache.advance()  # not asked for at the last keyframe: forgotten
+    assert cache.get(moved, points, j)[2] is not reference

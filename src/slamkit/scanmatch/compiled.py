@@ -21,8 +21,8 @@ from slamkit._validation import FloatArray
 
 __all__ = [
     "AVAILABLE",
+    "bounded_sums",
     "enabled",
-    "gathered_sums",
     "ieee_remainder",
     "jit",
     "min_eigenvalue_sym3",
@@ -84,20 +84,43 @@ def writable(a: np.ndarray) -> np.ndarray:
 
 
 @jit
-def gathered_sums(
-    flat: FloatArray, bases: np.ndarray, k: np.ndarray, offsets: np.ndarray, out: FloatArray
+def bounded_sums(
+    table: FloatArray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    k: np.ndarray,
+    di: np.ndarray,
+    dj: np.ndarray,
+    threshold: float,
+    out: FloatArray,
 ) -> None:
-    """``out[u] = sum_p flat[bases[k[u], p] + offsets[u]]``: the node scores of correlative
-    matching (:mod:`slamkit.scanmatch.correlative`) without the ``(nodes, points)`` index and
-    value temporaries of the NumPy gather. The indices must be in range (the lookup grid's
-    padding guarantees it)."""
+    """``out[u] = sum_p T[rows[k[u], p] + di[u], cols[k[u], p] + dj[u]]`` with ``T = table``
+    inside it and ``T[0, 0]`` (the floor: the corner of a padded table) outside, or ``-inf``
+    when that sum is below ``threshold``: the node scores of correlative matching
+    (:mod:`slamkit.scanmatch.correlative`) without the ``(nodes, points)`` index and value
+    temporaries of the NumPy gather, and without a table padded by the whole search window.
+    Every value must be ``<= 0`` (a partial sum then only falls, so the sum stops as soon
+    as it is below ``threshold``; ``-inf``: every sum is complete)."""
+    n_rows, n_cols = table.shape
+    flat = table.reshape(-1)
+    floor = flat[0]
+    nr = np.uint64(n_rows)
+    nc = np.uint64(n_cols)
     for u in range(k.shape[0]):
         row = k[u]
-        shift = offsets[u]
+        a, b = di[u], dj[u]
         total = 0.0
-        for p in range(bases.shape[1]):
-            total += flat[bases[row, p] + shift]
-        out[u] = total
+        for p in range(rows.shape[1]):
+            r = rows[row, p] + a
+            c = cols[row, p] + b
+            # Unsigned, a negative index is huge: one comparison per axis.
+            if np.uint64(r) < nr and np.uint64(c) < nc:
+                total += flat[r * n_cols + c]
+                if total < threshold:
+                    break
+            else:
+                total += floor
+        out[u] = -np.inf if total < threshold else total
 
 
 @jit

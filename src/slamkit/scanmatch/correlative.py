@@ -21,10 +21,15 @@ between neighbouring rotations.
 **Branch and bound.** A node ``(k, i, j)`` at level ``h`` stands for the ``2^h × 2^h``
 translations ``[i, i + 2^h) × [j, j + 2^h)`` at rotation ``k``; its bound
 ``sum_p M_h[cell_p + (i, j)]`` (the max tables of the lookup grid) is at least the score of
-each of them. The search starts from all top-level nodes of all rotations (so whole
-rotations are pruned too), finds a good leaf by greedy descent from the best node, then goes
-down level by level: nodes whose bound is below the best leaf so far are dropped, the others
-split into four, and the best leaf is tightened by another greedy descent. A leaf that is
+each of them. The search scores all top-level nodes of all rotations (so whole rotations
+are pruned too) and takes them in rounds, those of the best bounds first (a few, then more,
+then all that are left whose bound still reaches the best leaf so far). Within a round it
+finds a good leaf by greedy descent from the best node, then goes down level by level:
+nodes whose bound is below the best leaf so far are dropped, the others split into four,
+and the best leaf is tightened by another greedy descent. The first rounds find a leaf near
+the optimum, which prunes the later ones hard. The best leaf starts as the initial guess's;
+since every table value is ``<= 0`` a node's partial sum only falls, so its sum stops as
+soon as it drops below the best leaf (the node would be dropped anyway). A leaf that is
 dropped had an ancestor bound below a score already reached, so the optimum found equals the
 exhaustive search over the same fine grid (``config.search = "exhaustive"``; ties go to the
 smallest ``(k, i, j)`` in both).
@@ -71,6 +76,11 @@ IntArray = NDArray[np.int64]
 # Gathers run in chunks of at most this many (node, point) pairs: 2^18 int64 indices and
 # float64 values are 2 MB each, small enough to stay in cache-friendly temporaries.
 _CHUNK_ELEMENTS = 1 << 18
+
+# Branch and bound searches the top nodes in rounds of at most these many (best bounds
+# first), then all that are left: on loop-closure searches of Intel, 1.3x faster than one
+# round, within 15 % of a search that knew the optimum's score from the start.
+_ROUNDS = (8, 128, 2048)
 
 # Fields that shape the lookup grid: a prepared reference fixes them.
 _GRID_FIELDS = ("resolution", "sigma", "floor_likelihood", "join_gap", "levels")
@@ -154,11 +164,10 @@ class CorrelativeConfig:
             raise ConfigError(f"min_score: expected a number in [0, 1], got {self.min_score!r}")
 
 
-def _pad_cells(config: CorrelativeConfig, resolution: float) -> int:
-    """Padding that lets a search of ``config`` (window and covariance window) read any
-    offset without bounds checks (see :meth:`LookupGrid.base_indices`)."""
-    reach = max(_cells(config.window_xy, resolution), _cells(config.cov_window_xy, resolution))
-    return 2 * reach + (1 << (config.levels - 1)) + 1
+def _pad_cells(config: CorrelativeConfig) -> int:
+    """Padding of the lookup tables: the coarsest block and one cell (reads outside the
+    tables are misses, see :meth:`LookupGrid.cells`), whatever the window searched."""
+    return (1 << (config.levels - 1)) + 1
 
 
 def _cells(length: float, step: float) -> int:
@@ -173,8 +182,8 @@ class CorrelativeReference:
     loop-closure candidates, the scans of one particle's map).
 
     A match may use a different config as long as it keeps the grid fields
-    (``resolution``, ``sigma``, ``floor_likelihood``, ``levels``) and searches a window no
-    larger than the one the reference was built for.
+    (``resolution``, ``sigma``, ``floor_likelihood``, ``levels``); its window may be any
+    size (the tables do not depend on it).
     """
 
     lookup: LookupGrid
@@ -194,7 +203,7 @@ class CorrelativeReference:
             cfg.sigma,
             cfg.floor_likelihood,
             levels=cfg.levels,
-            pad=_pad_cells(cfg, cfg.resolution),
+            pad=_pad_cells(cfg),
             join_gap=cfg.join_gap,
         )
         return cls(lookup, cfg)
@@ -229,7 +238,7 @@ class CorrelativeReference:
             floor=float(np.log(cfg.floor_likelihood)),
             inlier_log=inlier,
             levels=cfg.levels,
-            pad=_pad_cells(cfg, grid.resolution),
+            pad=_pad_cells(cfg),
         )
         return cls(lookup, cfg)
 
@@ -254,7 +263,7 @@ class CorrelativeReference:
             floor=floor,
             inlier_log=max(inlier, floor),
             levels=cfg.levels,
-            pad=_pad_cells(cfg, field.grid.resolution),
+            pad=_pad_cells(cfg),
         )
         return cls(lookup, cfg)
 
@@ -289,30 +298,59 @@ def _prepare(
     return CorrelativeReference.from_points(reference, cfg), cfg
 
 
-def _rotated_bases(
-    lookup: LookupGrid, points: FloatArray, xy: FloatArray, thetas: FloatArray, reach: int
-) -> IntArray:
-    """Flat base cell indices ``(K, N)`` of the points rotated by each ``θ_k`` and moved by
+Cells = tuple[IntArray, IntArray]
+"""Row and column indices ``(K, N)`` of every point at every rotation."""
+
+
+def _rotated_cells(
+    lookup: LookupGrid, points: FloatArray, xy: FloatArray, thetas: FloatArray
+) -> Cells:
+    """Cell rows and columns ``(K, N)`` of the points rotated by each ``θ_k`` and moved by
     ``xy``: one rotation of the scan per angle."""
     c, s = np.cos(thetas)[:, None], np.sin(thetas)[:, None]
     world = np.empty((thetas.size, points.shape[0], 2))
     world[..., 0] = c * points[:, 0] - s * points[:, 1] + xy[0]
     world[..., 1] = s * points[:, 0] + c * points[:, 1] + xy[1]
-    return lookup.base_indices(world, reach)
+    return lookup.cells(world)
 
 
-def _score(flat: FloatArray, bases: IntArray, k: IntArray, offsets: IntArray) -> FloatArray:
-    """``sum_p flat[bases[k_u, p] + offsets_u]`` for every node ``u``, gathered in chunks."""
-    n_points = bases.shape[1]
+def _score(
+    lookup: LookupGrid,
+    level: int,
+    cells: Cells,
+    k: IntArray,
+    i: IntArray,
+    j: IntArray,
+    threshold: float = -np.inf,
+) -> FloatArray:
+    """``sum_p T[row_p + i_u, col_p + j_u]`` at rotation ``k_u`` for every node ``u``, with
+    ``T = lookup.tables[level]`` and reads outside it ``lookup.floor``; ``-inf`` for a node
+    whose sum is below ``threshold`` (which needs every table value ``<= 0``: the compiled
+    sum stops early). Gathered in chunks."""
+    table = lookup.tables[level]
+    assert table[0, 0] == lookup.floor  # the padding's corner: compiled reads outside
+    rows, cols = cells
     out = np.empty(k.size)
     if compiled.enabled():
-        compiled.gathered_sums(flat, bases, k, offsets, out)
+        compiled.bounded_sums(table, rows, cols, k, i, j, threshold, out)
         return out
-    step = max(1, _CHUNK_ELEMENTS // max(n_points, 1))
+    step = max(1, _CHUNK_ELEMENTS // max(rows.shape[1], 1))
     for a in range(0, k.size, step):
         b = min(a + step, k.size)
-        idx = bases[k[a:b]] + offsets[a:b, None]
-        np.sum(np.take(flat, idx), axis=1, out=out[a:b])
+        values = _level_values(
+            table, lookup.floor, rows[k[a:b]] + i[a:b, None], cols[k[a:b]] + j[a:b, None]
+        )
+        np.sum(values, axis=1, out=out[a:b])
+    out[out < threshold] = -np.inf
+    return out
+
+
+def _level_values(table: FloatArray, floor: float, rows: IntArray, cols: IntArray) -> FloatArray:
+    """``table`` at cells ``(rows, cols)`` (any shape), ``floor`` outside it."""
+    inside = (rows >= 0) & (rows < table.shape[0]) & (cols >= 0) & (cols < table.shape[1])
+    out: FloatArray = np.where(
+        inside, table[np.where(inside, rows, 0), np.where(inside, cols, 0)], floor
+    )
     return out
 
 
@@ -332,13 +370,12 @@ class _Optimum:
     levels: int
 
 
-def _exhaustive(lookup: LookupGrid, bases: IntArray, n: int) -> _Optimum:
-    cols = lookup.shape[1]
+def _exhaustive(lookup: LookupGrid, cells: Cells, n: int) -> _Optimum:
     ks, ii, jj = np.meshgrid(
-        np.arange(bases.shape[0]), np.arange(-n, n + 1), np.arange(-n, n + 1), indexing="ij"
+        np.arange(cells[0].shape[0]), np.arange(-n, n + 1), np.arange(-n, n + 1), indexing="ij"
     )
     k, i, j = ks.ravel(), ii.ravel(), jj.ravel()
-    s = _score(lookup.flat(0), bases, k, i * cols + j)
+    s = _score(lookup, 0, cells, k, i, j)
     u = _first_best(s, k, i, j)
     return _Optimum(int(k[u]), int(i[u]), int(j[u]), float(s[u]), 1)
 
@@ -356,40 +393,89 @@ def _children(
     return ck[ok], ci[ok], cj[ok]
 
 
-def _descend(
-    lookup: LookupGrid, bases: IntArray, k: int, i: int, j: int, level: int, n: int
-) -> float:
+def _descend(lookup: LookupGrid, cells: Cells, k: int, i: int, j: int, level: int, n: int) -> float:
     """Score of the leaf reached by always taking the child with the best bound."""
-    cols = lookup.shape[1]
     ka, ia, ja = np.array([k]), np.array([i]), np.array([j])
     score = -np.inf
     while level > 0:
         ka, ia, ja = _children(ka, ia, ja, 1 << (level - 1), n)
         level -= 1
-        s = _score(lookup.flat(level), bases, ka, ia * cols + ja)
+        s = _score(lookup, level, cells, ka, ia, ja)
         u = int(np.argmax(s))
         ka, ia, ja, score = ka[u : u + 1], ia[u : u + 1], ja[u : u + 1], float(s[u])
     return score
 
 
-def _branch_and_bound(lookup: LookupGrid, bases: IntArray, n: int) -> _Optimum:
-    cols = lookup.shape[1]
+def _branch_and_bound(lookup: LookupGrid, cells: Cells, n: int) -> _Optimum:
     level = lookup.levels - 1
     starts = np.arange(-n, n + 1, 1 << level)
-    ks, ii, jj = np.meshgrid(np.arange(bases.shape[0]), starts, starts, indexing="ij")
+    n_k = cells[0].shape[0]
+    ks, ii, jj = np.meshgrid(np.arange(n_k), starts, starts, indexing="ij")
     k, i, j = ks.ravel(), ii.ravel(), jj.ravel()
-    bound = _score(lookup.flat(level), bases, k, i * cols + j)
-    best = -np.inf
+    # The best leaf so far starts as the initial guess's (the middle rotation, no shift). A
+    # node whose bound falls below it is scored -inf, its sum cut short: with every table
+    # value <= 0 a partial sum only falls. Those nodes are dropped below anyway, and a node
+    # that may hold the best leaf is always scored in full, so the search reaches the same
+    # optimum as without the cut (and as the exhaustive search).
+    cut = float(lookup.tables[-1].max()) <= 0.0  # the top table's max is every table's
+    zero = np.zeros(1, dtype=np.int64)
+    mid = n_k // 2
+    best = _Optimum(mid, 0, 0, float(_score(lookup, 0, cells, zero + mid, zero, zero)[0]), 0)
+    bound = _score(lookup, level, cells, k, i, j, best.score if cut else -np.inf)
+    # The top nodes in rounds, best bounds first: the first round's leaves give the later
+    # rounds a threshold near the optimum. A node left when its bound is below the best
+    # leaf holds no leaf as good.
+    left = bound.copy()
+    for size in (*_ROUNDS, None):
+        open_ = np.flatnonzero(left >= best.score)
+        if open_.size == 0:
+            break
+        if size is not None and open_.size > size:
+            open_ = open_[np.argpartition(-left[open_], size - 1)[:size]]
+        left[open_] = -np.inf
+        found = _search_blocks(
+            lookup, cells, (k[open_], i[open_], j[open_]), bound[open_], level, n, best, cut
+        )
+        if found is not None and _better(found, best):
+            best = found
+    return _Optimum(best.k, best.i, best.j, best.score, lookup.levels)
+
+
+def _better(a: _Optimum, b: _Optimum) -> bool:
+    """Whether leaf ``a`` beats leaf ``b``: a higher score, or the same and a smaller
+    ``(k, i, j)`` (the exhaustive search's tie rule)."""
+    return a.score > b.score or (a.score == b.score and (a.k, a.i, a.j) < (b.k, b.i, b.j))
+
+
+def _search_blocks(
+    lookup: LookupGrid,
+    cells: Cells,
+    nodes: tuple[IntArray, IntArray, IntArray],
+    bound: FloatArray,
+    level: int,
+    n: int,
+    incumbent: _Optimum,
+    cut: bool,
+) -> _Optimum | None:
+    """Branch and bound below ``nodes`` (at ``level``, with their ``bound``): the first best
+    leaf (ties to the smallest ``(k, i, j)``) of those scoring at least ``incumbent``'s
+    score, None when there is none."""
+    k, i, j = nodes
+    best = incumbent.score
     while level > 0:
+        if k.size == 0:
+            return None
         u = int(np.argmax(bound))
-        best = max(best, _descend(lookup, bases, int(k[u]), int(i[u]), int(j[u]), level, n))
+        best = max(best, _descend(lookup, cells, int(k[u]), int(i[u]), int(j[u]), level, n))
         # A node whose bound is below a leaf already reached cannot hold the optimum.
         keep = bound >= best
         k, i, j = _children(k[keep], i[keep], j[keep], 1 << (level - 1), n)
         level -= 1
-        bound = _score(lookup.flat(level), bases, k, i * cols + j)
+        bound = _score(lookup, level, cells, k, i, j, best if cut else -np.inf)
+    if k.size == 0 or not bound.max() >= incumbent.score:
+        return None
     u = _first_best(bound, k, i, j)
-    return _Optimum(int(k[u]), int(i[u]), int(j[u]), float(bound[u]), lookup.levels)
+    return _Optimum(int(k[u]), int(i[u]), int(j[u]), float(bound[u]), 0)
 
 
 def _response_covariance(
@@ -405,12 +491,12 @@ def _response_covariance(
     c = _cells(config.cov_window_xy, res)
     ct = _cells(config.cov_window_theta, dtheta)
     dk = np.arange(-ct, ct + 1)
-    bases = _rotated_bases(lookup, points, pose[:2], pose[2] + dk * dtheta, c)
+    cells = _rotated_cells(lookup, points, pose[:2], pose[2] + dk * dtheta)
     ks, ii, jj = np.meshgrid(
         np.arange(dk.size), np.arange(-c, c + 1), np.arange(-c, c + 1), indexing="ij"
     )
     k, i, j = ks.ravel(), ii.ravel(), jj.ravel()
-    s = _score(lookup.flat(0), bases, k, i * lookup.shape[1] + j)
+    s = _score(lookup, 0, cells, k, i, j)
     p = np.exp(s - s.max())  # p_u ∝ exp(S_u); the shift only rescales
     p /= p.sum()
     x = np.column_stack([j * res, i * res, dk[k] * dtheta])
@@ -463,12 +549,12 @@ def correlative_match(
         dtheta = res / r_max
     m = _cells(cfg.window_theta, dtheta)
     thetas = guess[2] + np.arange(-m, m + 1) * dtheta
-    bases = _rotated_bases(lookup, pts, guess[:2], thetas, n)
+    cells = _rotated_cells(lookup, pts, guess[:2], thetas)
 
     if cfg.search == "exhaustive" or lookup.levels == 1:
-        opt = _exhaustive(lookup, bases, n)
+        opt = _exhaustive(lookup, cells, n)
     else:
-        opt = _branch_and_bound(lookup, bases, n)
+        opt = _branch_and_bound(lookup, cells, n)
 
     pose = np.array(
         [
@@ -477,8 +563,9 @@ def correlative_match(
             wrap_angle_float(float(thetas[opt.k])),
         ]
     )
-    cols = lookup.shape[1]
-    values = np.take(lookup.flat(0), bases[opt.k] + opt.i * cols + opt.j)
+    values = _level_values(
+        lookup.tables[0], lookup.floor, cells[0][opt.k] + opt.i, cells[1][opt.k] + opt.j
+    )
     n_pts = pts.shape[0]
     score = 1.0 - opt.score / (n_pts * lookup.floor) if lookup.floor < 0 else 1.0
     score = min(max(score, 0.0), 1.0)

@@ -22,9 +22,12 @@ block ``[i, i + w) × [j, j + w)`` from above. ``M_h`` follows from ``M_{h-1}`` 
 four shifted copies (shift ``w / 2``), indices past the last row or column reading the last
 one (the same rule as clipping an index into the table).
 
-Every table is padded by ``pad`` cells of value ``log f`` on each side, so a point that
-falls outside the reference reads "miss", and the search can add integer offsets to flat
-indices without any per-offset bounds check (see :meth:`LookupGrid.base_indices`).
+Every table is padded by ``pad`` cells of value ``log f`` on each side (at least the
+coarsest block, ``2^(levels-1)`` cells, so the max tables hold every block that begins
+before the reference and reaches into it), and a read outside the table is a "miss" of
+value ``log f`` too: the search checks each read's row and column instead of padding the
+tables by its whole window (see :meth:`LookupGrid.cells`), so a table's size does not depend
+on the window searched.
 
 **Exact scores.** Every table value is rounded to a multiple of ``QUANTUM = 2^-12`` (a
 quarter of a thousandth of a nat, far below any difference between two poses that matters).
@@ -125,30 +128,23 @@ class LookupGrid:
         """Table ``level`` flattened (row-major), for gathers by flat index."""
         return self.tables[level].reshape(-1)
 
-    def base_indices(self, points: FloatArray, reach: int) -> IntArray:
-        """Flat cell indices ``(...,)`` of world points ``(..., 2)``, made safe for offsets.
-
-        The result ``b`` may be offset by ``di * cols + dj`` for any ``|di|, |dj| <= reach``
-        plus a block of up to ``2^(levels-1)`` cells without leaving the table, and every
-        such read gives the value the unclipped cell would have (``floor`` outside): a row or
-        column index is clipped into ``[reach, size - reach - 2^(levels-1)]``, which only
-        moves points so far outside the reference that every cell they can reach is border.
-        Requires ``pad >= 2 reach + 2^(levels-1)``.
-        """
+    def cells(self, points: FloatArray) -> tuple[IntArray, IntArray]:
+        """Row and column indices ``(...,)`` of the cells of world points ``(..., 2)``, not
+        clipped to the table: a read at ``(row + di, col + dj)`` outside it is a miss
+        (``floor``). Indices are clipped to ``±2^30`` only, far outside any table and any
+        offset a search adds. Requires ``pad >= 2^(levels-1)`` (module docstring)."""
         top = 1 << (self.levels - 1)
-        if self.pad < 2 * reach + top:
+        if self.pad < top:
             raise InputError(
-                f"lookup grid padded by {self.pad} cells; a search reaching {reach} cells "
-                f"with blocks of {top} needs {2 * reach + top}: rebuild the reference with "
-                "the larger window"
+                f"lookup grid padded by {self.pad} cells; its {self.levels} levels need "
+                f"{top}: rebuild the reference with the larger padding"
             )
-        rows, cols = self.shape
         u = (points[..., 0] - self.origin_xy[0]) / self.resolution
         v = (points[..., 1] - self.origin_xy[1]) / self.resolution
-        col = np.clip(np.floor(u), reach, cols - reach - top).astype(np.int64)
-        row = np.clip(np.floor(v), reach, rows - reach - top).astype(np.int64)
-        out: IntArray = row * cols + col
-        return out
+        far = float(1 << 30)
+        col = np.clip(np.floor(u), -far, far).astype(np.int64)
+        row = np.clip(np.floor(v), -far, far).astype(np.int64)
+        return row, col
 
 
 def join_consecutive(points: FloatArray, max_gap: float, spacing: float) -> FloatArray:
@@ -180,18 +176,22 @@ def join_consecutive(points: FloatArray, max_gap: float, spacing: float) -> Floa
 
 def _max_pyramid(fine: FloatArray, levels: int) -> tuple[FloatArray, ...]:
     """``(L, M_1, ..., M_{levels-1})``: ``M_h`` is the max of four copies of ``M_{h-1}``
-    shifted by ``s = 2^(h-1)`` rows/columns, edge values repeated past the end."""
+    shifted by ``s = 2^(h-1)`` rows/columns, edge values repeated past the end. The max over
+    the 2 × 2 shifts is taken as one over rows, then one over columns (the same values)."""
     out = [fine]
     for h in range(1, levels):
         s = 1 << (h - 1)
         prev = out[-1]
-        # Edge padding by s at the far ends: index r + s reads min(r + s, last).
-        ext = np.pad(prev, ((0, s), (0, s)), mode="edge")
         rows, cols = prev.shape
-        m = np.maximum(ext[:rows, :cols], ext[s : s + rows, :cols])
-        m = np.maximum(m, ext[:rows, s : s + cols])
-        m = np.maximum(m, ext[s : s + rows, s : s + cols])
-        out.append(m)
+        # Over rows: row r with row min(r + s, last) (the edge repeated past the end) ...
+        a, m = max(rows - s, 0), np.empty_like(prev)
+        np.maximum(prev[:a], prev[s:], out=m[:a])
+        np.maximum(prev[a:], prev[-1], out=m[a:])
+        # ... then over columns, the same way.
+        b, r = max(cols - s, 0), np.empty_like(prev)
+        np.maximum(m[:, :b], m[:, s:], out=r[:, :b])
+        np.maximum(m[:, b:], m[:, -1:], out=r[:, b:])
+        out.append(r)
     return tuple(out)
 
 

@@ -12,19 +12,34 @@ pose as a :class:`~slamkit.scanmatch.normal_icp.NormalCloud`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray, as_array, as_positive
 from slamkit.geometry.pose2 import transform_points
 from slamkit.scanmatch.covariance import estimate_normals, neighbour_table
 from slamkit.scanmatch.normal_icp import NormalCloud
 
-__all__ = ["PointMap"]
+__all__ = ["PointMap", "ScanNormals", "scan_normals"]
 
 #: Points in a scan's neighbourhood for its normals (beam order), and their reach [m].
 NORMAL_NEIGHBOURS = 7
 NORMAL_RADIUS = 0.3
+
+
+ScanNormals = tuple[FloatArray, NDArray[np.bool_]]
+"""A scan's normals ``(K, 2)`` in its own frame and the mask ``(K,)`` of points that have
+one (:func:`scan_normals`)."""
+
+
+def scan_normals(points: ArrayLike) -> ScanNormals:
+    """The normals :meth:`PointMap.insert` gives a scan's ``points (K, 2)`` (sensor frame,
+    beam order): they depend on the scan alone, so a caller that inserts one scan many
+    times (at different poses) may compute them once and pass them in."""
+    p = as_array(points, "points", (None, 2))
+    return estimate_normals(p, neighbour_table(p, None, NORMAL_NEIGHBOURS), NORMAL_RADIUS)
 
 
 class PointMap:
@@ -40,15 +55,42 @@ class PointMap:
     def __len__(self) -> int:
         return int(self._keys.size)
 
-    def insert(self, pose: ArrayLike, points: ArrayLike) -> int:
+    def insert(self, pose: ArrayLike, points: ArrayLike, known: ScanNormals | None = None) -> int:
         """Insert a scan's ``points (K, 2)`` (sensor frame, beam order) taken from ``pose``;
-        returns how many went into empty voxels (points without a normal are left out)."""
+        returns how many went into empty voxels (points without a normal are left out).
+        ``known``: the scan's :func:`scan_normals`, when the caller has them already."""
+        placed = self._placed(pose, points, known)
+        return 0 if placed is None else self._add(*placed)
+
+    def insert_many(
+        self,
+        poses: ArrayLike,
+        scans: Sequence[ArrayLike],
+        known: Sequence[ScanNormals | None] | None = None,
+    ) -> int:
+        """Insert ``scans`` (each as :meth:`insert` takes it) taken from ``poses (S, 3)``, in
+        order: the same map as inserting them one by one (a voxel keeps the first point of
+        the first scan that reaches it), in one pass over the voxel keys."""
+        T = as_array(poses, "poses", (len(scans), 3))
+        placed = [
+            self._placed(T[a], scans[a], None if known is None else known[a])
+            for a in range(len(scans))
+        ]
+        kept = [x for x in placed if x is not None]
+        if not kept:
+            return 0
+        world, n, keys = (np.concatenate(parts) for parts in zip(*kept, strict=True))
+        return self._add(world, n, keys)
+
+    def _placed(
+        self, pose: ArrayLike, points: ArrayLike, known: ScanNormals | None
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.int64]] | None:
+        """A scan's points with normals in the world frame and their voxel keys (None:
+        fewer than 3 points)."""
         p = as_array(points, "points", (None, 2))
         if p.shape[0] < 3:
-            return 0
-        normals, ok = estimate_normals(
-            p, neighbour_table(p, None, NORMAL_NEIGHBOURS), NORMAL_RADIUS
-        )
+            return None
+        normals, ok = scan_normals(p) if known is None else known
         T = as_array(pose, "pose", (3,))
         world = transform_points(T, p[ok])
         c, s = np.cos(T[2]), np.sin(T[2])
@@ -56,7 +98,11 @@ class PointMap:
         cells = np.floor(world / self.voxel).astype(np.int64)
         # One int64 key per voxel: the column index in the low 32 bits, the row above.
         keys = (cells[:, 0] << 32) ^ (cells[:, 1] & 0xFFFFFFFF)
-        _, first = np.unique(keys, return_index=True)  # one per voxel in this scan
+        return world, n, keys
+
+    def _add(self, world: FloatArray, n: FloatArray, keys: NDArray[np.int64]) -> int:
+        """Add the first point of each voxel among ``keys`` not in the map yet."""
+        _, first = np.unique(keys, return_index=True)  # one per voxel, its first point
         idx = np.sort(first)
         idx = idx[~np.isin(keys[idx], self._keys, assume_unique=True)]
         if idx.size == 0:

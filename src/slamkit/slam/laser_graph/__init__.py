@@ -21,7 +21,9 @@ from slamkit.slam.laser_graph.estimator import NO_ODOMETRY, LaserGraphSlam
 from slamkit.slam.laser_graph.frontend import Keyframe, Tracker, floored_information
 from slamkit.slam.laser_graph.loops import (
     LoopMatch,
+    SubmapCache,
     loop_candidates,
+    loop_reference,
     search_window,
     submap,
     verify_closure,
@@ -36,11 +38,13 @@ __all__ = [
     "LoopMatch",
     "LoopSettings",
     "PoseGraph",
+    "SubmapCache",
     "Tracker",
     "default_optimizer",
     "edge_chi2",
     "floored_information",
     "loop_candidates",
+    "loop_reference",
     "search_window",
     "submap",
     "verify_closure",

@@ -62,51 +62,67 @@ class OptimizationRecord:
 
 
 class PoseGraph:
-    """Keyframe poses ``(K, 3)`` (the current estimate) and edges, grown one at a time."""
+    """Keyframe poses ``(K, 3)`` (the current estimate) and edges, grown one at a time.
+
+    Poses and edges live in arrays that double their capacity when full, so reading them
+    all (each solve, each χ² check) is a slice, not a conversion of one list per edge."""
 
     def __init__(self, optimizer: OptimizerConfig) -> None:
         self.optimizer = optimizer
-        self._poses: list[FloatArray] = []
-        self._i: list[int] = []
-        self._j: list[int] = []
-        self._z: list[FloatArray] = []
-        self._info: list[FloatArray] = []
+        self._n_poses = 0
+        self._pose_buf = np.zeros((16, 3))
+        self._n_edges = 0
+        self._i_buf = np.zeros(16, dtype=np.int64)
+        self._j_buf = np.zeros(16, dtype=np.int64)
+        self._z_buf = np.zeros((16, 3))
+        self._info_buf = np.zeros((16, 3, 3))
         self._kind: list[EdgeKind] = []
         self._off: set[int] = set()  # edges left out of the solve (optimize_consistent)
         self.solves: list[OptimizationRecord] = []
 
     def __len__(self) -> int:
-        return len(self._poses)
+        return self._n_poses
 
     @property
     def poses(self) -> FloatArray:
         """The current estimate of every keyframe ``(K, 3)`` (a copy)."""
-        return np.asarray(self._poses, dtype=np.float64).reshape(-1, 3)
+        return self._pose_buf[: self._n_poses].copy()
 
     def pose(self, k: int) -> FloatArray:
-        return self._poses[k]
+        """The current estimate of keyframe ``k`` ``(3,)`` (a copy)."""
+        if not -self._n_poses <= k < self._n_poses:
+            raise IndexError(f"keyframe {k} of {self._n_poses}")
+        return self._pose_buf[k % self._n_poses].copy()
 
     def set_poses(self, poses: FloatArray) -> None:
         """Replace the estimate of every keyframe ``(K, 3)``."""
-        if poses.shape != (len(self._poses), 3):
-            raise ShapeError(f"poses: expected ({len(self._poses)}, 3), got {poses.shape}")
-        self._poses = [p.copy() for p in np.asarray(poses, dtype=np.float64)]
+        if poses.shape != (self._n_poses, 3):
+            raise ShapeError(f"poses: expected ({self._n_poses}, 3), got {poses.shape}")
+        self._pose_buf[: self._n_poses] = np.asarray(poses, dtype=np.float64)
 
     def add_pose(self, pose: FloatArray) -> int:
         """A new keyframe at ``pose``; its index."""
-        self._poses.append(np.array(pose, dtype=np.float64))
-        return len(self._poses) - 1
+        if self._n_poses == self._pose_buf.shape[0]:
+            self._pose_buf = _grown(self._pose_buf)
+        self._pose_buf[self._n_poses] = np.asarray(pose, dtype=np.float64)
+        self._n_poses += 1
+        return self._n_poses - 1
 
     def add_edge(
         self, i: int, j: int, measurement: FloatArray, information: FloatArray, kind: EdgeKind
     ) -> int:
         """An edge ``i → j`` measuring ``T_i_j``; its index."""
-        self._i.append(int(i))
-        self._j.append(int(j))
-        self._z.append(np.array(measurement, dtype=np.float64))
-        self._info.append(np.array(information, dtype=np.float64))
+        e = self._n_edges
+        if e == self._i_buf.shape[0]:
+            self._i_buf, self._j_buf = _grown(self._i_buf), _grown(self._j_buf)
+            self._z_buf, self._info_buf = _grown(self._z_buf), _grown(self._info_buf)
+        self._i_buf[e] = int(i)
+        self._j_buf[e] = int(j)
+        self._z_buf[e] = np.asarray(measurement, dtype=np.float64)
+        self._info_buf[e] = np.asarray(information, dtype=np.float64)
         self._kind.append(kind)
-        return len(self._i) - 1
+        self._n_edges += 1
+        return e
 
     def disable_edges(self, indices: list[int]) -> None:
         """Leave the edges at ``indices`` out of :meth:`optimize` (until removed)."""
@@ -115,32 +131,33 @@ class PoseGraph:
     def remove_edges(self, indices: list[int]) -> None:
         """Drop the edges at ``indices``."""
         self._off = set()
-        drop = set(indices)
-        keep = [k for k in range(len(self._i)) if k not in drop]
-        self._i = [self._i[k] for k in keep]
-        self._j = [self._j[k] for k in keep]
-        self._z = [self._z[k] for k in keep]
-        self._info = [self._info[k] for k in keep]
-        self._kind = [self._kind[k] for k in keep]
+        if not indices:
+            return
+        keep = np.ones(self._n_edges, dtype=bool)
+        keep[list(indices)] = False
+        n = int(keep.sum())
+        for name in ("_i_buf", "_j_buf", "_z_buf", "_info_buf"):
+            buf = getattr(self, name)
+            buf[:n] = buf[: self._n_edges][keep]
+        self._kind = [kind for kind, k in zip(self._kind, keep, strict=True) if k]
+        self._n_edges = n
 
     def edge_kinds(self) -> list[EdgeKind]:
         return list(self._kind)
 
     def loop_pairs(self) -> list[tuple[int, int]]:
         """The ends ``(i, j)`` of every loop-closure edge."""
-        return [
-            (a, b)
-            for a, b, kind in zip(self._i, self._j, self._kind, strict=True)
-            if kind == "loop"
-        ]
+        loops = np.flatnonzero(np.array([kind == "loop" for kind in self._kind], dtype=bool))
+        return list(zip(self._i_buf[loops].tolist(), self._j_buf[loops].tolist(), strict=True))
 
     def edges(self) -> tuple[np.ndarray, np.ndarray, FloatArray, FloatArray]:
-        """``i (E,)``, ``j (E,)``, measurements ``(E, 3)``, information ``(E, 3, 3)``."""
+        """``i (E,)``, ``j (E,)``, measurements ``(E, 3)``, information ``(E, 3, 3)`` (copies)."""
+        n = self._n_edges
         return (
-            np.asarray(self._i, dtype=np.int64),
-            np.asarray(self._j, dtype=np.int64),
-            np.asarray(self._z, dtype=np.float64).reshape(-1, 3),
-            np.asarray(self._info, dtype=np.float64).reshape(-1, 3, 3),
+            self._i_buf[:n].copy(),
+            self._j_buf[:n].copy(),
+            self._z_buf[:n].copy(),
+            self._info_buf[:n].copy(),
         )
 
     def chi2(self) -> FloatArray:
@@ -157,7 +174,7 @@ class PoseGraph:
             on[list(self._off)] = False
             i, j, z, info = i[on], j[on], z[on], info[on]
         edges = (EdgeSet("se2", i, j, z, info, np.zeros(i.size, dtype=np.int64)),)
-        n = len(self._poses)
+        n = self._n_poses
         return GraphData(
             dim=2,
             pose_ids=np.arange(n, dtype=np.int64),
@@ -177,7 +194,7 @@ class PoseGraph:
             raise ConvergenceError(
                 f"pose-graph optimisation over {len(self)} keyframes returned non-finite poses"
             )
-        self._poses = [p.copy() for p in np.asarray(result.poses, dtype=np.float64)]
+        self._pose_buf[: self._n_poses] = np.asarray(result.poses, dtype=np.float64)
         record = OptimizationRecord(
             keyframes=len(self),
             edges=data.n_edges,
@@ -190,6 +207,13 @@ class PoseGraph:
         )
         self.solves.append(record)
         return record
+
+
+def _grown(buf: np.ndarray) -> np.ndarray:
+    """``buf`` copied into twice the rows."""
+    out = np.zeros((2 * buf.shape[0], *buf.shape[1:]), dtype=buf.dtype)
+    out[: buf.shape[0]] = buf
+    return out
 
 
 def optimize_consistent(

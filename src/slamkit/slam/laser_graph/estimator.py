@@ -33,6 +33,7 @@ from slamkit.mapping.occupancy.config import OccupancyMappingConfig
 from slamkit.mapping.occupancy.mapper import OccupancyMapper
 from slamkit.scanmatch.icp import prepare_scan
 from slamkit.scanmatch.normal_icp import NormalCloud
+from slamkit.scanmatch.point_map import ScanNormals, scan_normals
 from slamkit.scanmatch.result import scan_points
 from slamkit.slam.laser_graph.backend import PoseGraph, optimize_consistent
 from slamkit.slam.laser_graph.config import LaserGraphConfig
@@ -45,11 +46,11 @@ from slamkit.slam.laser_graph.frontend import (
 )
 from slamkit.slam.laser_graph.loops import (
     LoopMatch,
+    SubmapCache,
     drift_distances,
     loop_candidates,
     pair_consistent,
     search_window,
-    submap,
     verify_closure,
 )
 
@@ -89,6 +90,8 @@ class LaserGraphSlam(EstimatorShell):
         self._graph = PoseGraph(config.optimizer)
         self._keys: list[Keyframe] = []
         self._ranges: list[FloatArray] = []
+        self._normals: dict[int, ScanNormals] = {}  # each keyframe's, once in a submap
+        self._submaps = SubmapCache(config.loops, self._scan_normals)
         self._counts: Counter[str] = Counter()
         self._pending = 0  # closures added since the last optimisation
         self._waiting: list[tuple[int, int, LoopMatch]] = []  # verified, no partner yet
@@ -234,23 +237,29 @@ class LaserGraphSlam(EstimatorShell):
         poses = self._graph.poses
         travelled = np.array([kf.travelled for kf in self._keys])
         drift = None if s.closure_travel is None else self._drift(travelled, k)
+        points = [kf.points for kf in self._keys]
         for j in loop_candidates(poses[:, :2], travelled, k, s, drift):
             self._counts["loop_candidates"] += 1
             window = search_window(
                 float(travelled[k] - travelled[j] if drift is None else drift[j]), s
             )
-            ref_points, cloud = submap(
-                poses, [kf.points for kf in self._keys], j, s.submap_keyframes // 2
-            )
+            ref_points, cloud, reference = self._submaps.get(poses, points, j)
             found = verify_closure(
                 ref_points, cloud, self._keys[k].points, between(poses[j], poses[k]),
-                window, s, self._cfg.normal_icp,
+                window, s, self._cfg.normal_icp, reference=reference,
             )  # fmt: skip
             if isinstance(found, str):
                 self._counts[f"loop_rejected:{found}"] += 1
                 continue
             self._counts["loops_verified"] += 1
             self._confirm(poses, (j, k, found))
+        self._submaps.advance()
+
+    def _scan_normals(self, i: int) -> ScanNormals:
+        """Keyframe ``i``'s normals in its own frame (computed once)."""
+        if i not in self._normals:
+            self._normals[i] = scan_normals(self._keys[i].points)
+        return self._normals[i]
 
     def _drift(self, travelled: FloatArray, k: int) -> FloatArray:
         return drift_distances(travelled, self.loop_closures(), k, self._cfg.loops)

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,14 +46,16 @@ from slamkit.geometry.angles import wrap_angle_float
 from slamkit.geometry.pose2 import between, compose, transform_points
 from slamkit.scanmatch.correlative import CorrelativeConfig, CorrelativeReference, correlative_match
 from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
-from slamkit.scanmatch.point_map import PointMap
+from slamkit.scanmatch.point_map import PointMap, ScanNormals
 from slamkit.scanmatch.result import MatchResult
 from slamkit.slam.laser_graph.config import LoopSettings
 
 __all__ = [
     "LoopMatch",
+    "SubmapCache",
     "drift_distances",
     "loop_candidates",
+    "loop_reference",
     "pair_consistent",
     "search_window",
     "submap",
@@ -139,21 +142,87 @@ def loop_candidates(
 
 
 def submap(
-    poses: FloatArray, points: list[FloatArray], j: int, half: int
+    poses: FloatArray,
+    points: list[FloatArray],
+    j: int,
+    half: int,
+    scan_normals: Callable[[int], ScanNormals] | None = None,
 ) -> tuple[FloatArray, NormalCloud]:
     """Keyframe ``j``'s submap in its own frame: the points of keyframes ``j - half, ...,
     j + half`` (those that exist, ``points[i]`` in keyframe ``i``'s frame, ``poses (K, 3)``),
     concatenated in keyframe and beam order, and the same points with normals as a
-    :class:`NormalCloud` (one per 2.5 cm voxel)."""
+    :class:`NormalCloud` (one per 2.5 cm voxel). ``scan_normals(i)``: keyframe ``i``'s
+    :func:`~slamkit.scanmatch.point_map.scan_normals` (a cache; None: computed here)."""
     lo, hi = max(j - half, 0), min(j + half + 1, len(points))
+    T_j = np.array([between(poses[j], poses[i]) for i in range(lo, hi)]).reshape(-1, 3)
+    scans = points[lo:hi]
+    parts = [transform_points(T_j[a], scans[a]) for a in range(hi - lo)]
     cloud = PointMap(0.025)
-    parts = []
-    for i in range(lo, hi):
-        T_j_i = between(poses[j], poses[i])
-        parts.append(transform_points(T_j_i, points[i]))
-        cloud.insert(T_j_i, points[i])
+    known = None if scan_normals is None else [scan_normals(i) for i in range(lo, hi)]
+    cloud.insert_many(T_j, scans, known)
     pts, normals = cloud.arrays()
     return np.concatenate(parts), NormalCloud.build(pts, normals)
+
+
+class SubmapCache:
+    """Candidates' submaps (:func:`submap`) and their correlative references
+    (:func:`loop_reference`), kept from one keyframe to the next while the poses of their
+    keyframes stay exactly as they were (no solve in between): consecutive keyframes often
+    share a candidate. ``scan_normals(i)``: keyframe ``i``'s normals (see :func:`submap`)."""
+
+    def __init__(
+        self, settings: LoopSettings, scan_normals: Callable[[int], ScanNormals] | None = None
+    ) -> None:
+        self.settings = settings
+        self.scan_normals = scan_normals
+        self._last: dict[int, _Submap] = {}
+        self._used: dict[int, _Submap] = {}
+
+    def get(
+        self, poses: FloatArray, points: list[FloatArray], j: int
+    ) -> tuple[FloatArray, NormalCloud, CorrelativeReference | None]:
+        """Candidate ``j``'s submap points, cloud and reference (None: no points, which
+        :func:`verify_closure` reports) at ``poses (K, 3)``."""
+        half = self.settings.submap_keyframes // 2
+        lo, hi = max(j - half, 0), min(j + half + 1, len(points))
+        key = (lo, hi, np.ascontiguousarray(poses[lo:hi]).tobytes())
+        found = self._used.get(j) or self._last.get(j)
+        if found is None or found[0] != key:
+            ref_points, cloud = submap(poses, points, j, half, self.scan_normals)
+            try:
+                reference: CorrelativeReference | None = loop_reference(ref_points, self.settings)
+            except MatchError:
+                reference = None
+            found = (key, ref_points, cloud, reference)
+        self._used[j] = found
+        return found[1], found[2], found[3]
+
+    def advance(self) -> None:
+        """The next keyframe: keep only the submaps asked for since the last call."""
+        self._last, self._used = self._used, {}
+
+
+_Submap = tuple[tuple[int, int, bytes], FloatArray, NormalCloud, CorrelativeReference | None]
+"""A cached submap: (its span and the poses it was built at, points, cloud, reference)."""
+
+
+def _search_config(settings: LoopSettings, window: tuple[float, float]) -> CorrelativeConfig:
+    radius, angle = window
+    return CorrelativeConfig(
+        window_xy=radius,
+        window_theta=angle,
+        resolution=settings.resolution,
+        sigma=settings.sigma,
+        levels=5,
+        min_score=settings.min_score,
+    )
+
+
+def loop_reference(reference_points: FloatArray, settings: LoopSettings) -> CorrelativeReference:
+    """The correlative reference of a submap's points ``(M, 2)`` for :func:`verify_closure`
+    (it does not depend on the search window, so one serves every search against the
+    submap). Raises :class:`MatchError` when there are no points."""
+    return CorrelativeReference.from_points(reference_points, _search_config(settings, (0, 0)))
 
 
 def verify_closure(
@@ -164,23 +233,19 @@ def verify_closure(
     window: tuple[float, float],
     settings: LoopSettings,
     icp_config: NormalIcpConfig,
+    *,
+    reference: CorrelativeReference | None = None,
 ) -> LoopMatch | str:
     """Match ``points (N, 2)`` (the new keyframe, its frame) to a candidate's submap from
     ``initial = T_j_k`` over ``window = (radius [m], angle [rad])``; the verified
     :class:`LoopMatch`, or the reason it was refused (``"low_score"``, ``"degenerate"``,
     ``"too_few_points"``, ``"ambiguous"``, ``"refine:<reason>"``, ``"inliers"``,
-    ``"refinement"``)."""
-    radius, angle = window
-    cfg = CorrelativeConfig(
-        window_xy=radius,
-        window_theta=angle,
-        resolution=settings.resolution,
-        sigma=settings.sigma,
-        levels=5,
-        min_score=settings.min_score,
-    )
+    ``"refinement"``). ``reference``: the submap's :func:`loop_reference`, when the caller
+    has it already."""
+    cfg = _search_config(settings, window)
     try:
-        reference = CorrelativeReference.from_points(reference_points, cfg)
+        if reference is None:
+            reference = loop_reference(reference_points, settings)
         coarse = correlative_match(reference, points, initial, cfg)
     except MatchError as exc:
         return exc.reason
