@@ -124,10 +124,6 @@ class LookupGrid:
         rows, cols = self.tables[0].shape
         return int(rows), int(cols)
 
-    def flat(self, level: int) -> FloatArray:
-        """Table ``level`` flattened (row-major), for gathers by flat index."""
-        return self.tables[level].reshape(-1)
-
     def cells(self, points: FloatArray) -> tuple[IntArray, IntArray]:
         """Row and column indices ``(...,)`` of the cells of world points ``(..., 2)``, not
         clipped to the table: a read at ``(row + di, col + dj)`` outside it is a miss

@@ -95,8 +95,9 @@ def one_line(exc: BaseException) -> str:
 def execute_task(task: RunTask) -> RunOutcome:
     """Run one point exactly as ``slamkit run`` does, in this thread's job process
     (:mod:`slamkit.sweep.job_process`: a Dask worker thread runs a job measurably slower than a
-    plain process does); any exception, the job process's death included, becomes a failed
-    outcome."""
+    plain process does). Any exception of the run, and the job process's death, becomes a
+    failed outcome; a job process that cannot be started raises (Dask then records the
+    task's error)."""
     from slamkit.sweep.job_process import JobProcessDied, run_in_job_process
 
     start = time.perf_counter()
