@@ -242,7 +242,8 @@ DATASETS: dict[str, DatasetEntry] = {
             "fr079-raw",
             "real",
             "Freiburg building 079, raw log (ROS 1 bag): 4934 scans × 360 beams (0.5°), laser "
-            "4 cm ahead, raw wheel odometry at the scan stamps, 1685 reference relations",
+            "4 cm behind the centre, raw wheel odometry at the scan stamps, 1685 reference "
+            "relations",
             "slamkit.datasets.rosbag:load_fr079_raw",
             files=("laser/rosbags/fr079.bag", "laser/relations/fr079.relations"),
         ),
