@@ -86,6 +86,10 @@ class LaserGraphSlam(EstimatorShell):
             config.plicp,
             config.normal_icp,
         )
+        reference = config.frontend.reference
+        if reference == "auto":
+            reference = "keyframe" if motion is None else "map"
+        self._reference = reference  # what the front end tracks against (resolved)
         self._local: NormalCloud | None = None  # the local map in the keyframe's frame
         self._graph = PoseGraph(config.optimizer)
         self._keys: list[Keyframe] = []
@@ -227,10 +231,11 @@ class LaserGraphSlam(EstimatorShell):
         if self._pending and k - self._last_solve >= self._cfg.loops.optimize_every:
             self._optimize()
         f = self._cfg.frontend
-        if f.reference == "map":
+        if self._reference == "map":
             self._local = local_map(
-                self._graph.poses, [kf.points for kf in self._keys], k, f.map_keyframes, f.voxel
-            )
+                self._graph.poses, [kf.points for kf in self._keys], k, f.map_keyframes,
+                f.voxel, self._scan_normals,
+            )  # fmt: skip
 
     def _close_loops(self, k: int) -> None:
         s = self._cfg.loops
@@ -308,6 +313,7 @@ class LaserGraphSlam(EstimatorShell):
         solves = self._graph.solves
         return {
             "odometry": "wheels" if self._tracker.velocity is None else NO_ODOMETRY,
+            "frontend_reference": self._reference,
             "scans": c["scans"],
             "keyframes": len(self._keys),
             "matched": c["matched"],

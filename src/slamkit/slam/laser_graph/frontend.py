@@ -1,8 +1,9 @@
 """The front end of graph-based laser SLAM: scan-to-keyframe tracking and the edges between
 neighbouring keyframes.
 
-Every scan is registered by point-to-line ICP to the current keyframe, starting from the
-last match composed with the wheels' motion since,
+Every scan is registered to the current keyframe (point-to-line ICP against its scan, or
+point-to-normal ICP against the local map in its frame, below), starting from the last
+match composed with the wheels' motion since,
 
     T_key_cur⁰ = T_key_prev ⊕ g(u)          (g: the data set's motion model)
 
@@ -12,8 +13,8 @@ the motion models allow since they are invariant under a change of world frame).
 becomes a keyframe when the offset reaches the keyframe distance or angle, or its match
 overlaps too little; the edge from the previous keyframe is its offset with the match's
 covariance (floored), or the odometry's covariance when the match failed. With the map
-reference (``reference = "map"``; the default is the keyframe) a scan is matched instead
-against the local map of the last few keyframes in the current keyframe's frame
+reference (``reference = "map"``, the default when there is odometry) a scan is matched
+instead against the local map of the last few keyframes in the current keyframe's frame
 (:func:`local_map`), by point-to-normal ICP with the odometry's prediction as a prior, so
 that a direction the map leaves unconstrained (a corridor) keeps the prediction.
 """
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,7 +42,7 @@ from slamkit.scanmatch.correlative import (
 from slamkit.scanmatch.icp import PreparedScan
 from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
 from slamkit.scanmatch.plicp import PlIcpConfig, plicp
-from slamkit.scanmatch.point_map import PointMap
+from slamkit.scanmatch.point_map import PointMap, ScanNormals
 from slamkit.scanmatch.result import MatchResult
 from slamkit.slam.laser_graph.config import FrontEndSettings
 
@@ -118,7 +120,7 @@ class Tracker:
         )
         self.velocity = ConstantVelocity() if model is None else None
         self._coasted: tuple[FloatArray, float] | None = None  # offset before, dt
-        self._coarse: tuple[PreparedScan, CorrelativeReference] | None = None
+        self._coarse: tuple[PreparedScan | NormalCloud, CorrelativeReference] | None = None
         self._cloud: tuple[PreparedScan, NormalCloud] | None = None  # the keyframe's
         self.track_cov: FloatArray = np.zeros((3, 3))
         """Covariance of the current offset: the last match's, propagated by the motion
@@ -164,15 +166,15 @@ class Tracker:
         offset; on success the offset becomes the match. Returns whether it matched
         (failures are counted by reason, gated matches as ``"gated"``)."""
         try:
+            start = self.offset if self.velocity is None else self._search(reference, points)
             if isinstance(reference, NormalCloud):
                 s_xy, s_t = self.settings.cov_floor_xy, math.radians(self.settings.cov_floor_deg)
                 prior = self.odometry_cov + np.diag([s_xy**2, s_xy**2, s_t**2])
                 result = normal_icp(
-                    reference, points, self.offset, self.normal_icp,
+                    reference, points, start, self.normal_icp,
                     prior_information=np.linalg.solve(prior, np.eye(3)),
                 )  # fmt: skip
             else:
-                start = self.offset if self.velocity is None else self._search(reference, points)
                 result = plicp(reference, points, start, self.plicp)
         except MatchError as exc:
             fused = None
@@ -222,10 +224,10 @@ class Tracker:
         except MatchError:
             return None
 
-    def _search(self, reference: PreparedScan, points: FloatArray) -> FloatArray:
+    def _search(self, reference: PreparedScan | NormalCloud, points: FloatArray) -> FloatArray:
         """Without odometry: the correlative optimum (:data:`COAST_SEARCH`) of ``points``
-        against the keyframe around the coasted prediction, where point-to-line ICP starts
-        (from a prediction this rough, ICP alone often settles in a local minimum)."""
+        against the keyframe (or the local map) around the coasted prediction, where ICP
+        starts (from a prediction this rough, ICP alone often settles in a local minimum)."""
         if self._coarse is None or self._coarse[0] is not reference:
             coarse = CorrelativeReference.from_points(reference.points, COAST_SEARCH)
             self._coarse = (reference, coarse)
@@ -281,12 +283,23 @@ def match_neighbours(
 
 
 def local_map(
-    poses: FloatArray, points: list[FloatArray], k: int, count: int, voxel: float
+    poses: FloatArray,
+    points: list[FloatArray],
+    k: int,
+    count: int,
+    voxel: float,
+    scan_normals: Callable[[int], ScanNormals] | None = None,
 ) -> NormalCloud:
     """The points of keyframes ``k - count + 1, ..., k`` (``points[i]`` in keyframe ``i``'s
-    frame, ``poses (K, 3)``) in keyframe ``k``'s frame, newest first, one per ``voxel``."""
+    frame, ``poses (K, 3)``) in keyframe ``k``'s frame, newest first, one per ``voxel``.
+    ``scan_normals(i)``: keyframe ``i``'s normals in its own frame (a cache; None: computed
+    here)."""
+    order = range(k, max(k - count, -1), -1)
     cloud = PointMap(voxel)
-    for i in range(k, max(k - count, -1), -1):
-        cloud.insert(between(poses[k], poses[i]), points[i])
+    cloud.insert_many(
+        between(poses[k], poses[list(order)]),
+        [points[i] for i in order],
+        None if scan_normals is None else [scan_normals(i) for i in order],
+    )
     pts, normals = cloud.arrays()
     return NormalCloud.build(pts, normals)
