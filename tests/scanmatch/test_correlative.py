@@ -287,6 +287,34 @@ def test_compiled_scores_equal_numpy_to_the_last_bit(seed: int) -> None:
     assert np.array_equal(fast.cov, slow.cov)
 
 
+@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba is not installed")
+def test_integer_scores_equal_float_scores_to_the_last_bit() -> None:
+    # The tables in quanta (int16) summed as integers give the float sums exactly, with the
+    # same -inf below a threshold, inside and outside the table.
+    rng = np.random.default_rng(3)
+    ref = _points(rooms_world(), np.array([*SPOTS[0], 0.2]), rng)
+    lk = CorrelativeReference.from_points(ref, CorrelativeConfig()).lookup
+    assert lk.counts is not None and lk.counts[0].dtype == np.int16
+    rows = rng.integers(-20, lk.shape[0] + 20, (7, 180))
+    cols = rng.integers(-20, lk.shape[1] + 20, (7, 180))
+    k, di, dj = rng.integers(0, 7, 500), rng.integers(-9, 9, 500), rng.integers(-9, 9, 500)
+    for level in (0, lk.levels - 1):
+        full = np.empty(500)
+        compiled.bounded_sums(lk.tables[level], rows, cols, k, di, dj, -np.inf, full)
+        mid = float(np.median(full))
+        for threshold in (-np.inf, mid, mid + 0.3 * QUANTUM, float(full.max())):
+            a, b = np.empty(500), np.empty(500)
+            compiled.bounded_sums(lk.tables[level], rows, cols, k, di, dj, threshold, a)
+            q = -(2**62) if math.isinf(threshold) else math.ceil(threshold / QUANTUM)
+            compiled.bounded_counts(lk.counts[level], rows, cols, k, di, dj, q, QUANTUM, b)
+            assert np.array_equal(a, b) and (b > -np.inf).any()
+    unquantised = lookup_from_log_table(
+        np.full((4, 4), -0.5), np.zeros(2), 0.1, floor=-2.0, inlier_log=-0.1, levels=2, pad=2
+    )
+    assert unquantised.counts is not None  # -0.5 is a multiple of the quantum
+    assert replace(unquantised, tables=(unquantised.tables[0] + 1e-6,)).counts is None
+
+
 def test_smear_values() -> None:
     sigma, f = 0.05, 0.1
     d = np.array([0.0, sigma, 2 * sigma, 100.0])

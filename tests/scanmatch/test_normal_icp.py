@@ -124,3 +124,13 @@ def test_config_is_validated() -> None:
         NormalIcpConfig(huber_k=0.0)
     with pytest.raises(ConfigError, match="max_iterations"):
         NormalIcpConfig(max_iterations=0)
+
+
+def test_the_robust_scale_median_is_numpys() -> None:
+    from slamkit.scanmatch.covariance import median
+
+    rng = np.random.default_rng(0)
+    for n in (1, 2, 3, 10, 11, 180, 181):
+        for _ in range(50):
+            x = rng.standard_normal(n) * rng.uniform(1e-3, 10.0)
+            assert median(x) == float(np.median(x))

@@ -21,6 +21,7 @@ from slamkit._validation import FloatArray
 
 __all__ = [
     "AVAILABLE",
+    "bounded_counts",
     "bounded_sums",
     "enabled",
     "ieee_remainder",
@@ -121,6 +122,45 @@ def bounded_sums(
             else:
                 total += floor
         out[u] = -np.inf if total < threshold else total
+
+
+@jit
+def bounded_counts(
+    table: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    k: np.ndarray,
+    di: np.ndarray,
+    dj: np.ndarray,
+    threshold: int,
+    quantum: float,
+    out: FloatArray,
+) -> None:
+    """:func:`bounded_sums` on an integer ``table`` of quanta (``value = count × quantum``),
+    summed in ``int64`` and compared with the integer ``threshold`` (in quanta; a sum of
+    integers is below a real ``t`` exactly when it is below ``ceil(t)``): ``out[u]`` is the
+    sum times ``quantum``, the float sum of the quantised values to the last bit (every
+    partial sum is exact in both), or ``-inf`` below the threshold. The integer add is a
+    shorter dependency chain than the float one, and the table a quarter of the bytes."""
+    n_rows, n_cols = table.shape
+    flat = table.reshape(-1)
+    floor = np.int64(flat[0])
+    nr = np.uint64(n_rows)
+    nc = np.uint64(n_cols)
+    for u in range(k.shape[0]):
+        row = k[u]
+        a, b = di[u], dj[u]
+        total = np.int64(0)
+        for p in range(rows.shape[1]):
+            r = rows[row, p] + a
+            c = cols[row, p] + b
+            if np.uint64(r) < nr and np.uint64(c) < nc:
+                total += np.int64(flat[r * n_cols + c])
+                if total < threshold:
+                    break
+            else:
+                total += floor
+        out[u] = -np.inf if total < threshold else total * quantum
 
 
 @jit

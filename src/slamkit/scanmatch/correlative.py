@@ -62,6 +62,7 @@ from slamkit.localization.likelihood_field import LikelihoodField
 from slamkit.maps import FREE_THRESHOLD, OCCUPIED_THRESHOLD, OccupancyGrid
 from slamkit.scanmatch import compiled
 from slamkit.scanmatch.lookup import (
+    QUANTUM,
     LookupGrid,
     log_likelihood_of_distance,
     lookup_from_log_table,
@@ -332,7 +333,13 @@ def _score(
     rows, cols = cells
     out = np.empty(k.size)
     if compiled.enabled():
-        compiled.bounded_sums(table, rows, cols, k, i, j, threshold, out)
+        if lookup.counts is not None:  # the same sums in integer quanta (exact)
+            compiled.bounded_counts(
+                lookup.counts[level], rows, cols, k, i, j, _quanta_below(threshold),
+                QUANTUM, out,
+            )  # fmt: skip
+        else:
+            compiled.bounded_sums(table, rows, cols, k, i, j, threshold, out)
         return out
     step = max(1, _CHUNK_ELEMENTS // max(rows.shape[1], 1))
     for a in range(0, k.size, step):
@@ -343,6 +350,14 @@ def _score(
         np.sum(values, axis=1, out=out[a:b])
     out[out < threshold] = -np.inf
     return out
+
+
+def _quanta_below(threshold: float) -> int:
+    """The integer ``c`` with ``n < c ⇔ n · QUANTUM < threshold`` for every integer ``n``:
+    ``ceil(threshold / QUANTUM)``, clamped far beyond any sum for infinite thresholds."""
+    if math.isinf(threshold):
+        return -(2**62) if threshold < 0 else 2**62
+    return math.ceil(threshold / QUANTUM)
 
 
 def _level_values(table: FloatArray, floor: float, rows: IntArray, cols: IntArray) -> FloatArray:

@@ -51,6 +51,7 @@ __all__ = [
     "degenerate_error",
     "estimate_normals",
     "line_jacobian",
+    "median",
     "neighbour_table",
     "normal_distance_covariance",
     "normalised_min_eigenvalue",
@@ -135,6 +136,18 @@ def estimate_normals(
     ok = count >= 3
     normals = np.column_stack([-np.sin(phi), np.cos(phi)]) * ok[:, None]
     return normals, ok
+
+
+def median(values: FloatArray) -> float:
+    """``np.median`` of a non-empty 1-D array (the middle order statistic, or the mean of the
+    two middle ones for an even count), by one partition without ``np.median``'s general
+    axis handling: the robust scale of every ICP iteration takes one."""
+    n = values.shape[0]
+    h = n // 2
+    if n % 2:
+        return float(np.partition(values, h)[h])
+    part = np.partition(values, (h - 1, h))
+    return float((part[h - 1] + part[h]) / 2.0)
 
 
 def line_jacobian(current: FloatArray, normals: FloatArray, theta: float) -> FloatArray:
@@ -289,7 +302,7 @@ def normal_distance_covariance(
     matcher: ``H = Σ J_iᵀ J_i`` over the kept rows of ``jacobian (m, 3)`` and ``σ̂ = 1.4826 ·
     median |e_i|`` over all ``residuals (m,)`` (robust, and not shrunk by the trimming)."""
     jk = jacobian[kept]
-    sigma = 1.4826 * float(np.median(np.abs(residuals)))
+    sigma = 1.4826 * median(np.abs(residuals))
     h = jk.T @ jk
     cov = sigma * sigma * np.linalg.solve(h, np.eye(3))
     return 0.5 * (cov + cov.T)  # symmetric to rounding

@@ -36,7 +36,7 @@ from scipy.spatial import cKDTree
 
 from slamkit._validation import FloatArray, as_array
 from slamkit.errors import ConfigError, CovarianceError, MatchError
-from slamkit.scanmatch.covariance import line_jacobian, require_constrained
+from slamkit.scanmatch.covariance import line_jacobian, median, require_constrained
 from slamkit.scanmatch.result import MatchResult, require_points
 
 __all__ = ["NormalCloud", "NormalIcpConfig", "normal_icp"]
@@ -181,7 +181,7 @@ def normal_icp(
         jac = line_jacobian(qk, nk, th)
         if it == 1 and lam is None:
             require_constrained(jac, qk, cfg.min_eigenvalue, "normal-icp")
-        sigma = max(1.4826 * float(np.median(np.abs(e))), cfg.noise_floor)
+        sigma = max(1.4826 * median(np.abs(e)), cfg.noise_floor)
         w = np.minimum(1.0, cfg.huber_k * sigma / np.maximum(np.abs(e), 1e-300))
         jw = jac * w[:, None]
         h = jw.T @ jac
