@@ -47,9 +47,9 @@ from slamkit.slam.laser_graph.frontend import (
 from slamkit.slam.laser_graph.loops import (
     LoopMatch,
     SubmapCache,
+    consistent_partners,
     drift_distances,
     loop_candidates,
-    pair_consistent,
     search_window,
     verify_closure,
 )
@@ -275,13 +275,15 @@ class LaserGraphSlam(EstimatorShell):
         s = self._cfg.loops
         j, k, found = new
         self._waiting = [w for w in self._waiting if k - w[1] <= s.pair_keyframes]
-        partners = [
+        near = [
             w
             for w in [*self._waiting, *self._confirmed]
-            if abs(w[0] - j) <= s.pair_keyframes
-            and 0 < k - w[1] <= s.pair_keyframes
-            and pair_consistent(poses, (j, k, found.pose), (w[0], w[1], w[2].pose), s)
+            if abs(w[0] - j) <= s.pair_keyframes and 0 < k - w[1] <= s.pair_keyframes
         ]
+        agree = consistent_partners(
+            poses, (j, k, found.pose), [(w[0], w[1], w[2].pose) for w in near], s
+        )
+        partners = [w for w, ok in zip(near, agree, strict=True) if ok]
         if not partners:
             self._waiting.append(new)
             return

@@ -53,6 +53,7 @@ from slamkit.slam.laser_graph.config import LoopSettings
 __all__ = [
     "LoopMatch",
     "SubmapCache",
+    "consistent_partners",
     "drift_distances",
     "loop_candidates",
     "loop_reference",
@@ -289,10 +290,28 @@ def pair_consistent(
     """Whether closures ``a = (j, k, T_j_k)`` and ``b = (j', k', T_j'_k')`` agree: the cycle
     ``between(T_j_k, T_j_j' ⊕ T_j'_k' ⊕ T_k'_k)`` (chains at ``poses (K, 3)``) within
     ``pair_xy`` [m] and ``pair_deg``."""
+    return consistent_partners(poses, a, [b], settings)[0]
+
+
+def consistent_partners(
+    poses: FloatArray,
+    a: tuple[int, int, FloatArray],
+    others: list[tuple[int, int, FloatArray]],
+    settings: LoopSettings,
+) -> list[bool]:
+    """:func:`pair_consistent` of ``a`` with each of ``others``, the cycles composed for all
+    of them at once (the same numbers as one at a time)."""
+    if not others:
+        return []
     j, k, z = a
-    j2, k2, z2 = b
+    j2 = np.array([o[0] for o in others])
+    k2 = np.array([o[1] for o in others])
+    z2 = np.array([o[2] for o in others], dtype=np.float64).reshape(-1, 3)
     via = compose(compose(between(poses[j], poses[j2]), z2), between(poses[k2], poses[k]))
     e = between(z, via)
-    return math.hypot(e[0], e[1]) <= settings.pair_xy and abs(
-        wrap_angle_float(float(e[2]))
-    ) <= math.radians(settings.pair_deg)
+    limit = math.radians(settings.pair_deg)
+    return [
+        math.hypot(float(x), float(y)) <= settings.pair_xy
+        and abs(wrap_angle_float(float(t))) <= limit
+        for x, y, t in e.tolist()
+    ]
