@@ -312,7 +312,12 @@ def test_integer_scores_equal_float_scores_to_the_last_bit() -> None:
         np.full((4, 4), -0.5), np.zeros(2), 0.1, floor=-2.0, inlier_log=-0.1, levels=2, pad=2
     )
     assert unquantised.counts is not None  # -0.5 is a multiple of the quantum
-    assert replace(unquantised, tables=(unquantised.tables[0] + 1e-6,)).counts is None
+    pairs = zip(unquantised.counts, unquantised.tables, strict=True)
+    assert all(np.array_equal(c * QUANTUM, t) for c, t in pairs)
+    off = replace(unquantised, tables=(unquantised.tables[0] + 1e-6,), counts=None)
+    assert off.counts is None  # not multiples of the quantum: the float sums are used
+    with pytest.raises(InputError, match="counts"):
+        replace(unquantised, tables=(unquantised.tables[0],))  # two levels of counts, one table
 
 
 def test_smear_values() -> None:

@@ -94,10 +94,12 @@ class LookupGrid:
     * ``pad`` (cells): width of the border of value ``floor`` around the reference.
     * ``floor``: the table value of a miss (the minimum of every table).
     * ``inlier_log``: a point whose table value is at least this counts as an inlier.
-    * ``counts`` (derived): the same tables in units of :data:`QUANTUM`, as ``int16`` (or
-      ``int32`` when a value does not fit), when every value is such a multiple; None
-      otherwise. Integer sums of them are the float sums exactly (module docstring), and a
-      table a quarter the size and an integer add are what the compiled scoring reads.
+    * ``counts``: the same tables in units of :data:`QUANTUM`, as ``int16`` (or ``int32``
+      when a value does not fit), when every value is such a multiple; None otherwise.
+      Integer sums of them are the float sums exactly (module docstring), and a table a
+      quarter the size and an integer add are what the compiled scoring reads. Derived
+      from ``tables`` when not given (:func:`lookup_from_log_table` gives them: it builds
+      the pyramid on the counts).
 
     Arrays are read-only; build with :func:`lookup_from_points` or :func:`lookup_from_log_table`.
     """
@@ -108,7 +110,7 @@ class LookupGrid:
     pad: int
     floor: float
     inlier_log: float
-    counts: tuple[NDArray[np.integer], ...] | None = field(init=False, default=None)
+    counts: tuple[NDArray[np.integer], ...] | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if not self.tables:
@@ -120,7 +122,13 @@ class LookupGrid:
             t.flags.writeable = False
         object.__setattr__(self, "resolution", as_positive(self.resolution, "resolution"))
         object.__setattr__(self, "origin_xy", as_array(self.origin_xy, "origin_xy", (2,)))
-        object.__setattr__(self, "counts", _quanta(self.tables))
+        if self.counts is None:
+            object.__setattr__(self, "counts", _quanta(self.tables))
+        elif len(self.counts) != len(self.tables) or any(c.shape != shape for c in self.counts):
+            raise InputError("counts: expected one table of counts per table, of one shape")
+        else:
+            for c in self.counts:
+                c.flags.writeable = False
 
     @property
     def levels(self) -> int:
@@ -197,7 +205,7 @@ def join_consecutive(points: FloatArray, max_gap: float, spacing: float) -> Floa
     return np.concatenate([pts, inner])
 
 
-def _max_pyramid(fine: FloatArray, levels: int) -> tuple[FloatArray, ...]:
+def _max_pyramid(fine: np.ndarray, levels: int) -> tuple[np.ndarray, ...]:
     """``(L, M_1, ..., M_{levels-1})``: ``M_h`` is the max of four copies of ``M_{h-1}``
     shifted by ``s = 2^(h-1)`` rows/columns, edge values repeated past the end. The max over
     the 2 × 2 shifts is taken as one over rows, then one over columns (the same values)."""
@@ -242,11 +250,19 @@ def lookup_from_log_table(
         raise InputError(f"pad: expected an integer >= 1, got {pad!r}")
     floor = float(quantize(np.array(floor)))
     inlier = float(quantize(np.array(inlier_log)))
-    fine = np.pad(
-        quantize(np.maximum(table, floor)), int(pad), mode="constant", constant_values=floor
-    )
+    # The pyramid is built on the integer counts (max commutes with the scaling), and the
+    # float tables are the counts times the quantum: the same values as quantising each.
+    low = round(floor / QUANTUM)
+    scaled = np.round(np.maximum(table, floor) / QUANTUM)
+    high = float(scaled.max())
+    if not math.isfinite(high) or max(-low, high) >= 2**31:
+        raise InputError(f"log-likelihood table: values must lie within ±2^19 nat, got {high}")
+    dtype = np.int16 if max(-low, high) < 2**15 else np.int32
+    fine = np.pad(scaled.astype(dtype), int(pad), mode="constant", constant_values=low)
+    counts = _max_pyramid(fine, int(levels))
+    tables = tuple(c * QUANTUM for c in counts)
     origin = as_array(origin_xy, "origin_xy", (2,)) - int(pad) * resolution
-    return LookupGrid(_max_pyramid(fine, int(levels)), resolution, origin, int(pad), floor, inlier)
+    return LookupGrid(tables, resolution, origin, int(pad), floor, inlier, counts)
 
 
 def lookup_from_points(
