@@ -275,6 +275,31 @@ def test_aces_first_600_s_relations(data_root) -> None:
     assert rel.rotation_mean_deg < 0.5 * odo.rotation_mean_deg
 
 
+@pytest.mark.realdata
+def test_freiburg_079_is_scored_in_the_logs_robot_frame(data_root) -> None:
+    """The first 300 s of raw Freiburg 079 (345 relations): with the registered mounting
+    (the laser 4 cm behind the centre, the original log's robot_frontlaser_offset) measured
+    0.0255 ± 0.017 m; with the bag's /tf_static (4 cm ahead) 0.0376 ± 0.038 m, 1.47× worse
+    — the benchmark's relations are in the log's robot frame (docs/relations.md)."""
+    pytest.importorskip("rosbags", reason="the laser extra (rosbags) is not installed")
+    from slamkit.eval.relations import relation_errors
+
+    if not (data_root / "laser/rosbags/fr079.bag").exists():
+        pytest.skip(f"laser/rosbags/fr079.bag not under {data_root}")
+    data = load_dataset("fr079-raw", data_root=data_root)
+    assert data.laser.mounting == (-0.04, 0.0, 0.0)
+    t0 = data.events[0].t
+    data = dataclasses.replace(data, events=tuple(e for e in data.events if e.t <= t0 + 300.0))
+    scores = []
+    for config in ({}, {"mounting": (0.04, 0.0, 0.0)}):
+        result = run("graph-slam", data, seed=0, config=config)
+        rel = relation_errors(result.times, result.poses, data.truth.relations)
+        assert rel.count >= 340
+        scores.append(rel.translation_mean)
+    assert scores[0] < 0.03
+    assert scores[1] > 1.3 * scores[0]
+
+
 def _without_odometry(data):
     """The data set as a laser-only log: no motion model, the scans alone."""
     scans = tuple(e for e in data.events if isinstance(e, LaserScan))
