@@ -94,7 +94,8 @@ class GridRbpfConfig(Section):
     prediction (wheels that slipped): the scan is then also registered by a correlative
     search of ``± recovery_window_xy``, ``± recovery_window_deg`` around the prediction
     (refined by the same Gauss-Newton match), and whichever of the two poses has the larger
-    ``log p(z | x, m) + log p(x | x', u)`` is the proposal's mode; 0: never."""
+    ``log p(z | x, m) / likelihood_temperature + log p(x | x', u)`` is the proposal's mode;
+    0: never."""
     recovery_window_xy: float = setting(0.5, finite_above(0.0), "a finite number > 0")
     """[m] ..."""
     recovery_window_deg: float = setting(30.0, finite_above(0.0), "a finite number > 0")

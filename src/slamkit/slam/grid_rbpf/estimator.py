@@ -331,7 +331,8 @@ class GridRbpf(EstimatorShell):
                 if math.hypot(corr[0], corr[1]) > gate_xy or abs(corr[2]) > gate_th:
                     self._counts["failed:gated"] += 1
                     result = None
-            if field is not None and (result is None or result.score < cfg.recovery_score):
+            poor = result is None or result.score < cfg.recovery_score
+            if field is not None and cfg.recovery_score > 0 and poor:
                 result = self._recover(field, scan, points, predicted, motion_cov, result)
             self._seconds["match"] += time.perf_counter() - tic
             tic = time.perf_counter()
@@ -378,7 +379,9 @@ class GridRbpf(EstimatorShell):
     ) -> MatchResult | None:
         """The wide match of a poor one (``GridRbpfConfig.recovery_score``): a correlative
         search around ``predicted`` refined by Gauss-Newton; kept if it lies within the
-        window and its ``log p(z | x, m) + log p(x | x', u)`` beats the local match's."""
+        window and its ``log p(z | x, m) / T + log p(x | x', u)`` beats the local match's,
+        with ``T = likelihood_temperature``: the evidence of the scan as the weights count
+        it (its beams are far from independent), so that a jump has to pay for itself."""
         try:
             wide = match_to_map(
                 field,
@@ -397,7 +400,7 @@ class GridRbpf(EstimatorShell):
             return local
         if local is not None:
             poses = np.stack([local.pose, wide.pose])
-            t = self._cfg.proposal_temperature
+            t = self._cfg.likelihood_temperature
             log_f = scan.log_likelihood(field, poses, t) + motion_log_density(
                 poses, predicted, motion_cov
             )
