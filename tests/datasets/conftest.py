@@ -36,6 +36,7 @@ class OdomSpec:
     pose: tuple[float, float, float]
     bag_ns: int | None = None  # when recorded; None: the stamp
     quaternion: tuple[float, float, float, float] | None = None  # x y z w; None: from yaw
+    speed: float = 0.0  # the twist's linear.x [m/s]
 
 
 @dataclass
@@ -83,7 +84,9 @@ def _messages(ts: Any, spec: BagSpec, ros1: bool) -> list[tuple[str, str, int, A
         pose = T["geometry_msgs/msg/Pose"](
             position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0), orientation=Quat(*q)
         )
-        twist = T["geometry_msgs/msg/Twist"](linear=Vec(0.0, 0.0, 0.0), angular=Vec(0.0, 0.0, 0.0))
+        twist = T["geometry_msgs/msg/Twist"](
+            linear=Vec(o.speed, 0.0, 0.0), angular=Vec(0.0, 0.0, 0.0)
+        )
         msg = T["nav_msgs/msg/Odometry"](
             header=header(o.stamp_ns, "odom"),
             child_frame_id="base_link",

@@ -132,6 +132,31 @@ def test_odometry_gap_within_the_limit_interpolates_across_it(bags, tmp_path):
     assert float(wrap_angle(pose[2] - (3.0 + 0.2 * 2.5))) == pytest.approx(0.0, abs=1e-12)
 
 
+def test_odometry_direction_twist_reverses_the_steps_the_speed_says_went_backward(bags, tmp_path):
+    # Poses that always advance along x (heading 0.3 rad), as if integrated from the
+    # unsigned speed, while the twist says messages 1 -> 3 reversed.
+    yaw = 0.3
+    step = 0.1 * np.array([math.cos(yaw), math.sin(yaw)])
+    speeds = [0.5, -0.5, -0.5, -0.5, 0.5]
+    odometry = [
+        bags.Odom(round(t * S), (k * step[0], k * step[1], yaw), speed=v)
+        for k, (t, v) in enumerate(zip(ODOM_T, speeds, strict=True))
+    ]
+    path = _write(bags, tmp_path, _spec(bags, odometry=odometry))
+    as_poses = np.array([e.pose for e in _odometry(read_rosbag(path))])
+    signed = read_rosbag(path, options={"odometry_direction": "twist"})
+    by_twist = np.array([e.pose for e in _odometry(signed)])
+    # Steps 0->1 (speeds 0.5, -0.5: sum 0, kept) and 3->4 (sum 0, kept) go forward; steps
+    # 1->2 and 2->3 go backward: the poses at messages 0..4 are at 0, 1, 0, -1, 0 steps.
+    along = np.array([0.0, 1.0, 0.0, -1.0, 0.0])
+    # Scans at 10.0, 10.1, 10.2, 10.3 s: halfway between messages 0-1, 1-2, 2-3, 3-4.
+    expected = 0.5 * (along[:-1] + along[1:])[:, None] * step
+    np.testing.assert_allclose(by_twist[:, :2], expected, atol=1e-12)
+    np.testing.assert_allclose(by_twist[:, 2], as_poses[:, 2], atol=1e-15)  # headings kept
+    np.testing.assert_allclose(as_poses[:, :2], (np.arange(4) + 0.5)[:, None] * step, atol=1e-12)
+    assert signed.metadata["config"]["odometry_direction"] == "twist"
+
+
 def test_mounting_chains_static_transforms_and_can_be_given(bags, tmp_path):
     tf = [("base_link", "mount", (0.1, 0.0, math.pi / 2)), ("mount", "laser", (0.2, 0.0, 0.0))]
     path = _write(bags, tmp_path, _spec(bags, tf_static=tf))
@@ -399,3 +424,33 @@ def test_intel_raw_odometry_scores_as_published_on_short_relations(freiburg):
     rot = float(np.degrees(np.mean(np.abs(wrap_angle(err[:, 2])))))
     # measured: 0.0331 m, 1.70°
     assert 0.030 < trans < 0.036 and 1.6 < rot < 1.8, (trans, rot)
+
+
+@pytest.mark.realdata
+def test_fr079_raw_odometry_backs_up_where_the_relations_do(freiburg, data_root):
+    """Freiburg 079's /odom poses never go backward (integrated from the unsigned speed);
+    the registered fr079-raw takes the direction from the twist (docs/relations.md)."""
+
+    def short_relations(ds):
+        rel = ds.truth.relations
+        times = np.array([e.t for e in _odometry(ds)])
+        poses = np.array([e.pose for e in _odometry(ds)])
+        short = (rel.t2 - rel.t1) < 3.0
+        est = between(
+            poses[np.searchsorted(times, rel.t1[short])],
+            poses[np.searchsorted(times, rel.t2[short])],
+        )
+        err = between(rel.deltas[short], est)
+        back = rel.deltas[short][:, 0] < -0.1
+        agree = int(np.count_nonzero(est[back, 0] < 0.0))
+        return float(np.mean(np.hypot(err[:, 0], err[:, 1]))), int(back.sum()), agree
+
+    as_poses = load_dataset(
+        "fr079-raw", options={"odometry_direction": "pose"}, data_root=data_root
+    )
+    # measured: 966 short relations, 27 of them backing up more than 0.1 m;
+    # 0.0569 m with the poses' direction (none backs up), 0.0380 m with the twist's
+    trans, back, agree = short_relations(as_poses)
+    assert back == 27 and agree == 0 and 0.055 < trans < 0.059, (trans, back, agree)
+    trans, back, agree = short_relations(freiburg["fr079-raw"])
+    assert back == 27 and agree == 27 and 0.036 < trans < 0.040, (trans, back, agree)

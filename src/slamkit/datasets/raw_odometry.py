@@ -58,6 +58,7 @@ __all__ = [
     "raw_laser_dataset",
     "raw_odometry_cov",
     "repeat_mask",
+    "signed_by_speed",
 ]
 
 DEFAULT_MAX_ODOM_GAP = 0.5
@@ -137,6 +138,24 @@ class OdometryAtScans:
             "after_odometry": self.after,
             "odometry_gap": int(self.in_gap.sum()),
         }
+
+
+def signed_by_speed(poses: FloatArray, speed: FloatArray) -> FloatArray:
+    """Odometry poses ``(M, 3)`` whose steps go backward where the reported forward
+    ``speed (M,)`` [m/s] says the robot reversed: for a log whose poses were integrated from
+    the unsigned speed (they always advance) while its velocities keep the sign.
+
+    Step ``i`` (messages ``i-1`` → ``i``) travels ``≈ (v_{i-1} + v_i) Δt / 2`` (trapezoid):
+    where that is negative its translation is reversed, ``Δp_i → -Δp_i`` in the world frame
+    (``-Δp`` in the frame of pose ``i-1``, the same thing); the headings are kept as they
+    are (the wheels' turning is signed either way), and the first pose stays. Steps whose
+    speeds sum to zero or more are kept."""
+    step = np.diff(poses[:, :2], axis=0)
+    backward = (speed[:-1] + speed[1:]) < 0.0
+    step[backward] *= -1.0
+    out: FloatArray = poses.copy()
+    out[1:, :2] = poses[0, :2] + np.cumsum(step, axis=0)
+    return out
 
 
 def odometry_at_scans(

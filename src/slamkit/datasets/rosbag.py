@@ -66,6 +66,7 @@ from slamkit.datasets.raw_odometry import (
     raw_laser_dataset,
     raw_odometry_cov,
     repeat_mask,
+    signed_by_speed,
 )
 from slamkit.datasets.relations import Relations, read_relations
 from slamkit.datasets.rosbag_read import BagContents, read_bag
@@ -114,11 +115,14 @@ FREIBURG_BAGS: dict[str, FreiburgBag] = {
     # The bag's /tf_static puts the laser 4 cm ahead of base_link; the original CARMEN log
     # says 4 cm behind (PARAM robot_frontlaser_offset -0.04), and the benchmark's relations
     # are in that robot frame: graph SLAM's path scores 0.068 m read with +0.04 and 0.033 m
-    # with -0.04 (docs/relations.md, "Which robot frame").
+    # with -0.04 (docs/relations.md, "Which robot frame"). Its /odom poses never go
+    # backward, while the twist reverses on 514 of 8,950 steps (10.9 m): the poses were
+    # integrated from the unsigned speed, so they follow the twist's sign
+    # (docs/relations.md, "Freiburg 079's odometry backs up forward").
     "fr079-raw": FreiburgBag(
         "laser/rosbags/fr079.bag",
         "laser/relations/fr079.relations",
-        {"mounting": FR079_MOUNTING},
+        {"mounting": FR079_MOUNTING, "odometry_direction": "twist"},
     ),
 }
 """Registered name → the files of the Freiburg benchmark's raw logs and their defaults."""
@@ -162,6 +166,11 @@ class RosbagOptions:
     """Nominal per-step translation noise of the odometry [m] (for the MotionSpec)."""
     odometry_sigma_rot_deg: float = RAW_ODOMETRY_SIGMA_ROT_DEG
     """Nominal per-step rotation noise of the odometry [deg] (for the MotionSpec)."""
+    odometry_direction: Literal["pose", "twist"] = "pose"
+    """Which way the odometry travels: ``"pose"``, as its poses say; ``"twist"``, each step
+    between two messages backward where the twist's forward speed (``linear.x``) is
+    negative (:func:`~slamkit.datasets.raw_odometry.signed_by_speed`): for a bag whose poses
+    were integrated from the unsigned speed (Freiburg 079's)."""
     lenient: bool = False
     """Drop bad messages (mark bad beams no return) and count them instead of raising."""
     max_duration_s: float | None = None
@@ -180,6 +189,10 @@ class RosbagOptions:
         m = self.mounting
         if m is not None and (len(m) != 3 or not all(math.isfinite(v) for v in m)):
             raise ConfigError(f"mounting: expected three finite numbers (x, y, yaw), got {m!r}")
+        if self.odometry_direction not in ("pose", "twist"):
+            raise ConfigError(
+                f"odometry_direction: expected 'pose' or 'twist', got {self.odometry_direction!r}"
+            )
         if self.stamps not in ("header", "bag"):
             raise ConfigError(f"stamps: expected 'header' or 'bag', got {self.stamps!r}")
         for name in ("range_sigma", "odometry_sigma_trans", "odometry_sigma_rot_deg"):
@@ -319,7 +332,10 @@ def _odometry(
         idx[~order],
         "stamp not later than the messages before it (out of order)",
     )
-    return t[order], poses[order], int(np.count_nonzero(repeats))
+    t, poses = t[order], poses[order]
+    if opts.odometry_direction == "twist":
+        poses = signed_by_speed(poses, o.speed[idx[order]])
+    return t, poses, int(np.count_nonzero(repeats))
 
 
 def _odometry_at_scans(

@@ -66,13 +66,15 @@ class ScanMessages:
 @dataclass(frozen=True, eq=False)
 class OdometryMessages:
     """The Odometry messages of one topic in bag order: stamps, ``position (M, 2)`` (x, y)
-    and ``orientation (M, 4)`` (x, y, z, w) of the pose."""
+    and ``orientation (M, 4)`` (x, y, z, w) of the pose, and ``speed (M,)``, the twist's
+    forward velocity ``linear.x`` [m/s] (0 in bags that do not fill the twist in)."""
 
     sec: NDArray[np.int64]
     nsec: NDArray[np.int64]
     bag_times: FloatArray
     position: FloatArray
     orientation: FloatArray
+    speed: FloatArray
 
 
 @dataclass(frozen=True)
@@ -175,7 +177,7 @@ def _read_messages(
     s_geo: list[tuple[float, float, float, float, float]] = []
     s_ranges: list[NDArray[np.float32]] = []
     o_int: list[tuple[int, int, int]] = []
-    o_pose: list[tuple[float, float, float, float, float, float]] = []
+    o_pose: list[tuple[float, float, float, float, float, float, float]] = []
     scan_frame = odom_child = ""
     deserialize = reader.deserialize
     for conn, ts, raw in reader.messages(connections=[*scan_conns, *odom_conns]):
@@ -193,7 +195,7 @@ def _read_messages(
                 odom_child = str(msg.child_frame_id)
             pos, q = msg.pose.pose.position, msg.pose.pose.orientation
             o_int.append((stamp.sec, stamp.nanosec, ts))
-            o_pose.append((pos.x, pos.y, q.x, q.y, q.z, q.w))
+            o_pose.append((pos.x, pos.y, q.x, q.y, q.z, q.w, msg.twist.twist.linear.x))
     edges: dict[str, _Edge] = {}
     for topic, window in (("/tf_static", None), ("/tf", TF_WINDOW)):
         if topics.get(topic) != TF_MESSAGE:
@@ -205,7 +207,7 @@ def _read_messages(
     si = np.asarray(s_int, dtype=np.int64).reshape(-1, 3)
     sg = np.asarray(s_geo, dtype=np.float64).reshape(-1, 5)
     oi = np.asarray(o_int, dtype=np.int64).reshape(-1, 3)
-    op = np.asarray(o_pose, dtype=np.float64).reshape(-1, 6)
+    op = np.asarray(o_pose, dtype=np.float64).reshape(-1, 7)
     scans = ScanMessages(
         sec=si[:, 0],
         nsec=si[:, 1],
@@ -223,7 +225,8 @@ def _read_messages(
         nsec=oi[:, 1],
         bag_times=_ns_seconds(oi[:, 2]),
         position=op[:, :2].copy(),
-        orientation=op[:, 2:].copy(),
+        orientation=op[:, 2:6].copy(),
+        speed=op[:, 6].copy(),
     )
     return BagContents(
         ros1=not reader.is2,

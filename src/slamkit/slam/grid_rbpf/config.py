@@ -88,6 +88,18 @@ class GridRbpfConfig(Section):
     motion model is sampled instead) ..."""
     max_correction_deg: float = setting(15.0, finite_above(0.0), "a finite number > 0")
     """... or turned more than this [deg]."""
+    recovery_score: float = setting(0.5, fraction(), "a fraction in [0, 1]")
+    """A match whose score (mean per-beam likelihood relative to a perfect hit) is below
+    this, or that failed or was gated, may have stopped in a local optimum near a wrong
+    prediction (wheels that slipped): the scan is then also registered by a correlative
+    search of ``± recovery_window_xy``, ``± recovery_window_deg`` around the prediction
+    (refined by the same Gauss-Newton match), and whichever of the two poses has the larger
+    ``log p(z | x, m) / likelihood_temperature + log p(x | x', u)`` is the proposal's mode;
+    0: never."""
+    recovery_window_xy: float = setting(0.5, finite_above(0.0), "a finite number > 0")
+    """[m] ..."""
+    recovery_window_deg: float = setting(30.0, finite_above(0.0), "a finite number > 0")
+    """... [deg]: Freiburg 079's wheels err by up to 26° between two updates."""
     resample_threshold: float = setting(0.5, fraction(), "a fraction in [0, 1]")
     """Resample (low variance) when ``N_eff < threshold · N``."""
     min_range: float = setting(0.05, finite_at_least(0.0), "a finite number >= 0")

@@ -4,8 +4,10 @@ T-RO 2007, "Improved techniques for grid mapping with Rao-Blackwellized particle
 Every particle carries a pose, the path that led to it and an occupancy grid built from
 that path (:class:`~slamkit.slam.grid_rbpf.maps.TiledMap`: tiles shared between particles,
 copied on write). The filter updates only after the odometry reports ``update_distance``
-of travel or ``update_angle_deg`` of turning since the last update (the scans between are
-not used; the odometry accumulates into one motion ``Δ`` in the frame of the last update).
+of travel or ``update_angle_deg`` of turning since the last update, summed step by step (a
+robot that backs up and drives on has travelled the whole way, whatever its net motion; the
+scans between are not used; the odometry accumulates into one motion ``Δ`` in the frame of
+the last update, whose noise grows with that travel).
 At an update, for every particle:
 
 1. predict ``x̂ = x' ⊕ Δ``;
@@ -61,7 +63,8 @@ from slamkit.mapping.grid import lattice_cells
 from slamkit.mapping.inverse_model import InverseSensorModel
 from slamkit.mapping.logodds import expit
 from slamkit.maps import OccupancyGrid
-from slamkit.scanmatch.result import scan_points
+from slamkit.scanmatch.correlative import CorrelativeConfig, CorrelativeReference
+from slamkit.scanmatch.result import MatchResult, scan_points
 from slamkit.scanmatch.to_map import MapMatchConfig, match_to_map
 from slamkit.slam.grid_rbpf.config import GridRbpfConfig
 from slamkit.slam.grid_rbpf.maps import TiledMap, TilePool, scan_cells
@@ -70,6 +73,7 @@ from slamkit.slam.grid_rbpf.proposal import (
     gaussian_proposal,
     mode_proposal,
     motion_covariance,
+    motion_log_density,
     motion_proposal,
 )
 
@@ -109,10 +113,18 @@ class GridRbpf(EstimatorShell):
             step_tolerance_xy=cfg.match_tolerance_xy,
             step_tolerance_theta=math.radians(cfg.match_tolerance_deg),
         )
+        self._wide_cfg = CorrelativeConfig(
+            window_xy=cfg.recovery_window_xy,
+            window_theta=math.radians(cfg.recovery_window_deg),
+            max_flatness=None,
+        )
         start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
         n = cfg.particles
         self._odom: FloatArray = np.array(start, dtype=np.float64)  # dead-reckoned
         self._odom_at_update = self._odom.copy()
+        # Path length [m] and turning [rad] of the odometry since the last update, summed.
+        self._travel = 0.0
+        self._turn = 0.0
         self._poses: FloatArray = np.tile(self._odom, (n, 1))
         self._logw: FloatArray = np.full(n, -math.log(n))
         self._pool = TilePool(cfg.resolution, cfg.tile_cells, self._ism.l0)
@@ -152,6 +164,9 @@ class GridRbpf(EstimatorShell):
         moved = np.asarray(self._model.apply(self._odom, u, dt), dtype=np.float64)
         if not np.isfinite(moved).all():
             raise ConvergenceError(f"the control {u} over {dt} s moved the odometry to {moved}")
+        step = between(self._odom, moved)
+        self._travel += math.hypot(float(step[0]), float(step[1]))
+        self._turn += abs(wrap_angle_float(float(step[2])))
         self._odom = moved
 
     def on_scan(self, event: LaserScan) -> None:
@@ -161,9 +176,9 @@ class GridRbpf(EstimatorShell):
         if not self._started:
             self._first_scan(event, delta)
             return
-        moved = math.hypot(delta[0], delta[1]) >= cfg.update_distance or abs(
-            wrap_angle_float(float(delta[2]))
-        ) >= math.radians(cfg.update_angle_deg)
+        moved = self._travel >= cfg.update_distance or self._turn >= math.radians(
+            cfg.update_angle_deg
+        )
         if not moved or (cfg.max_updates is not None and self.updates >= cfg.max_updates):
             return
         self._update(event, delta)
@@ -212,6 +227,7 @@ class GridRbpf(EstimatorShell):
             "updates": self.updates,
             "resamplings": c["resamplings"],
             "matched": c["matched"],
+            "recovered": c["recovered"],
             "proposal_failures": {
                 k[len("failed:") :]: v for k, v in c.items() if k.startswith("failed:")
             },
@@ -290,7 +306,7 @@ class GridRbpf(EstimatorShell):
         points = scan_points(event.ranges[::stride], angles, reach, min_range=cfg.min_range)
         if self._mounting.any():
             points = transform_points(self._mounting, points)
-        motion_cov = motion_covariance(delta, cfg)
+        motion_cov = motion_covariance(delta, cfg, (self._travel, self._turn))
         finite_motion = bool(np.isfinite(motion_cov).all() and np.isfinite(delta).all())
         n = len(self._maps)
         drawn = np.empty((n, 3))
@@ -315,6 +331,9 @@ class GridRbpf(EstimatorShell):
                 if math.hypot(corr[0], corr[1]) > gate_xy or abs(corr[2]) > gate_th:
                     self._counts["failed:gated"] += 1
                     result = None
+            poor = result is None or result.score < cfg.recovery_score
+            if field is not None and cfg.recovery_score > 0 and poor:
+                result = self._recover(field, scan, points, predicted, motion_cov, result)
             self._seconds["match"] += time.perf_counter() - tic
             tic = time.perf_counter()
             if result is None or field is None:
@@ -349,6 +368,47 @@ class GridRbpf(EstimatorShell):
         self._logw = logw
         self._store(drawn, event.t)
 
+    def _recover(
+        self,
+        field: LikelihoodField,
+        scan: Scan,
+        points: FloatArray,
+        predicted: FloatArray,
+        motion_cov: FloatArray,
+        local: MatchResult | None,
+    ) -> MatchResult | None:
+        """The wide match of a poor one (``GridRbpfConfig.recovery_score``): a correlative
+        search around ``predicted`` refined by Gauss-Newton; kept if it lies within the
+        window and its ``log p(z | x, m) / T + log p(x | x', u)`` beats the local match's,
+        with ``T = likelihood_temperature``: the evidence of the scan as the weights count
+        it (its beams are far from independent), so that a jump has to pay for itself."""
+        try:
+            wide = match_to_map(
+                field,
+                points,
+                predicted,
+                self._match_cfg,
+                coarse=CorrelativeReference.from_likelihood_field(field, self._wide_cfg),
+            )
+        except MatchError:
+            return local
+        corr = between(predicted, wide.pose)
+        w = self._wide_cfg
+        if math.hypot(corr[0], corr[1]) > math.sqrt(2.0) * w.window_xy or abs(corr[2]) > (
+            w.window_theta
+        ):
+            return local
+        if local is not None:
+            poses = np.stack([local.pose, wide.pose])
+            t = self._cfg.likelihood_temperature
+            log_f = scan.log_likelihood(field, poses, t) + motion_log_density(
+                poses, predicted, motion_cov
+            )
+            if not log_f[1] > log_f[0]:
+                return local
+        self._counts["recovered"] += 1
+        return wide
+
     def _store(self, drawn: FloatArray, t: float) -> None:
         """Record the drawn poses in the path tree, resample when ``N_eff`` is low."""
         self._hist_poses.append(drawn.copy())
@@ -357,6 +417,7 @@ class GridRbpf(EstimatorShell):
         self._poses = drawn
         self._parent = np.arange(n)
         self._odom_at_update = self._odom.copy()
+        self._travel = self._turn = 0.0
         w = self._weights()
         neff = float(1.0 / np.sum(w * w))
         self._neff.append(neff)

@@ -73,13 +73,23 @@ class Scan:
         return log_likelihood(field, poses, self.ranges, self.angles, self.mounting) / temperature
 
 
-def motion_covariance(delta: FloatArray, cfg: GridRbpfConfig) -> FloatArray:
+def motion_covariance(
+    delta: FloatArray, cfg: GridRbpfConfig, travelled: tuple[float, float] | None = None
+) -> FloatArray:
     """``Σ_u (3, 3)`` of the odometry motion ``delta = (dx, dy, dθ)`` (in the frame of the
     previous pose): position and heading standard deviations grow linearly with the distance
     travelled and the angle turned, plus floors; isotropic in position, so the same in the
-    world frame whatever the heading."""
-    d = math.hypot(float(delta[0]), float(delta[1]))
-    a = abs(float(wrap_angle(delta[2])))
+    world frame whatever the heading.
+
+    ``travelled = (path length [m], turning [rad])``: what the odometry went through since
+    the previous pose, summed step by step (``Σ |Δt_i|``, ``Σ |Δθ_i|``) — the wheels err per
+    metre rolled and per radian turned, so a robot that backs up and drives on again errs
+    over the whole way, not over the net ``delta``. None: the net motion of ``delta``."""
+    if travelled is None:
+        d = math.hypot(float(delta[0]), float(delta[1]))
+        a = abs(float(wrap_angle(delta[2])))
+    else:
+        d, a = float(travelled[0]), float(travelled[1])
     s_xy = cfg.motion_floor_xy + cfg.motion_trans_per_m * d + cfg.motion_trans_per_rad * a
     s_th = (
         math.radians(cfg.motion_floor_deg) + cfg.motion_rot_per_m * d + cfg.motion_rot_per_rad * a
