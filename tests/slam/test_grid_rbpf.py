@@ -185,18 +185,13 @@ def test_needs_a_laser_and_motion_and_validates_its_settings() -> None:
 
 @pytest.mark.realdata
 @pytest.mark.slow
-def test_aces_first_five_minutes(data_root) -> None:
+def test_aces_first_five_minutes(raw_log) -> None:
     """The raw ACES log, first 300 s (1,854 scans, 147 updates; the relations covered: 291
     of 1,279). Measured: 0.039 ± 0.034 m, 1.1 ± 1.2° (the raw odometry, still undrifted
     here: 0.033 m, 0.9°)."""
-    pytest.importorskip("rosbags", reason="the laser extra (rosbags) is not installed")
     from slamkit.eval.relations import relation_errors
 
-    if not (data_root / "laser/rosbags/aces.bag").exists():
-        pytest.skip(f"laser/rosbags/aces.bag not under {data_root}")
-    data = load_dataset("aces-raw", data_root=data_root)
-    t0 = data.events[0].t
-    data = dataclasses.replace(data, events=tuple(e for e in data.events if e.t < t0 + 300.0))
+    data = raw_log("aces-raw", 300.0, closed=False)
     result = run("grid-rbpf", data, seed=0)
     err = relation_errors(result.times, result.poses, data.truth.relations)
     assert int(err.covered.sum()) >= 250
@@ -206,20 +201,15 @@ def test_aces_first_five_minutes(data_root) -> None:
 
 @pytest.mark.realdata
 @pytest.mark.slow
-def test_fr079_first_300_s_recovers_from_the_slipping_wheels(data_root) -> None:
+def test_fr079_first_300_s_recovers_from_the_slipping_wheels(raw_log) -> None:
     """The raw Freiburg 079 log, first 300 s (345 relations). At 168.8-175.2 s the robot
     backs and fills and its odometry turns -15° where the scans turn +10°: the match from
     the prediction stops in a local optimum (score 0.46), the wide search finds the scan's
     pose. Measured 2026-12-04: 0.046 ± 0.034 m, 1.80° with the recovery; without it
     (recovery_score 0) 0.41 ± 0.89 m, 5.2° (the long relations across 175 s)."""
-    pytest.importorskip("rosbags", reason="the laser extra (rosbags) is not installed")
     from slamkit.eval.relations import relation_errors
 
-    if not (data_root / "laser/rosbags/fr079.bag").exists():
-        pytest.skip(f"laser/rosbags/fr079.bag not under {data_root}")
-    data = load_dataset("fr079-raw", data_root=data_root)
-    t0 = data.events[0].t
-    data = dataclasses.replace(data, events=tuple(e for e in data.events if e.t <= t0 + 300.0))
+    data = raw_log("fr079-raw", 300.0)
     result = run("grid-rbpf", data, seed=0)
     err = relation_errors(result.times, result.poses, data.truth.relations)
     assert int(err.covered.sum()) >= 300

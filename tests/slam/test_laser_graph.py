@@ -252,20 +252,15 @@ def test_run_job_writes_the_graph_as_g2o(tmp_path) -> None:
 
 @pytest.mark.realdata
 @pytest.mark.slow
-def test_aces_first_600_s_relations(data_root) -> None:
+def test_aces_first_600_s_relations(raw_log) -> None:
     """The first 600 s of the raw ACES log (405 keyframes): measured 0.040 ± 0.044 m and
     0.36 ± 0.35° over the 533 relations it covers (with the keyframe reference 0.034 ±
     0.029 m, 0.34°; published graph mapping over the whole log: 0.044 m). ACES's raw
     odometry is good over the short relations of this window (0.031 m) but turns worse:
     0.87° against 0.36°."""
-    pytest.importorskip("rosbags", reason="the laser extra (rosbags) is not installed")
     from slamkit.eval.relations import relation_errors
 
-    if not (data_root / "laser/rosbags/aces.bag").exists():
-        pytest.skip(f"laser/rosbags/aces.bag not under {data_root}")
-    data = load_dataset("aces-raw", data_root=data_root)
-    t0 = data.events[0].t
-    data = dataclasses.replace(data, events=tuple(e for e in data.events if e.t <= t0 + 600.0))
+    data = raw_log("aces-raw", 600.0)
     result = run("graph-slam", data, seed=0)
     rel = relation_errors(result.times, result.poses, data.truth.relations)
     assert rel.count >= 500
@@ -276,20 +271,15 @@ def test_aces_first_600_s_relations(data_root) -> None:
 
 
 @pytest.mark.realdata
-def test_freiburg_079_is_scored_in_the_logs_robot_frame(data_root) -> None:
+def test_freiburg_079_is_scored_in_the_logs_robot_frame(raw_log) -> None:
     """The first 300 s of raw Freiburg 079 (345 relations): with the registered mounting
     (the laser 4 cm behind the centre, the original log's robot_frontlaser_offset) measured
     0.0256 ± 0.018 m; with the bag's /tf_static (4 cm ahead) 0.0376 ± 0.038 m, 1.47× worse
     — the benchmark's relations are in the log's robot frame (docs/relations.md)."""
-    pytest.importorskip("rosbags", reason="the laser extra (rosbags) is not installed")
     from slamkit.eval.relations import relation_errors
 
-    if not (data_root / "laser/rosbags/fr079.bag").exists():
-        pytest.skip(f"laser/rosbags/fr079.bag not under {data_root}")
-    data = load_dataset("fr079-raw", data_root=data_root)
+    data = raw_log("fr079-raw", 300.0)
     assert data.laser.mounting == (-0.04, 0.0, 0.0)
-    t0 = data.events[0].t
-    data = dataclasses.replace(data, events=tuple(e for e in data.events if e.t <= t0 + 300.0))
     scores = []
     for config in ({}, {"mounting": (0.04, 0.0, 0.0)}):
         result = run("graph-slam", data, seed=0, config=config)
@@ -329,17 +319,12 @@ def test_a_log_without_odometry_runs_on_scan_matching_alone_and_says_so() -> Non
 
 @pytest.mark.realdata
 @pytest.mark.slow
-def test_aces_without_odometry_first_300_s(data_root) -> None:
+def test_aces_without_odometry_first_300_s(raw_log) -> None:
     """The first 300 s of raw ACES by scan matching alone: measured 0.048 ± 0.071 m, 0.34°
     over 291 relations (with the wheels: 0.037 ± 0.034 m, 0.30°)."""
-    pytest.importorskip("rosbags", reason="the laser extra (rosbags) is not installed")
     from slamkit.eval.relations import relation_errors
 
-    if not (data_root / "laser/rosbags/aces.bag").exists():
-        pytest.skip(f"laser/rosbags/aces.bag not under {data_root}")
-    data = load_dataset("aces-raw", data_root=data_root)
-    t0 = data.events[0].t
-    data = dataclasses.replace(data, events=tuple(e for e in data.events if e.t <= t0 + 300.0))
+    data = raw_log("aces-raw", 300.0)
     result = run("graph-slam", _without_odometry(data), seed=0)
     rel = relation_errors(result.times, result.poses, data.truth.relations)
     assert rel.count >= 280
