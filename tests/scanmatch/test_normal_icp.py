@@ -7,7 +7,7 @@ import pytest
 
 from slamkit.errors import MatchError, ShapeError
 from slamkit.geometry.pose2 import between, compose
-from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
+from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp, surface_fit
 from slamkit.scanmatch.point_map import PointMap, scan_normals
 from slamkit.sim import rooms_world
 from slamkit.sim.scans import corridor_world, random_scan_pairs, simulated_scan_pair
@@ -134,3 +134,20 @@ def test_the_robust_scale_median_is_numpys() -> None:
         for _ in range(50):
             x = rng.standard_normal(n) * rng.uniform(1e-3, 10.0)
             assert median(x) == float(np.median(x))
+
+
+def test_surface_fit_counts_the_points_on_the_map_surfaces() -> None:
+    """A scan at its true pose lies on the map built from itself (1 cm noise, 5 cm
+    tolerance: all but the edge points); turned 15° about the sensor, most of it is off;
+    points far from every map point (new ground) and an empty scan count as off."""
+    rng = np.random.default_rng(3)
+    pair = random_scan_pairs(
+        rooms_world(), 1, rng, beam_angles=BEAMS, max_range=12.0, range_sigma=0.01
+    )[0]
+    cloud = _cloud_of(np.zeros(3), pair.reference)
+    at_truth = surface_fit(cloud, pair.current, pair.T_ref_cur)
+    turned = surface_fit(cloud, pair.current, compose(pair.T_ref_cur, [0.0, 0.0, np.deg2rad(15)]))
+    assert at_truth > 0.85 and turned < 0.4, (at_truth, turned)
+    far = surface_fit(cloud, pair.current + 100.0, pair.T_ref_cur)
+    assert far == 0.0
+    assert surface_fit(cloud, np.zeros((0, 2)), np.zeros(3)) == 0.0

@@ -39,7 +39,7 @@ from slamkit.errors import ConfigError, CovarianceError, MatchError
 from slamkit.scanmatch.covariance import line_jacobian, median, require_constrained
 from slamkit.scanmatch.result import MatchResult, require_points
 
-__all__ = ["NormalCloud", "NormalIcpConfig", "normal_icp"]
+__all__ = ["NormalCloud", "NormalIcpConfig", "normal_icp", "surface_fit"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -218,3 +218,34 @@ def normal_icp(
     frac = n_pairs / q.shape[0]
     pose = np.array([tx, ty, math.remainder(th, 2.0 * math.pi)])
     return MatchResult(pose, cov, frac, frac, it, "normal-icp")
+
+
+def surface_fit(
+    reference: NormalCloud,
+    current: ArrayLike,
+    pose: ArrayLike,
+    tolerance: float = 0.05,
+    reach: float = 0.2,
+) -> float:
+    """The fraction of ``current (K, 2)`` points (sensor frame) that ``pose = T_ref_cur``
+    puts within ``tolerance`` [m] of the map's surface: nearer than that, along its normal,
+    to the tangent line of their nearest map point, that point within ``reach`` [m].
+
+    A check of a match that does not trust the match's own residuals: a scan turned the
+    wrong way still pairs its points within the matcher's correspondence distance and can
+    converge with a small robust scale on the few walls it got right, but most of its
+    points then lie off every surface. Points far from any map point (new ground) count as
+    off the surface too, so compare fits of the same scan, or set a low bar.
+    """
+    q = as_array(current, "current points", (None, 2))
+    x = as_array(pose, "pose", (3,))
+    if q.shape[0] == 0 or reference.points.shape[0] == 0:
+        return 0.0
+    c, s = math.cos(float(x[2])), math.sin(float(x[2]))
+    moved = q @ np.array([[c, s], [-s, c]])
+    moved += x[:2]
+    _, j = reference.tree.query(moved, k=1, distance_upper_bound=reach)
+    ok = j < reference.points.shape[0]
+    jk = j[ok]
+    e = np.einsum("ij,ij->i", reference.normals[jk], moved[ok] - reference.points[jk])
+    return float(np.count_nonzero(np.abs(e) <= tolerance)) / q.shape[0]
