@@ -259,8 +259,9 @@ class LaserOdometry(EstimatorShell):
     def _match(
         self, reference: PreparedScan | NormalCloud, points: FloatArray, prior: FloatArray
     ) -> MatchResult | None:
-        """The match of ``points`` to the keyframe from ``prior``, or None (counted) when the
-        matcher fails or the gate refuses it."""
+        """The match of ``points`` to the reference from ``prior`` (against the map, searched
+        again when it fits poorly: :meth:`_recover`), or None (counted) when the matcher
+        fails or the gate refuses it and no recovery gives one."""
         cfg = self._cfg
         result: MatchResult | None = None
         try:
