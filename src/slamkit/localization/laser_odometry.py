@@ -56,11 +56,11 @@ from slamkit.geometry.pose2 import between, compose, transform_points
 from slamkit.mapping.inverse_model import InverseSensorModel
 from slamkit.mapping.occupancy.config import OccupancyMappingConfig
 from slamkit.mapping.occupancy.mapper import OccupancyMapper
-from slamkit.scanmatch.icp import IcpConfig, PreparedScan, icp, prepare_scan
+from slamkit.scanmatch.icp import MIN_REFERENCE_POINTS, IcpConfig, PreparedScan, icp, prepare_scan
 from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp, surface_fit
 from slamkit.scanmatch.plicp import PlIcpConfig, plicp
 from slamkit.scanmatch.point_map import PointMap
-from slamkit.scanmatch.result import MatchResult, scan_points
+from slamkit.scanmatch.result import MatchResult, require_points, scan_points
 
 __all__ = ["PRIOR_FLOOR", "LaserOdometry", "LaserOdometryConfig", "MapSettings"]
 
@@ -144,7 +144,7 @@ class LaserOdometryConfig(Section):
 @dataclass
 class _Keyframe:
     pose: FloatArray  # T_world_key
-    reference: PreparedScan
+    reference: PreparedScan | None  # the keyframe reference's; the map reference has none
 
 
 class LaserOdometry(EstimatorShell):
@@ -213,6 +213,7 @@ class LaserOdometry(EstimatorShell):
         # prior: the last match and the wheels' motion since, in that frame.
         frame = key.pose if self._local is None else np.zeros(3)
         reference = key.reference if self._local is None else self._local
+        assert reference is not None  # a keyframe without a scan comes with the local map
         prior = between(frame, self._pose)
         result = self._match(reference, points, prior)
         overlap = 0.0
@@ -345,8 +346,12 @@ class LaserOdometry(EstimatorShell):
         return best
 
     def _new_keyframe(self, points: FloatArray, ranges: FloatArray) -> None:
-        try:
-            reference = prepare_scan(points)
+        reference = None
+        try:  # the map reference matches against the point map, not the keyframe's scan
+            if self._points is None:
+                reference = prepare_scan(points)
+            else:
+                require_points(points, MIN_REFERENCE_POINTS, "reference")
         except MatchError as exc:  # too few points to be a reference: keep the old one
             self._counts[f"failed:{exc.reason}"] += 1
             return
