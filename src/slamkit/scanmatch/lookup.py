@@ -111,6 +111,9 @@ class LookupGrid:
     floor: float
     inlier_log: float
     counts: tuple[NDArray[np.integer], ...] | None = field(default=None, repr=False)
+    _dilated: dict[tuple[int, int], NDArray[np.integer]] = field(
+        default_factory=dict, init=False, repr=False
+    )
 
     def __post_init__(self) -> None:
         if not self.tables:
@@ -139,6 +142,21 @@ class LookupGrid:
     def shape(self) -> tuple[int, int]:
         rows, cols = self.tables[0].shape
         return int(rows), int(cols)
+
+    def dilated_counts(self, level: int, spread: int) -> NDArray[np.integer]:
+        """``counts[level]`` dilated by ``spread`` cells: ``D[r, c] = max C[r + a, c + b]``
+        over ``|a|, |b| <= spread`` (a read outside ``C`` is the floor), stored padded by
+        ``spread + 1`` cells (``D``'s cell ``(r + spread + 1, c + spread + 1)`` is ``C``'s
+        ``(r, c)``, its corner is the floor). A sum over it bounds the sums over ``C`` of
+        points each moved by at most ``spread`` cells per axis (the screen of
+        :func:`~slamkit.scanmatch.compiled.group_bounds`). Built on first use and kept;
+        read-only. Requires :attr:`counts`."""
+        if self.counts is None:
+            raise InputError("dilated_counts: the lookup grid has no integer counts")
+        key = (int(level), int(spread))
+        if key not in self._dilated:
+            self._dilated[key] = _dilate(self.counts[key[0]], key[1])
+        return self._dilated[key]
 
     def cells(self, points: FloatArray) -> tuple[IntArray, IntArray]:
         """Row and column indices ``(...,)`` of the cells of world points ``(..., 2)``, not
@@ -176,6 +194,29 @@ def _quanta(tables: tuple[FloatArray, ...]) -> tuple[NDArray[np.integer], ...] |
         c.flags.writeable = False
         out.append(c)
     return tuple(out)
+
+
+def _dilate(table: NDArray[np.integer], spread: int) -> NDArray[np.integer]:
+    """:meth:`LookupGrid.dilated_counts` of ``table``: the max over a window of ``w = 2
+    spread + 1`` cells, taken over rows, then columns, each by doubling (windows of 2, 4, ...
+    cells, then two overlapping ones cover ``w``), on the table padded by ``w`` cells of its
+    corner value (the floor)."""
+    w = 2 * spread + 1
+    out = np.pad(table, w, mode="constant", constant_values=table[0, 0])
+    for axis in (0, 1):
+        m = np.moveaxis(out, axis, 0)
+        span = 1
+        while 2 * span <= w:
+            m = m.copy()
+            np.maximum(m[:-span], m[span:], out=m[:-span])  # m[x] = max over [x, x + 2 span)
+            span *= 2
+        cover = np.maximum(m[: m.shape[0] - (w - span)], m[w - span :])  # [x, x + w)
+        out = np.moveaxis(cover, 0, axis)
+    # Row y of ``out`` is the max over padded rows [y, y + w), table rows [y - w, y - 1]:
+    # centred on table row y - spread - 1, as documented.
+    out = np.ascontiguousarray(out[: table.shape[0] + w + 1, : table.shape[1] + w + 1])
+    out.flags.writeable = False
+    return out
 
 
 def join_consecutive(points: FloatArray, max_gap: float, spacing: float) -> FloatArray:
