@@ -395,6 +395,25 @@ def test_rotation_group_bounds_hold_for_every_member() -> None:
     assert (bound == -np.inf).any() and np.isfinite(bound).any()
 
 
+@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba is not installed")
+@pytest.mark.parametrize(("resolution", "sigma"), [(0.05, 0.05), (0.03, 0.05), (0.05, 0.02)])
+def test_stamped_tables_equal_the_distance_transforms(resolution: float, sigma: float) -> None:
+    # Compiled, the table is stamped around each marked cell from the quantised values by
+    # squared cell distance; the NumPy path takes the distance transform: the same counts.
+    rng = np.random.default_rng(6)
+    pts = _points(rooms_world(), np.array([*SPOTS[3], 1.0]), rng)
+    cfg = CorrelativeConfig(resolution=resolution, sigma=sigma)
+    fast = CorrelativeReference.from_points(pts, cfg).lookup
+    with compiled.use_numpy():
+        slow = CorrelativeReference.from_points(pts, cfg).lookup
+    assert fast.counts is not None and slow.counts is not None
+    for a, b in zip(fast.counts, slow.counts, strict=True):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    assert all(np.array_equal(a, b) for a, b in zip(fast.tables, slow.tables, strict=True))
+    assert (fast.floor, fast.inlier_log) == (slow.floor, slow.inlier_log)
+    assert np.array_equal(fast.origin_xy, slow.origin_xy)
+
+
 def test_smear_values() -> None:
     sigma, f = 0.05, 0.1
     d = np.array([0.0, sigma, 2 * sigma, 100.0])

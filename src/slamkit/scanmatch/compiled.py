@@ -29,6 +29,7 @@ __all__ = [
     "jit",
     "min_eigenvalue_sym3",
     "select_kth",
+    "stamp_max",
     "use_numpy",
     "writable",
 ]
@@ -235,6 +236,29 @@ def group_bounds(
                     threshold,
                 )  # fmt: skip
                 out[u] = -np.inf if total < threshold else total * quantum
+
+
+@jit
+def stamp_max(
+    counts: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    d_rows: np.ndarray,
+    d_cols: np.ndarray,
+    values: np.ndarray,
+) -> None:
+    """``counts[r + d_rows[o], c + d_cols[o]] = max(itself, values[o])`` for every marked
+    cell ``(r, c) = (rows[m], cols[m])`` and stamp offset ``o``, those inside ``counts``:
+    with ``values`` the table at each offset's distance, the table of the distance to the
+    nearest marked cell where it is above the floor
+    (:func:`~slamkit.scanmatch.lookup.lookup_from_points`)."""
+    n_rows, n_cols = counts.shape
+    for m in range(rows.shape[0]):
+        for o in range(d_rows.shape[0]):
+            r = rows[m] + d_rows[o]
+            c = cols[m] + d_cols[o]
+            if 0 <= r < n_rows and 0 <= c < n_cols and counts[r, c] < values[o]:
+                counts[r, c] = values[o]
 
 
 @jit
