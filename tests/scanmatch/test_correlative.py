@@ -320,6 +320,100 @@ def test_integer_scores_equal_float_scores_to_the_last_bit() -> None:
         replace(unquantised, tables=(unquantised.tables[0],))  # two levels of counts, one table
 
 
+@pytest.mark.parametrize("seed", [0, 3])
+def test_branch_and_bound_equals_exhaustive_with_rotation_groups(seed: int) -> None:
+    # At the default angular step no point moves more than a cell per rotation, so groups
+    # of rotations are bounded through the dilated top table (compiled.group_bounds).
+    ref_pts, cur, _ = _pair(seed, max_theta=0.1)
+    cfg = CorrelativeConfig(window_xy=0.6, window_theta=0.12, levels=4, max_flatness=None)
+    ref = CorrelativeReference.from_points(ref_pts, cfg)
+    bnb = correlative_match(ref, cur, np.zeros(3), cfg)
+    exh = correlative_match(ref, cur, np.zeros(3), replace(cfg, search="exhaustive"))
+    assert np.array_equal(bnb.pose, exh.pose) and bnb.score == exh.score
+
+
+def test_dilated_counts_are_the_window_max() -> None:
+    rng = np.random.default_rng(4)
+    ref = _points(rooms_world(), np.array([*SPOTS[1], 0.4]), rng)
+    lk = CorrelativeReference.from_points(ref, CorrelativeConfig()).lookup
+    assert lk.counts is not None
+    for level, spread in ((lk.levels - 1, 2), (0, 3)):
+        counts, w = lk.counts[level], 2 * spread + 1
+        dilated = lk.dilated_counts(level, spread)
+        # Padded by w cells of the floor, every window's max; cell (r + spread + 1, c +
+        # spread + 1) of the dilated table centred on (r, c) of the counts.
+        padded = np.pad(counts, w, constant_values=counts[0, 0])
+        windows = np.lib.stride_tricks.sliding_window_view(padded, (w, w)).max(axis=(2, 3))
+        rows, cols = counts.shape
+        assert np.array_equal(dilated, windows[: rows + w + 1, : cols + w + 1])
+        assert dilated[0, 0] == counts[0, 0] and lk.dilated_counts(level, spread) is dilated
+
+
+@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba is not installed")
+def test_rotation_group_bounds_hold_for_every_member() -> None:
+    rng = np.random.default_rng(5)
+    world = rooms_world()
+    lk = CorrelativeReference.from_points(
+        _points(world, np.array([*SPOTS[2], 0.0]), rng), CorrelativeConfig()
+    ).lookup
+    assert lk.counts is not None
+    cur = _points(world, np.array([*(SPOTS[2] + [0.1, -0.1]), 0.05]), rng, beams=180)
+    step = lk.resolution / float(np.hypot(*cur.T).max())  # the default angular step
+    theta = np.arange(23) * step
+    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
+    world_pts = np.stack([c * cur[:, 0] - s * cur[:, 1], s * cur[:, 0] + c * cur[:, 1]], -1)
+    rows, cols = lk.cells(world_pts)
+    spread, level = 2, lk.levels - 1
+    size = 2 * spread + 1
+    groups = -(-rows.shape[0] // size)
+    near = np.ones(groups, dtype=bool)
+    for g in range(groups):
+        k = np.arange(g * size, min(g * size + size, rows.shape[0]))
+        mid = (k[0] + k[-1]) // 2
+        moved = max(np.abs(rows[k] - rows[mid]).max(), np.abs(cols[k] - cols[mid]).max())
+        assert moved <= spread  # a cell per rotation at most
+    near[1] = False  # no bound for that group: +inf
+    off = np.arange(-24, 25, 8)
+    ks, ii, jj = np.meshgrid(np.arange(rows.shape[0]), off, off, indexing="ij")
+    full = np.empty(ks.size)
+    compiled.bounded_counts(
+        lk.counts[level], rows, cols, ks.ravel(), ii.ravel(), jj.ravel(), -(2**62), 1.0, full
+    )
+    threshold = int(np.median(full))
+    out = np.empty(groups * off.size**2)
+    compiled.group_bounds(
+        lk.dilated_counts(level, spread), spread, near, rows, cols, off, off, threshold, 1.0, out
+    )
+    bound = out.reshape(groups, off.size, off.size)
+    for g in range(groups):
+        members = full.reshape(-1, off.size, off.size)[g * size : g * size + size]
+        top = members.max(axis=0)
+        if not near[g]:
+            assert np.all(bound[g] == np.inf)
+            continue
+        assert np.all((bound[g] >= top) | ((bound[g] == -np.inf) & (top < threshold)))
+    assert (bound == -np.inf).any() and np.isfinite(bound).any()
+
+
+@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba is not installed")
+@pytest.mark.parametrize(("resolution", "sigma"), [(0.05, 0.05), (0.03, 0.05), (0.05, 0.02)])
+def test_stamped_tables_equal_the_distance_transforms(resolution: float, sigma: float) -> None:
+    # Compiled, the table is stamped around each marked cell from the quantised values by
+    # squared cell distance; the NumPy path takes the distance transform: the same counts.
+    rng = np.random.default_rng(6)
+    pts = _points(rooms_world(), np.array([*SPOTS[3], 1.0]), rng)
+    cfg = CorrelativeConfig(resolution=resolution, sigma=sigma)
+    fast = CorrelativeReference.from_points(pts, cfg).lookup
+    with compiled.use_numpy():
+        slow = CorrelativeReference.from_points(pts, cfg).lookup
+    assert fast.counts is not None and slow.counts is not None
+    for a, b in zip(fast.counts, slow.counts, strict=True):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    assert all(np.array_equal(a, b) for a, b in zip(fast.tables, slow.tables, strict=True))
+    assert (fast.floor, fast.inlier_log) == (slow.floor, slow.inlier_log)
+    assert np.array_equal(fast.origin_xy, slow.origin_xy)
+
+
 def test_smear_values() -> None:
     sigma, f = 0.05, 0.1
     d = np.array([0.0, sigma, 2 * sigma, 100.0])

@@ -24,10 +24,12 @@ __all__ = [
     "bounded_counts",
     "bounded_sums",
     "enabled",
+    "group_bounds",
     "ieee_remainder",
     "jit",
     "min_eigenvalue_sym3",
     "select_kth",
+    "stamp_max",
     "use_numpy",
     "writable",
 ]
@@ -161,6 +163,102 @@ def bounded_counts(
             else:
                 total += floor
         out[u] = -np.inf if total < threshold else total * quantum
+
+
+@jit
+def _bounded_total(
+    flat: np.ndarray,
+    n_rows: int,
+    n_cols: int,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    k: int,
+    a: int,
+    b: int,
+    threshold: int,
+) -> np.int64:
+    """One node's sum of :func:`bounded_counts` (``flat``: the table raveled, its first
+    value the floor), stopped once below ``threshold``."""
+    floor = np.int64(flat[0])
+    nr = np.uint64(n_rows)
+    nc = np.uint64(n_cols)
+    total = np.int64(0)
+    for p in range(rows.shape[1]):
+        r = rows[k, p] + a
+        c = cols[k, p] + b
+        if np.uint64(r) < nr and np.uint64(c) < nc:
+            total += np.int64(flat[r * n_cols + c])
+            if total < threshold:
+                break
+        else:
+            total += floor
+    return total
+
+
+@jit
+def group_bounds(
+    dilated: np.ndarray,
+    spread: int,
+    near: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    di: np.ndarray,
+    dj: np.ndarray,
+    threshold: int,
+    quantum: float,
+    out: FloatArray,
+) -> None:
+    """Upper bounds of :func:`bounded_counts` over groups of rotations: the rotations of
+    ``rows``, ``cols`` in groups ``g`` of ``2 spread + 1`` (the last may be smaller),
+    ``out[(g · len(di) + a) · len(dj) + b]`` at least the sum of every rotation of group
+    ``g`` at offset ``(di[a], dj[b])``. Where ``near[g]`` (no point's cell at any rotation of
+    the group lies more than ``spread`` cells per axis from its cell at the group's middle
+    rotation) the bound is the middle rotation's sum over ``dilated`` (the table dilated by
+    ``spread``, :meth:`~slamkit.scanmatch.lookup.LookupGrid.dilated_counts`; every value
+    ``<= 0``), ``-inf`` when below ``threshold``; elsewhere ``+inf`` (no bound). One sum
+    bounds ``2 spread + 1`` nodes."""
+    d_rows, d_cols = dilated.shape
+    d_flat = dilated.reshape(-1)
+    shift = spread + 1  # the dilated table's padding
+    n_k = rows.shape[0]
+    n_i, n_j = di.shape[0], dj.shape[0]
+    size = 2 * spread + 1
+    for g in range(near.shape[0]):
+        mid = (g * size + min(g * size + size, n_k) - 1) // 2
+        for ii in range(n_i):
+            for jj in range(n_j):
+                u = (g * n_i + ii) * n_j + jj
+                if not near[g]:
+                    out[u] = np.inf
+                    continue
+                total = _bounded_total(
+                    d_flat, d_rows, d_cols, rows, cols, mid, di[ii] + shift, dj[jj] + shift,
+                    threshold,
+                )  # fmt: skip
+                out[u] = -np.inf if total < threshold else total * quantum
+
+
+@jit
+def stamp_max(
+    counts: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    d_rows: np.ndarray,
+    d_cols: np.ndarray,
+    values: np.ndarray,
+) -> None:
+    """``counts[r + d_rows[o], c + d_cols[o]] = max(itself, values[o])`` for every marked
+    cell ``(r, c) = (rows[m], cols[m])`` and stamp offset ``o``, those inside ``counts``:
+    with ``values`` the table at each offset's distance, the table of the distance to the
+    nearest marked cell where it is above the floor
+    (:func:`~slamkit.scanmatch.lookup.lookup_from_points`)."""
+    n_rows, n_cols = counts.shape
+    for m in range(rows.shape[0]):
+        for o in range(d_rows.shape[0]):
+            r = rows[m] + d_rows[o]
+            c = cols[m] + d_cols[o]
+            if 0 <= r < n_rows and 0 <= c < n_cols and counts[r, c] < values[o]:
+                counts[r, c] = values[o]
 
 
 @jit

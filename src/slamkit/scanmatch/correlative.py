@@ -83,6 +83,10 @@ _CHUNK_ELEMENTS = 1 << 18
 # round, within 15 % of a search that knew the optimum's score from the start.
 _ROUNDS = (8, 128, 2048)
 
+# The top-level nodes are bounded by groups of 2 * _SPREAD + 1 rotations first
+# (compiled.group_bounds).
+_SPREAD = 4
+
 # Fields that shape the lookup grid: a prepared reference fixes them.
 _GRID_FIELDS = ("resolution", "sigma", "floor_likelihood", "join_gap", "levels")
 
@@ -425,8 +429,6 @@ def _branch_and_bound(lookup: LookupGrid, cells: Cells, n: int) -> _Optimum:
     level = lookup.levels - 1
     starts = np.arange(-n, n + 1, 1 << level)
     n_k = cells[0].shape[0]
-    ks, ii, jj = np.meshgrid(np.arange(n_k), starts, starts, indexing="ij")
-    k, i, j = ks.ravel(), ii.ravel(), jj.ravel()
     # The best leaf so far starts as the initial guess's (the middle rotation, no shift). A
     # node whose bound falls below it is scored -inf, its sum cut short: with every table
     # value <= 0 a partial sum only falls. Those nodes are dropped below anyway, and a node
@@ -436,11 +438,21 @@ def _branch_and_bound(lookup: LookupGrid, cells: Cells, n: int) -> _Optimum:
     zero = np.zeros(1, dtype=np.int64)
     mid = n_k // 2
     best = _Optimum(mid, 0, 0, float(_score(lookup, 0, cells, zero + mid, zero, zero)[0]), 0)
-    bound = _score(lookup, level, cells, k, i, j, best.score if cut else -np.inf)
-    # The top nodes in rounds, best bounds first: the first round's leaves give the later
-    # rounds a threshold near the optimum. A node left when its bound is below the best
-    # leaf holds no leaf as good.
-    left = bound.copy()
+    grouped = cut and compiled.enabled() and lookup.counts is not None
+    near = _near_groups(cells) if grouped else None
+    if near is not None:
+        # Bounds of groups of rotations at each top-level offset, one sum per group
+        # (compiled.group_bounds); a group's nodes are scored when it is opened, against
+        # the best leaf by then.
+        left = _group_bounds(lookup, level, cells, near, starts, best.score)
+    else:
+        ks, ii, jj = np.meshgrid(np.arange(n_k), starts, starts, indexing="ij")
+        k, i, j = ks.ravel(), ii.ravel(), jj.ravel()
+        bound = _score(lookup, level, cells, k, i, j, best.score if cut else -np.inf)
+        left = bound.copy()
+    # The top nodes (or groups) in rounds, best bounds first: the first round's leaves give
+    # the later rounds a threshold near the optimum. A node or group left when its bound is
+    # below the best leaf holds no leaf as good.
     for size in (*_ROUNDS, None):
         open_ = np.flatnonzero(left >= best.score)
         if open_.size == 0:
@@ -448,12 +460,70 @@ def _branch_and_bound(lookup: LookupGrid, cells: Cells, n: int) -> _Optimum:
         if size is not None and open_.size > size:
             open_ = open_[np.argpartition(-left[open_], size - 1)[:size]]
         left[open_] = -np.inf
-        found = _search_blocks(
-            lookup, cells, (k[open_], i[open_], j[open_]), bound[open_], level, n, best, cut
-        )
+        if near is not None:
+            nodes, node_bound = _open_groups(lookup, level, cells, starts, open_, best.score)
+        else:
+            nodes, node_bound = (k[open_], i[open_], j[open_]), bound[open_]
+        found = _search_blocks(lookup, cells, nodes, node_bound, level, n, best, cut)
         if found is not None and _better(found, best):
             best = found
     return _Optimum(best.k, best.i, best.j, best.score, lookup.levels)
+
+
+def _near_groups(cells: Cells) -> NDArray[np.bool_]:
+    """Whether each group of ``2 _SPREAD + 1`` rotations (the last may be smaller) keeps
+    every point's cell within ``_SPREAD`` cells per axis of its cell at the group's middle
+    rotation ``(groups,)``: where it does, the dilated table bounds the whole group
+    (:func:`compiled.group_bounds`)."""
+    rows, cols = cells
+    n_k, size = rows.shape[0], 2 * _SPREAD + 1
+    k0 = np.arange(n_k) // size * size
+    mid = (k0 + np.minimum(k0 + size, n_k) - 1) // 2
+    moved = np.maximum(np.abs(rows - rows[mid]).max(axis=1), np.abs(cols - cols[mid]).max(axis=1))
+    out: NDArray[np.bool_] = np.maximum.reduceat(moved, np.arange(0, n_k, size)) <= _SPREAD
+    return out
+
+
+def _group_bounds(
+    lookup: LookupGrid,
+    level: int,
+    cells: Cells,
+    near: NDArray[np.bool_],
+    starts: IntArray,
+    threshold: float,
+) -> FloatArray:
+    """:func:`compiled.group_bounds` at ``level`` for the top-level offsets ``starts ×
+    starts``, groups of ``2 _SPREAD + 1`` rotations (``-inf``: below ``threshold``)."""
+    rows, cols = cells
+    out = np.empty(near.size * starts.size**2)
+    compiled.group_bounds(
+        lookup.dilated_counts(level, _SPREAD), _SPREAD, near, rows, cols, starts, starts,
+        _quanta_below(threshold), QUANTUM, out,
+    )  # fmt: skip
+    return out
+
+
+def _open_groups(
+    lookup: LookupGrid,
+    level: int,
+    cells: Cells,
+    starts: IntArray,
+    entries: IntArray,
+    threshold: float,
+) -> tuple[tuple[IntArray, IntArray, IntArray], FloatArray]:
+    """The top-level nodes of the groups ``entries`` (indices into :func:`_group_bounds`)
+    whose bound reaches ``threshold``, and their bounds."""
+    size = 2 * _SPREAD + 1
+    g, offset = np.divmod(entries, starts.size**2)
+    a, b = np.divmod(offset, starts.size)
+    k = (g[:, None] * size + np.arange(size)).ravel()
+    i = np.repeat(starts[a], size)
+    j = np.repeat(starts[b], size)
+    inside = k < cells[0].shape[0]  # the last group may be smaller
+    k, i, j = k[inside], i[inside], j[inside]
+    bound = _score(lookup, level, cells, k, i, j, threshold)
+    keep = bound >= threshold
+    return (k[keep], i[keep], j[keep]), bound[keep]
 
 
 def _better(a: _Optimum, b: _Optimum) -> bool:

@@ -8,10 +8,14 @@ perfect hit):
 
     L(d) = log( f + (1 - f) exp(-d² / (2 sigma²)) )   in [log f, 0].
 
-This is the Gaussian smear of Olson's rasterised cost table, but computed from one Euclidean
-distance transform (:func:`scipy.ndimage.distance_transform_edt`) instead of by stamping a
-kernel per reference point; ``max`` over overlapping kernels and the distance to the *nearest*
-point give the same table.
+This is the Gaussian smear of Olson's rasterised cost table, computed from one Euclidean
+distance transform (:func:`scipy.ndimage.distance_transform_edt`); ``max`` over overlapping
+kernels and the distance to the *nearest* point give the same table. With the compiled
+kernels the quantised table (below) is stamped instead, a small kernel per marked cell: once
+quantised, ``L`` is a function of the squared cell distance ``dr² + dc²`` alone and is the
+floor beyond a few cells (checked once per resolution, sigma and floor, with the transform's
+own arithmetic; where it is not, the transform is used), so the stamps give the transform's
+table to the last bit, without a pass over every cell.
 
 For branch and bound the grid carries a pyramid of max tables. With ``w = 2^h``,
 
@@ -41,6 +45,7 @@ rule rather than by rounding.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -50,6 +55,7 @@ from scipy.ndimage import distance_transform_edt
 
 from slamkit._validation import FloatArray, as_array, as_positive
 from slamkit.errors import InputError, MatchError
+from slamkit.scanmatch import compiled
 
 __all__ = [
     "QUANTUM",
@@ -111,6 +117,9 @@ class LookupGrid:
     floor: float
     inlier_log: float
     counts: tuple[NDArray[np.integer], ...] | None = field(default=None, repr=False)
+    _dilated: dict[tuple[int, int], NDArray[np.integer]] = field(
+        default_factory=dict, init=False, repr=False
+    )
 
     def __post_init__(self) -> None:
         if not self.tables:
@@ -139,6 +148,21 @@ class LookupGrid:
     def shape(self) -> tuple[int, int]:
         rows, cols = self.tables[0].shape
         return int(rows), int(cols)
+
+    def dilated_counts(self, level: int, spread: int) -> NDArray[np.integer]:
+        """``counts[level]`` dilated by ``spread`` cells: ``D[r, c] = max C[r + a, c + b]``
+        over ``|a|, |b| <= spread`` (a read outside ``C`` is the floor), stored padded by
+        ``spread + 1`` cells (``D``'s cell ``(r + spread + 1, c + spread + 1)`` is ``C``'s
+        ``(r, c)``, its corner is the floor). A sum over it bounds the sums over ``C`` of
+        points each moved by at most ``spread`` cells per axis (the screen of
+        :func:`~slamkit.scanmatch.compiled.group_bounds`). Built on first use and kept;
+        read-only. Requires :attr:`counts`."""
+        if self.counts is None:
+            raise InputError("dilated_counts: the lookup grid has no integer counts")
+        key = (int(level), int(spread))
+        if key not in self._dilated:
+            self._dilated[key] = _dilate(self.counts[key[0]], key[1])
+        return self._dilated[key]
 
     def cells(self, points: FloatArray) -> tuple[IntArray, IntArray]:
         """Row and column indices ``(...,)`` of the cells of world points ``(..., 2)``, not
@@ -176,6 +200,29 @@ def _quanta(tables: tuple[FloatArray, ...]) -> tuple[NDArray[np.integer], ...] |
         c.flags.writeable = False
         out.append(c)
     return tuple(out)
+
+
+def _dilate(table: NDArray[np.integer], spread: int) -> NDArray[np.integer]:
+    """:meth:`LookupGrid.dilated_counts` of ``table``: the max over a window of ``w = 2
+    spread + 1`` cells, taken over rows, then columns, each by doubling (windows of 2, 4, ...
+    cells, then two overlapping ones cover ``w``), on the table padded by ``w`` cells of its
+    corner value (the floor)."""
+    w = 2 * spread + 1
+    out = np.pad(table, w, mode="constant", constant_values=table[0, 0])
+    for axis in (0, 1):
+        m = np.moveaxis(out, axis, 0)
+        span = 1
+        while 2 * span <= w:
+            m = m.copy()
+            np.maximum(m[:-span], m[span:], out=m[:-span])  # m[x] = max over [x, x + 2 span)
+            span *= 2
+        cover = np.maximum(m[: m.shape[0] - (w - span)], m[w - span :])  # [x, x + w)
+        out = np.moveaxis(cover, 0, axis)
+    # Row y of ``out`` is the max over padded rows [y, y + w), table rows [y - w, y - 1]:
+    # centred on table row y - spread - 1, as documented.
+    out = np.ascontiguousarray(out[: table.shape[0] + w + 1, : table.shape[1] + w + 1])
+    out.flags.writeable = False
+    return out
 
 
 def join_consecutive(points: FloatArray, max_gap: float, spacing: float) -> FloatArray:
@@ -249,7 +296,6 @@ def lookup_from_log_table(
     if int(pad) != pad or pad < 1:
         raise InputError(f"pad: expected an integer >= 1, got {pad!r}")
     floor = float(quantize(np.array(floor)))
-    inlier = float(quantize(np.array(inlier_log)))
     # The pyramid is built on the integer counts (max commutes with the scaling), and the
     # float tables are the counts times the quantum: the same values as quantising each.
     low = round(floor / QUANTUM)
@@ -258,7 +304,28 @@ def lookup_from_log_table(
     if not math.isfinite(high) or max(-low, high) >= 2**31:
         raise InputError(f"log-likelihood table: values must lie within ±2^19 nat, got {high}")
     dtype = np.int16 if max(-low, high) < 2**15 else np.int32
-    fine = np.pad(scaled.astype(dtype), int(pad), mode="constant", constant_values=low)
+    return _lookup_from_counts(
+        scaled.astype(dtype), origin_xy, resolution, floor=floor, inlier_log=inlier_log,
+        levels=levels, pad=pad,
+    )  # fmt: skip
+
+
+def _lookup_from_counts(
+    fine_counts: NDArray[np.integer],
+    origin_xy: FloatArray,
+    resolution: float,
+    *,
+    floor: float,
+    inlier_log: float,
+    levels: int,
+    pad: int,
+) -> LookupGrid:
+    """:func:`lookup_from_log_table` from the table already in quanta (``floor`` and
+    ``inlier_log`` are rounded here)."""
+    floor = float(quantize(np.array(floor)))
+    inlier = float(quantize(np.array(inlier_log)))
+    low = round(floor / QUANTUM)
+    fine = np.pad(fine_counts, int(pad), mode="constant", constant_values=low)
     counts = _max_pyramid(fine, int(levels))
     tables = tuple(c * QUANTUM for c in counts)
     origin = as_array(origin_xy, "origin_xy", (2,)) - int(pad) * resolution
@@ -277,7 +344,8 @@ def lookup_from_points(
 ) -> LookupGrid:
     """The lookup grid of reference points ``(M, 2)``: the points are marked in a grid of
     ``resolution`` covering them plus a margin of ``4 sigma``, a distance transform gives
-    each cell's distance (centre to the nearest marked centre) and ``L(d)`` the table.
+    each cell's distance (centre to the nearest marked centre) and ``L(d)`` the table
+    (compiled: stamped, the same table; module docstring).
     Inliers are points within ``3 sigma`` of the reference. With ``join_gap`` (m), points in
     scan order closer than that to their successor are joined by a segment first
     (:func:`join_consecutive`)."""
@@ -293,11 +361,67 @@ def lookup_from_points(
     cols, rows = (cells.max(axis=0) + margin + 1).tolist()
     free = np.ones((rows, cols), dtype=bool)
     free[cells[:, 1], cells[:, 0]] = False
+    floor = float(np.log(floor_likelihood))
+    inlier = float(log_likelihood_of_distance(np.array(3.0 * sigma), sigma, floor_likelihood))
+    stamp = _stamp(res, float(sigma), float(floor_likelihood)) if compiled.enabled() else None
+    if stamp is not None:
+        # The quantised table is a function of the squared cell distance alone, the floor
+        # beyond a few cells: stamped around each marked cell (the same counts as the
+        # distance transform's table, quantised).
+        low = round(float(quantize(np.array(floor))) / QUANTUM)
+        counts = np.full((rows, cols), low, dtype=stamp[2].dtype)
+        marked_rows, marked_cols = np.nonzero(~free)
+        compiled.stamp_max(counts, marked_rows, marked_cols, *stamp)
+        return _lookup_from_counts(
+            counts, lo * res, res, floor=floor, inlier_log=inlier, levels=levels, pad=pad
+        )
     # EDT: for every non-zero (free) cell, the distance to the nearest zero (marked) cell.
     dist = np.asarray(distance_transform_edt(free, sampling=res), dtype=np.float64)
     table = log_likelihood_of_distance(dist, sigma, floor_likelihood)
-    floor = float(np.log(floor_likelihood))
-    inlier = float(log_likelihood_of_distance(np.array(3.0 * sigma), sigma, floor_likelihood))
     return lookup_from_log_table(
         table, lo * res, res, floor=floor, inlier_log=inlier, levels=levels, pad=pad
     )
+
+
+@functools.lru_cache(maxsize=16)
+def _stamp(
+    resolution: float, sigma: float, floor_likelihood: float
+) -> tuple[IntArray, IntArray, NDArray[np.integer]] | None:
+    """The offsets ``(d_rows, d_cols)`` and quantised table values (counts) of every cell
+    whose table value is above the floor, around a marked cell, when the quantised table
+    of :func:`lookup_from_points` is a function of the squared cell distance ``D = dr² +
+    dc²`` alone, non-increasing in it, and the floor beyond those offsets; None otherwise.
+    Checked with the distance transform's arithmetic (``sqrt((dr res)² + (dc res)²)``), for
+    every ``(dr, dc)`` out to where ``exp(-d² / (2 sigma²))`` is 0 (the floor exactly)."""
+    reach = math.ceil(math.sqrt(2.0 * 750.0) * sigma / resolution) + 1
+    if reach > 400:
+        return None
+    a = np.arange(reach)
+    dr, dc = np.meshgrid(a, a, indexing="ij")
+    squared = (dr**2 + dc**2).ravel()
+    scaled = np.stack([dr, dc]).astype(np.float64) * resolution
+    dist = np.sqrt(np.add.reduce(scaled * scaled, axis=0)).ravel()
+    floor = float(quantize(np.array(float(np.log(floor_likelihood)))))
+    low = round(floor / QUANTUM)
+    table = log_likelihood_of_distance(np.append(dist, 1e6), sigma, floor_likelihood)
+    counts = np.round(np.maximum(table, floor) / QUANTUM).astype(np.int64)
+    if counts[-1] != low or max(-low, int(counts.max())) >= 2**15:
+        return None
+    counts = counts[:-1]
+    order = np.argsort(squared, kind="stable")
+    d2, c = squared[order], counts[order]
+    same = d2[1:] == d2[:-1]
+    if np.any(same & (c[1:] != c[:-1])) or np.any(c[1:] > c[:-1]):
+        return None  # not a function of D, or not non-increasing
+    inside = squared <= reach * reach - 2 * reach  # a quarter disc, every D in it complete
+    if np.any(counts[~inside] != low):
+        return None
+    cut = squared[counts > low].max(initial=-1)
+    r = math.isqrt(max(cut, 0))
+    o = np.arange(-r, r + 1)
+    d_rows, d_cols = (x.ravel() for x in np.meshgrid(o, o, indexing="ij"))
+    near = d_rows**2 + d_cols**2 <= cut
+    value = np.zeros(int(squared.max()) + 1, dtype=np.int64)
+    value[squared] = counts  # by D (consistent, checked above)
+    values = value[d_rows[near] ** 2 + d_cols[near] ** 2].astype(np.int16)
+    return d_rows[near], d_cols[near], values
