@@ -146,22 +146,8 @@ def bounded_counts(
     shorter dependency chain than the float one, and the table a quarter of the bytes."""
     n_rows, n_cols = table.shape
     flat = table.reshape(-1)
-    floor = np.int64(flat[0])
-    nr = np.uint64(n_rows)
-    nc = np.uint64(n_cols)
     for u in range(k.shape[0]):
-        row = k[u]
-        a, b = di[u], dj[u]
-        total = np.int64(0)
-        for p in range(rows.shape[1]):
-            r = rows[row, p] + a
-            c = cols[row, p] + b
-            if np.uint64(r) < nr and np.uint64(c) < nc:
-                total += np.int64(flat[r * n_cols + c])
-                if total < threshold:
-                    break
-            else:
-                total += floor
+        total = _bounded_total(flat, n_rows, n_cols, rows, cols, k[u], di[u], dj[u], threshold)
         out[u] = -np.inf if total < threshold else total * quantum
 
 

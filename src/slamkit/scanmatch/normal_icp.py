@@ -36,6 +36,7 @@ from scipy.spatial import cKDTree
 
 from slamkit._validation import FloatArray, as_array
 from slamkit.errors import ConfigError, CovarianceError, MatchError
+from slamkit.geometry.pose2 import transform_points
 from slamkit.scanmatch.covariance import line_jacobian, median, require_constrained
 from slamkit.scanmatch.result import MatchResult, require_points
 
@@ -241,9 +242,7 @@ def surface_fit(
     x = as_array(pose, "pose", (3,))
     if q.shape[0] == 0 or reference.points.shape[0] == 0:
         return 0.0
-    c, s = math.cos(float(x[2])), math.sin(float(x[2]))
-    moved = q @ np.array([[c, s], [-s, c]])
-    moved += x[:2]
+    moved = transform_points(x, q)
     _, j = reference.tree.query(moved, k=1, distance_upper_bound=reach)
     ok = j < reference.points.shape[0]
     jk = j[ok]
