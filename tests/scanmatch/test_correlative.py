@@ -288,6 +288,27 @@ def test_compiled_scores_equal_numpy_to_the_last_bit(seed: int) -> None:
 
 
 @pytest.mark.skipif(not compiled.AVAILABLE, reason="numba is not installed")
+@pytest.mark.parametrize("seed", [3, 4, 5])
+def test_depth_first_search_equals_the_rounds_in_a_loop_closure_window(seed: int) -> None:
+    # A loop closure's window (metres, tens of degrees, five levels): the compiled search
+    # (depth first from rotation groups) and the NumPy one (rounds of top nodes, level by
+    # level) take the nodes in different orders and must still reach the same leaf.
+    rng = np.random.default_rng(seed)
+    world = rooms_world()
+    pose = np.array([*SPOTS[seed % len(SPOTS)], rng.uniform(-np.pi, np.pi)])
+    ref = _points(world, pose, rng)
+    moved = pose + np.array([0.6, -0.8, 0.2])
+    cur = _points(world, moved, rng, beams=180)
+    cfg = CorrelativeConfig(window_xy=1.5, window_theta=math.radians(25), levels=5)
+    reference = CorrelativeReference.from_points(ref, cfg)
+    fast = correlative_match(reference, cur, np.zeros(3), cfg)
+    with compiled.use_numpy():
+        slow = correlative_match(reference, cur, np.zeros(3), cfg)
+    assert np.array_equal(fast.pose, slow.pose) and fast.score == slow.score
+    assert np.abs(fast.pose - between(pose, moved)).max() < 0.1  # it found the motion
+
+
+@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba is not installed")
 def test_integer_scores_equal_float_scores_to_the_last_bit() -> None:
     # The tables in quanta (int16) summed as integers give the float sums exactly, with the
     # same -inf below a threshold, inside and outside the table.
@@ -380,19 +401,19 @@ def test_rotation_group_bounds_hold_for_every_member() -> None:
         lk.counts[level], rows, cols, ks.ravel(), ii.ravel(), jj.ravel(), -(2**62), 1.0, full
     )
     threshold = int(np.median(full))
-    out = np.empty(groups * off.size**2)
+    out = np.empty(groups * off.size**2, dtype=np.int64)
     compiled.group_bounds(
-        lk.dilated_counts(level, spread), spread, near, rows, cols, off, off, threshold, 1.0, out
+        lk.dilated_counts(level, spread), spread, near, rows, cols, off, off, threshold, out
     )
     bound = out.reshape(groups, off.size, off.size)
     for g in range(groups):
         members = full.reshape(-1, off.size, off.size)[g * size : g * size + size]
         top = members.max(axis=0)
         if not near[g]:
-            assert np.all(bound[g] == np.inf)
+            assert np.all(bound[g] == compiled.NO_BOUND)
             continue
-        assert np.all((bound[g] >= top) | ((bound[g] == -np.inf) & (top < threshold)))
-    assert (bound == -np.inf).any() and np.isfinite(bound).any()
+        assert np.all((bound[g] >= top) | ((bound[g] == compiled.BELOW) & (top < threshold)))
+    assert (bound == compiled.BELOW).any() and (np.abs(bound) < compiled.NO_BOUND).any()
 
 
 @pytest.mark.skipif(not compiled.AVAILABLE, reason="numba is not installed")

@@ -21,8 +21,11 @@ from slamkit._validation import FloatArray
 
 __all__ = [
     "AVAILABLE",
+    "BELOW",
+    "NO_BOUND",
     "bounded_counts",
     "bounded_sums",
+    "depth_first",
     "enabled",
     "group_bounds",
     "ieee_remainder",
@@ -181,6 +184,12 @@ def _bounded_total(
     return total
 
 
+NO_BOUND = 2**62
+""":func:`group_bounds`' value for a group it cannot bound (any sum may reach it)."""
+BELOW = -(2**62)
+""":func:`group_bounds`' value for a bound below the threshold."""
+
+
 @jit
 def group_bounds(
     dilated: np.ndarray,
@@ -191,18 +200,18 @@ def group_bounds(
     di: np.ndarray,
     dj: np.ndarray,
     threshold: int,
-    quantum: float,
-    out: FloatArray,
+    out: np.ndarray,
 ) -> None:
-    """Upper bounds of :func:`bounded_counts` over groups of rotations: the rotations of
-    ``rows``, ``cols`` in groups ``g`` of ``2 spread + 1`` (the last may be smaller),
-    ``out[(g · len(di) + a) · len(dj) + b]`` at least the sum of every rotation of group
-    ``g`` at offset ``(di[a], dj[b])``. Where ``near[g]`` (no point's cell at any rotation of
-    the group lies more than ``spread`` cells per axis from its cell at the group's middle
-    rotation) the bound is the middle rotation's sum over ``dilated`` (the table dilated by
-    ``spread``, :meth:`~slamkit.scanmatch.lookup.LookupGrid.dilated_counts`; every value
-    ``<= 0``), ``-inf`` when below ``threshold``; elsewhere ``+inf`` (no bound). One sum
-    bounds ``2 spread + 1`` nodes."""
+    """Upper bounds of :func:`bounded_counts` over groups of rotations, in quanta
+    (``out``: ``int64``): the rotations of ``rows``, ``cols`` in groups ``g`` of ``2 spread
+    + 1`` (the last may be smaller), ``out[(g · len(di) + a) · len(dj) + b]`` at least the
+    sum of every rotation of group ``g`` at offset ``(di[a], dj[b])``. Where ``near[g]`` (no
+    point's cell at any rotation of the group lies more than ``spread`` cells per axis from
+    its cell at the group's middle rotation) the bound is the middle rotation's sum over
+    ``dilated`` (the table dilated by ``spread``,
+    :meth:`~slamkit.scanmatch.lookup.LookupGrid.dilated_counts`; every value ``<= 0``),
+    :data:`BELOW` when below ``threshold``; elsewhere :data:`NO_BOUND`. One sum bounds
+    ``2 spread + 1`` nodes."""
     d_rows, d_cols = dilated.shape
     d_flat = dilated.reshape(-1)
     shift = spread + 1  # the dilated table's padding
@@ -215,13 +224,110 @@ def group_bounds(
             for jj in range(n_j):
                 u = (g * n_i + ii) * n_j + jj
                 if not near[g]:
-                    out[u] = np.inf
+                    out[u] = NO_BOUND
                     continue
                 total = _bounded_total(
                     d_flat, d_rows, d_cols, rows, cols, mid, di[ii] + shift, dj[jj] + shift,
                     threshold,
                 )  # fmt: skip
-                out[u] = -np.inf if total < threshold else total * quantum
+                out[u] = BELOW if total < threshold else total
+
+
+@jit
+def depth_first(
+    tables: tuple[np.ndarray, ...],
+    rows: np.ndarray,
+    cols: np.ndarray,
+    n: int,
+    spread: int,
+    bounds: np.ndarray,
+    starts: np.ndarray,
+    best: np.ndarray,
+) -> None:
+    """Branch and bound of correlative matching, depth first, from the rotation groups of
+    :func:`group_bounds` (``bounds``, in quanta, at the top-level offsets ``starts ×
+    starts``) down to the leaves: ``best = [score, k, i, j]`` (``int64``, the score in
+    quanta) starts as a leaf already scored and ends as the best leaf of the whole window,
+    ties to the smallest ``(k, i, j)``.
+
+    ``tables``: the integer tables of every level (:attr:`~slamkit.scanmatch.lookup.
+    LookupGrid.counts`, every value ``<= 0``); a node ``(k, i, j)`` at level ``h`` stands
+    for the translations ``[i, i + 2^h) × [j, j + 2^h)`` with ``|i|, |j| <= n`` at rotation
+    ``k``. Entries are taken from a stack, the best bound on top: a group whose bound still
+    reaches the best leaf is split into its rotations' top-level nodes, a node into its four
+    children, each scored against the best leaf (:func:`_bounded_total`: a sum below it is
+    cut short, and the entry dropped), and a leaf that beats the best becomes it. So every
+    entry is scored against the best leaf reached *by then*, not the best of an earlier
+    level, and the search's order, best bounds first, finds the optimum early. An entry is
+    dropped only when its bound is below a leaf's score, so the optimum and its tie rule
+    are those of the exhaustive search."""
+    levels = len(tables)
+    n_k = rows.shape[0]
+    size = 2 * spread + 1
+    n_s = starts.shape[0]
+    m = bounds.shape[0]
+    # A pop pushes at most `size` (a group) or four (a node) entries, a level lower.
+    cap = m + size + 4 * levels
+    s_level = np.empty(cap, np.int64)
+    s_k = np.empty(cap, np.int64)
+    s_i = np.empty(cap, np.int64)
+    s_j = np.empty(cap, np.int64)
+    s_bound = np.empty(cap, np.int64)
+    top = 0
+    for u in np.argsort(bounds, kind="mergesort"):  # ascending: the best ends on top
+        if bounds[u] < best[0]:
+            continue
+        g, offset = divmod(u, n_s * n_s)
+        s_level[top] = levels  # a group: one above the top level
+        s_k[top] = g
+        s_i[top] = starts[offset // n_s]
+        s_j[top] = starts[offset % n_s]
+        s_bound[top] = bounds[u]
+        top += 1
+    c_k = np.empty(size, np.int64)
+    c_i = np.empty(size, np.int64)
+    c_j = np.empty(size, np.int64)
+    c_bound = np.empty(size, np.int64)
+    while top > 0:
+        top -= 1
+        level, k, i, j, bound = s_level[top], s_k[top], s_i[top], s_j[top], s_bound[top]
+        if bound < best[0]:
+            continue
+        if level == 0:  # a leaf: its bound is its score
+            if bound > best[0] or (k, i, j) < (best[1], best[2], best[3]):
+                best[0], best[1], best[2], best[3] = bound, k, i, j
+            continue
+        table = tables[levels - 1 if level == levels else level - 1]
+        n_rows, n_cols = table.shape
+        flat = table.reshape(-1)
+        found = 0
+        count = min(k * size + size, n_k) - k * size if level == levels else 4
+        for a in range(count):
+            if level == levels:
+                ck, ci, cj = k * size + a, i, j
+            else:
+                half = 1 << (level - 1)
+                ck, ci, cj = k, i + (half if a >= 2 else 0), j + (half if a % 2 else 0)
+                if ci > n or cj > n:
+                    continue
+            total = _bounded_total(flat, n_rows, n_cols, rows, cols, ck, ci, cj, best[0])
+            if total < best[0]:
+                continue
+            # insertion into the children sorted by bound, ascending
+            p = found
+            while p > 0 and c_bound[p - 1] > total:
+                c_k[p], c_i[p], c_j[p] = c_k[p - 1], c_i[p - 1], c_j[p - 1]
+                c_bound[p] = c_bound[p - 1]
+                p -= 1
+            c_k[p], c_i[p], c_j[p], c_bound[p] = ck, ci, cj, total
+            found += 1
+        for a in range(found):
+            s_level[top] = level - 1
+            s_k[top] = c_k[a]
+            s_i[top] = c_i[a]
+            s_j[top] = c_j[a]
+            s_bound[top] = c_bound[a]
+            top += 1
 
 
 @jit

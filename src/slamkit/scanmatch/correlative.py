@@ -21,18 +21,27 @@ between neighbouring rotations.
 **Branch and bound.** A node ``(k, i, j)`` at level ``h`` stands for the ``2^h × 2^h``
 translations ``[i, i + 2^h) × [j, j + 2^h)`` at rotation ``k``; its bound
 ``sum_p M_h[cell_p + (i, j)]`` (the max tables of the lookup grid) is at least the score of
-each of them. The search scores all top-level nodes of all rotations (so whole rotations
-are pruned too) and takes them in rounds, those of the best bounds first (a few, then more,
-then all that are left whose bound still reaches the best leaf so far). Within a round it
-finds a good leaf by greedy descent from the best node, then goes down level by level:
-nodes whose bound is below the best leaf so far are dropped, the others split into four,
-and the best leaf is tightened by another greedy descent. The first rounds find a leaf near
-the optimum, which prunes the later ones hard. The best leaf starts as the initial guess's;
-since every table value is ``<= 0`` a node's partial sum only falls, so its sum stops as
-soon as it drops below the best leaf (the node would be dropped anyway). A leaf that is
-dropped had an ancestor bound below a score already reached, so the optimum found equals the
-exhaustive search over the same fine grid (``config.search = "exhaustive"``; ties go to the
-smallest ``(k, i, j)`` in both).
+each of them. The best leaf starts as the initial guess's; since every table value is
+``<= 0`` a node's partial sum only falls, so its sum stops as soon as it drops below the
+best leaf (the node would be dropped anyway). A leaf that is dropped had an ancestor bound
+below a score already reached, so the optimum found equals the exhaustive search over the
+same fine grid (``config.search = "exhaustive"``; ties go to the smallest ``(k, i, j)`` in
+both), whatever order the nodes are taken in. Two orders are implemented:
+
+* *compiled* (numba and the lookup's integer tables, the default): the top-level nodes are
+  bounded by groups of ``2 _SPREAD + 1`` rotations first (at the default angular step a
+  point moves at most a cell per rotation, so the top table dilated by ``_SPREAD`` cells,
+  summed at the group's middle rotation, bounds all of them; :func:`compiled.group_bounds`),
+  and the search goes depth first from the groups, best bound first at every split
+  (:func:`compiled.depth_first`): every node is scored against the best leaf reached by
+  then, so after the first descents most nodes are scored against the optimum itself;
+* *NumPy* (the twin without numba, and float tables): all top-level nodes of all rotations
+  are scored and taken in rounds, those of the best bounds first (a few, then more, then
+  all that are left whose bound still reaches the best leaf so far). Within a round it
+  finds a good leaf by greedy descent from the best node, then goes down level by level:
+  nodes whose bound is below the best leaf so far are dropped, the others split into four,
+  and the best leaf is tightened by another greedy descent (one vectorised gather per
+  level instead of a call per node).
 
 **Covariance** (Olson, section IV). Treating ``exp(S)`` as the (unnormalised) likelihood of
 each fine pose, the poses ``x_u`` of a window around the optimum get ``p_u ∝ exp(S_u)`` and
@@ -78,13 +87,13 @@ IntArray = NDArray[np.int64]
 # float64 values are 2 MB each, small enough to stay in cache-friendly temporaries.
 _CHUNK_ELEMENTS = 1 << 18
 
-# Branch and bound searches the top nodes in rounds of at most these many (best bounds
-# first), then all that are left: on loop-closure searches of Intel, 1.3x faster than one
-# round, within 15 % of a search that knew the optimum's score from the start.
+# The NumPy branch and bound searches the top nodes in rounds of at most these many (best
+# bounds first), then all that are left: on loop-closure searches of Intel, 1.3x faster
+# than one round, within 15 % of a search that knew the optimum's score from the start.
 _ROUNDS = (8, 128, 2048)
 
-# The top-level nodes are bounded by groups of 2 * _SPREAD + 1 rotations first
-# (compiled.group_bounds).
+# The compiled branch and bound bounds the top-level nodes by groups of 2 * _SPREAD + 1
+# rotations first (compiled.group_bounds).
 _SPREAD = 4
 
 # Fields that shape the lookup grid: a prepared reference fixes them.
@@ -438,21 +447,15 @@ def _branch_and_bound(lookup: LookupGrid, cells: Cells, n: int) -> _Optimum:
     zero = np.zeros(1, dtype=np.int64)
     mid = n_k // 2
     best = _Optimum(mid, 0, 0, float(_score(lookup, 0, cells, zero + mid, zero, zero)[0]), 0)
-    grouped = cut and compiled.enabled() and lookup.counts is not None
-    near = _near_groups(cells) if grouped else None
-    if near is not None:
-        # Bounds of groups of rotations at each top-level offset, one sum per group
-        # (compiled.group_bounds); a group's nodes are scored when it is opened, against
-        # the best leaf by then.
-        left = _group_bounds(lookup, level, cells, near, starts, best.score)
-    else:
-        ks, ii, jj = np.meshgrid(np.arange(n_k), starts, starts, indexing="ij")
-        k, i, j = ks.ravel(), ii.ravel(), jj.ravel()
-        bound = _score(lookup, level, cells, k, i, j, best.score if cut else -np.inf)
-        left = bound.copy()
-    # The top nodes (or groups) in rounds, best bounds first: the first round's leaves give
-    # the later rounds a threshold near the optimum. A node or group left when its bound is
-    # below the best leaf holds no leaf as good.
+    if cut and compiled.enabled() and lookup.counts is not None:
+        return _depth_first(lookup, cells, n, starts, best)
+    ks, ii, jj = np.meshgrid(np.arange(n_k), starts, starts, indexing="ij")
+    k, i, j = ks.ravel(), ii.ravel(), jj.ravel()
+    bound = _score(lookup, level, cells, k, i, j, best.score if cut else -np.inf)
+    left = bound.copy()
+    # The top nodes in rounds, best bounds first: the first round's leaves give the later
+    # rounds a threshold near the optimum. A node left when its bound is below the best leaf
+    # holds no leaf as good.
     for size in (*_ROUNDS, None):
         open_ = np.flatnonzero(left >= best.score)
         if open_.size == 0:
@@ -460,14 +463,34 @@ def _branch_and_bound(lookup: LookupGrid, cells: Cells, n: int) -> _Optimum:
         if size is not None and open_.size > size:
             open_ = open_[np.argpartition(-left[open_], size - 1)[:size]]
         left[open_] = -np.inf
-        if near is not None:
-            nodes, node_bound = _open_groups(lookup, level, cells, starts, open_, best.score)
-        else:
-            nodes, node_bound = (k[open_], i[open_], j[open_]), bound[open_]
-        found = _search_blocks(lookup, cells, nodes, node_bound, level, n, best, cut)
+        nodes = (k[open_], i[open_], j[open_])
+        found = _search_blocks(lookup, cells, nodes, bound[open_], level, n, best, cut)
         if found is not None and _better(found, best):
             best = found
     return _Optimum(best.k, best.i, best.j, best.score, lookup.levels)
+
+
+def _depth_first(
+    lookup: LookupGrid, cells: Cells, n: int, starts: IntArray, start: _Optimum
+) -> _Optimum:
+    """The compiled search (integer tables): the top-level nodes bounded by groups of ``2
+    _SPREAD + 1`` rotations (:func:`compiled.group_bounds`, where :func:`_near_groups`
+    allows), then :func:`compiled.depth_first` from those groups, best bounds first, with
+    ``start`` as the first best leaf."""
+    rows, cols = cells
+    assert lookup.counts is not None
+    level = lookup.levels - 1
+    near = _near_groups(cells)
+    threshold = _quanta_below(start.score)  # the score's own count: a multiple of QUANTUM
+    bounds = np.empty(near.size * starts.size**2, dtype=np.int64)
+    compiled.group_bounds(
+        lookup.dilated_counts(level, _SPREAD), _SPREAD, near, rows, cols, starts, starts,
+        threshold, bounds,
+    )  # fmt: skip
+    best = np.array([threshold, start.k, start.i, start.j], dtype=np.int64)
+    compiled.depth_first(lookup.counts, rows, cols, n, _SPREAD, bounds, starts, best)
+    k, i, j = (int(v) for v in best[1:])
+    return _Optimum(k, i, j, float(best[0]) * QUANTUM, lookup.levels)
 
 
 def _near_groups(cells: Cells) -> NDArray[np.bool_]:
@@ -482,48 +505,6 @@ def _near_groups(cells: Cells) -> NDArray[np.bool_]:
     moved = np.maximum(np.abs(rows - rows[mid]).max(axis=1), np.abs(cols - cols[mid]).max(axis=1))
     out: NDArray[np.bool_] = np.maximum.reduceat(moved, np.arange(0, n_k, size)) <= _SPREAD
     return out
-
-
-def _group_bounds(
-    lookup: LookupGrid,
-    level: int,
-    cells: Cells,
-    near: NDArray[np.bool_],
-    starts: IntArray,
-    threshold: float,
-) -> FloatArray:
-    """:func:`compiled.group_bounds` at ``level`` for the top-level offsets ``starts ×
-    starts``, groups of ``2 _SPREAD + 1`` rotations (``-inf``: below ``threshold``)."""
-    rows, cols = cells
-    out = np.empty(near.size * starts.size**2)
-    compiled.group_bounds(
-        lookup.dilated_counts(level, _SPREAD), _SPREAD, near, rows, cols, starts, starts,
-        _quanta_below(threshold), QUANTUM, out,
-    )  # fmt: skip
-    return out
-
-
-def _open_groups(
-    lookup: LookupGrid,
-    level: int,
-    cells: Cells,
-    starts: IntArray,
-    entries: IntArray,
-    threshold: float,
-) -> tuple[tuple[IntArray, IntArray, IntArray], FloatArray]:
-    """The top-level nodes of the groups ``entries`` (indices into :func:`_group_bounds`)
-    whose bound reaches ``threshold``, and their bounds."""
-    size = 2 * _SPREAD + 1
-    g, offset = np.divmod(entries, starts.size**2)
-    a, b = np.divmod(offset, starts.size)
-    k = (g[:, None] * size + np.arange(size)).ravel()
-    i = np.repeat(starts[a], size)
-    j = np.repeat(starts[b], size)
-    inside = k < cells[0].shape[0]  # the last group may be smaller
-    k, i, j = k[inside], i[inside], j[inside]
-    bound = _score(lookup, level, cells, k, i, j, threshold)
-    keep = bound >= threshold
-    return (k[keep], i[keep], j[keep]), bound[keep]
 
 
 def _better(a: _Optimum, b: _Optimum) -> bool:
