@@ -126,6 +126,7 @@ def test_deferred_linearization_forms_the_same_normal_equations(kernel: str) -> 
     lazy.on_formed = spent.append
     assert (lazy.cost, lazy.chi2) == (eager.cost, eager.chi2)
     assert eager.H is not None and eager.g is not None
+    assert lazy.g is not None and lazy.H is not None
     assert np.array_equal(lazy.g, eager.g) and np.array_equal(lazy.H, eager.H)
     assert len(spent) == 1 and lazy.H is lazy.H  # formed once
     cost_only = problem.linearize(data.poses, np.zeros((0, 2)), cfg.kernel, jacobians=False)

@@ -25,7 +25,8 @@ import numpy as np
 
 from slamkit.errors import GeometryError
 from slamkit.optim.data import FloatArray
-from slamkit.optim.graph import GraphProblem, Linearization
+from slamkit.optim.graph import GraphProblem
+from slamkit.optim.linearization import Linearization
 from slamkit.optim.robust import RobustKernel
 from slamkit.optim.settings import StoppingConfig
 from slamkit.optim.sparse import Factorizer, SingularSystem
