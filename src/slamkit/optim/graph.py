@@ -114,7 +114,9 @@ def _check_edge_set(data: GraphData, es: EdgeSet) -> None:
     # A finite sum has no NaN or infinity among its terms, so only a non-finite sum (or an
     # overflow) needs the search for the edge; the same for exactly symmetric matrices,
     # which pass the tolerance test below. Both shortcuts skip reductions over tiny axes.
-    if not (np.isfinite(es.measurement.sum()) and np.isfinite(es.information.sum())):
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow just takes the search
+        sums = np.array([es.measurement.sum(), es.information.sum()])
+    if not np.isfinite(sums).all():
         bad = ~np.isfinite(es.measurement).all(axis=1) | ~np.isfinite(es.information).all(
             axis=(1, 2)
         )
