@@ -23,7 +23,7 @@ and 2D landmarks, and over SE(3) poses.
 """
 
 from slamkit.optim.data import EdgeKind, EdgeSet, GraphData
-from slamkit.optim.graph import GraphProblem, Linearization
+from slamkit.optim.graph import GraphProblem
 from slamkit.optim.incremental import (
     GraphUpdate,
     IncrementalConfig,
@@ -37,6 +37,7 @@ from slamkit.optim.init import (
     initial_values,
     spanning_tree_initialization,
 )
+from slamkit.optim.linearization import Linearization
 from slamkit.optim.loop import IterationInfo
 from slamkit.optim.marginals import Marginals, marginal_covariances
 from slamkit.optim.objectives import g2o_chi2, sesync_objective

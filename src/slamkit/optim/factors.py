@@ -47,7 +47,7 @@ def _bf(a: FloatArray) -> FloatArray:
     """Batch-first view of an array built edge-last (``(m, E)`` → ``(E, m)``, ``(m, d, E)`` →
     ``(E, m, d)``). The kernels fill contiguous per-entry rows of length ``E`` (fast), and
     :meth:`GraphProblem.linearize` moves the axis back without copying."""
-    return np.moveaxis(a, -1, 0)
+    return a.transpose(a.ndim - 1, *range(a.ndim - 1))  # np.moveaxis(a, -1, 0), cheaper
 
 
 def retract_poses(poses: FloatArray, delta: FloatArray) -> FloatArray:

@@ -36,6 +36,7 @@ import scipy.sparse.csgraph
 from slamkit.errors import CovarianceError, GeometryError, InputError, NonFiniteError, ShapeError
 from slamkit.optim import factors, factors3d
 from slamkit.optim.data import EdgeSet, FloatArray, GraphData, IntArray
+from slamkit.optim.linearization import Linearization, WeightedBlock, normal_equations
 from slamkit.optim.robust import RobustKernel, robust_rho_and_weight
 from slamkit.optim.sparse import NormalPattern
 
@@ -110,11 +111,21 @@ def _check_edge_set(data: GraphData, es: EdgeSet) -> None:
     ):
         if arr.shape != shape:
             raise ShapeError(f"{es.kind} edges: {name} has shape {arr.shape}, expected {shape}")
-    bad = ~np.isfinite(es.measurement).all(axis=1) | ~np.isfinite(es.information).all(axis=(1, 2))
-    if bad.any():
-        k = int(np.flatnonzero(bad)[0])
-        raise NonFiniteError(f"{edge_location(data, es, k)}: NaN or infinity in the edge")
+    # A finite sum has no NaN or infinity among its terms, so only a non-finite sum (or an
+    # overflow) needs the search for the edge; the same for exactly symmetric matrices,
+    # which pass the tolerance test below. Both shortcuts skip reductions over tiny axes.
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow just takes the search
+        sums = np.array([es.measurement.sum(), es.information.sum()])
+    if not np.isfinite(sums).all():
+        bad = ~np.isfinite(es.measurement).all(axis=1) | ~np.isfinite(es.information).all(
+            axis=(1, 2)
+        )
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise NonFiniteError(f"{edge_location(data, es, k)}: NaN or infinity in the edge")
     info = es.information
+    if np.array_equal(info, np.swapaxes(info, 1, 2)):
+        return
     scale = np.maximum(np.abs(info).max(axis=(1, 2)), 1e-300)
     asym = np.abs(info - np.swapaxes(info, 1, 2)).max(axis=(1, 2)) > 1e-9 * scale
     if asym.any():
@@ -156,22 +167,6 @@ class _Block:
     db: int
     m: int
     batch_first: bool  # 3D: kernels, U and products batch-first (stacked 6x6 matmuls)
-
-
-@dataclass
-class Linearization:
-    """Whitened, robustly weighted system at one estimate.
-
-    ``cost = Σ ρ(‖U e‖²)``; ``H`` (lower-triangle values in the problem's pattern) and
-    ``g = Jᵀ r`` of the IRLS-weighted residual ``r`` (so the Gauss-Newton step solves
-    ``H δ = -g``); ``chi2`` is the unweighted ``Σ ‖U e‖²``.
-    """
-
-    cost: float
-    chi2: float
-    H: FloatArray | None
-    g: FloatArray | None
-    seconds: float
 
 
 class GraphProblem:
@@ -389,6 +384,8 @@ class GraphProblem:
                 continue
             src.append(a)
             dst.append(b + n_p if b_lm else b)
+        if n_p and anchored[0] and _reaches_first_row(n_p, n_l, alias, blocks_raw):
+            return
         s, d = np.concatenate(src), np.concatenate(dst)
         adj = scipy.sparse.coo_matrix((np.ones(s.shape[0]), (s, d)), shape=(n, n))
         n_comp, label = scipy.sparse.csgraph.connected_components(adj, directed=False)
@@ -566,8 +563,8 @@ class GraphProblem:
             r3 = np.matmul(U3, e[:, :, None])[:, :, 0]
             return r3, U3 @ Ja, None if Jb is None else U3 @ Jb
         # The 2D kernels build edge-last arrays and return batch-first views: undo the views.
-        e, Ja = np.moveaxis(e, 0, -1), np.moveaxis(Ja, 0, -1)
-        Jb = None if Jb is None else np.moveaxis(Jb, 0, -1)
+        e, Ja = _edge_last(e), _edge_last(Ja)
+        Jb = None if Jb is None else _edge_last(Jb)
         if blk.row_weights is not None:
             w = blk.row_weights
             return e * w, Ja * w[:, None, :], None if Jb is None else Jb * w[:, None, :]
@@ -584,54 +581,53 @@ class GraphProblem:
         kernel: RobustKernel | None = None,
         *,
         jacobians: bool = True,
+        deferred: bool = False,
     ) -> Linearization:
         """Cost, ``H`` and ``g`` at ``(poses, landmarks)`` (rows as ``pose_ids``, ``landmark_ids``).
 
         Per edge, with the whitened residual ``r = U e``, ``s = ‖r‖²`` and the IRLS weight
         ``w = ρ'(s)``: ``H_ab += w A_aᵀ A_b`` and ``g_a += w A_aᵀ r`` where ``A = U ∂e/∂δ``.
+        ``jacobians=False``: the cost only. ``deferred=True``: ``H`` and ``g`` are formed
+        when first read (the same numbers; :mod:`slamkit.optim.linearization`).
         """
         t0 = time.perf_counter()
         cost = 0.0
         chi2 = 0.0
-        hw: list[FloatArray] = []
-        gw: list[FloatArray] = []
+        weighted: list[WeightedBlock] = []
         robust = kernel is not None and kernel.name != "none"
         for blk in self.blocks:
             r, A, B = self.block_residuals(blk, poses, landmarks)
             s = _squared_norms(blk, r)
-            chi2 += float(s.sum())
+            s_sum = float(s.sum())
+            chi2 += s_sum
             if robust:
                 assert kernel is not None
                 rho, w = robust_rho_and_weight(kernel, s)
                 cost += float(rho.sum())
             else:
-                cost += float(s.sum())
+                cost += s_sum
             if not jacobians:
-                continue
-            if blk.batch_first:
-                if robust:
-                    sw = np.sqrt(w)
-                    r, A = r * sw[:, None], A * sw[:, None, None]
-                    B = None if B is None else B * sw[:, None, None]
-                _emit_batch_first(A, B, r, hw, gw)
                 continue
             if robust:
                 sw = np.sqrt(w)
-                r = r * sw
-                A = A * sw
-                B = None if B is None else B * sw
-            hw.append(np.einsum("kpe,kqe->pqe", A, A).ravel())
-            if B is not None:
-                hw.append(np.einsum("kpe,kqe->pqe", A, B).ravel())
-                hw.append(np.einsum("kpe,kqe->pqe", B, B).ravel())
-            gw.append(np.einsum("kpe,ke->pe", A, r).ravel())
-            if B is not None:
-                gw.append(np.einsum("kpe,ke->pe", B, r).ravel())
-        H = g = None
-        if jacobians:
-            pat = self.pattern
-            H = pat.values(np.concatenate(hw))
-            g = pat.gradient(np.concatenate(gw))
+                if blk.batch_first:
+                    r, A = r * sw[:, None], A * sw[:, None, None]
+                    B = None if B is None else B * sw[:, None, None]
+                else:
+                    r = r * sw
+                    A = A * sw
+                    B = None if B is None else B * sw
+            weighted.append(WeightedBlock(r, A, B, blk.batch_first))
+        if not jacobians:
+            return Linearization(cost, chi2, None, None, time.perf_counter() - t0)
+        pattern = self.pattern
+        if deferred:
+
+            def form() -> tuple[FloatArray, FloatArray]:
+                return normal_equations(pattern, weighted)
+
+            return Linearization(cost, chi2, None, None, time.perf_counter() - t0, pending=form)
+        H, g = normal_equations(pattern, weighted)
         return Linearization(cost, chi2, H, g, time.perf_counter() - t0)
 
     def block_terms(
@@ -733,33 +729,37 @@ class GraphProblem:
         return f"landmark {int(self.landmark_ids[k // 2])} ({'xy'[k % 2]})"
 
 
+def _edge_last(a: FloatArray) -> FloatArray:
+    """``a`` with its first (edge) axis moved last, as ``np.moveaxis(a, 0, -1)`` (the same
+    view) without its argument normalisation, which costs more than the view here."""
+    return a.transpose(*range(1, a.ndim), 0)
+
+
+def _reaches_first_row(
+    n_p: int,
+    n_l: int,
+    alias: IntArray,
+    blocks_raw: list[tuple[EdgeSet, IntArray, IntArray | None, bool]],
+) -> bool:
+    """Whether every variable is joined to pose row 0, by a sufficient test that needs no
+    graph search (the common case of a chain of poses): every later pose row has an edge
+    to, or is an alias of, an earlier row, and every landmark has a reading. ``False``
+    says nothing; :meth:`GraphProblem._check_connected` then searches the graph."""
+    earlier = alias < np.arange(n_p)
+    seen = np.zeros(n_l, dtype=bool)
+    for _es, a, b, b_lm in blocks_raw:
+        if b is None:
+            continue
+        if b_lm:
+            seen[b] = True
+        else:
+            earlier[np.maximum(a, b)] = True  # a != b: the larger row has the smaller before it
+    return bool(earlier[1:].all() and seen.all())
+
+
 def _squared_norms(blk: _Block, r: FloatArray) -> FloatArray:
     """``‖r_k‖²`` per edge of a whitened residual in the block's layout."""
     return np.einsum("em,em->e", r, r) if blk.batch_first else np.einsum("ie,ie->e", r, r)
-
-
-def _emit_batch_first(
-    A: FloatArray,
-    B: FloatArray | None,
-    r: FloatArray,
-    hw: list[FloatArray],
-    gw: list[FloatArray],
-) -> None:
-    """Append the block products ``AᵀA``, ``AᵀB``, ``BᵀB`` and gradients ``Aᵀr``, ``Bᵀr`` of
-    batch-first ``A (E, m, da)``, ``B (E, m, db)``, ``r (E, m)`` in the pattern's edge-last
-    order (``(d_a, d_b, E)`` raveled). Transposing ``A`` into contiguous memory first keeps
-    every product on matmul's fast path."""
-    At = np.ascontiguousarray(np.swapaxes(A, 1, 2))
-    hw.append(np.ascontiguousarray((At @ A).transpose(1, 2, 0)).ravel())
-    rc = r[:, :, None]
-    if B is None:
-        gw.append(np.ascontiguousarray((At @ rc)[:, :, 0].T).ravel())
-        return
-    Bt = np.ascontiguousarray(np.swapaxes(B, 1, 2))
-    hw.append(np.ascontiguousarray((At @ B).transpose(1, 2, 0)).ravel())
-    hw.append(np.ascontiguousarray((Bt @ B).transpose(1, 2, 0)).ravel())
-    gw.append(np.ascontiguousarray((At @ rc)[:, :, 0].T).ravel())
-    gw.append(np.ascontiguousarray((Bt @ rc)[:, :, 0].T).ravel())
 
 
 def sesync_row_weights(information: FloatArray) -> FloatArray:

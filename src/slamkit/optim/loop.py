@@ -25,7 +25,8 @@ import numpy as np
 
 from slamkit.errors import GeometryError
 from slamkit.optim.data import FloatArray
-from slamkit.optim.graph import GraphProblem, Linearization
+from slamkit.optim.graph import GraphProblem
+from slamkit.optim.linearization import Linearization
 from slamkit.optim.robust import RobustKernel
 from slamkit.optim.settings import StoppingConfig
 from slamkit.optim.sparse import Factorizer, SingularSystem
@@ -123,11 +124,17 @@ class SolverContext:
         self.assembly_seconds = 0.0
 
     def linearize(self, poses: FloatArray, landmarks: FloatArray) -> Estimate:
-        """The estimate at ``(poses, landmarks)`` with its cost, ``H`` and ``g``."""
-        lin = self.problem.linearize(poses, landmarks, self.kernel)
+        """The estimate at ``(poses, landmarks)`` with its cost; ``H`` and ``g`` are formed
+        when a strategy first reads them (a rejected trial and the last estimate of a solve
+        need only the cost), and the time that takes joins :attr:`assembly_seconds` then."""
+        lin = self.problem.linearize(poses, landmarks, self.kernel, deferred=True)
         self.linearizations += 1
         self.assembly_seconds += lin.seconds
+        lin.on_formed = self._count_assembly
         return Estimate(poses, landmarks, lin)
+
+    def _count_assembly(self, seconds: float) -> None:
+        self.assembly_seconds += seconds
 
     def move(self, at: Estimate, delta: FloatArray) -> Estimate:
         """``at ⊕ δ``, linearised."""

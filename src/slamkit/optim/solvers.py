@@ -105,10 +105,12 @@ class OptimizeResult:
     """Why this start was used (:attr:`StartChoice.reason`)."""
     g2o_chi2: float = float("nan")
     """g2o's χ² of the solution over every edge (:func:`slamkit.optim.g2o_chi2`), whatever
-    the objective minimised (set by :func:`optimize`)."""
+    the objective minimised (set by :func:`optimize` unless called with
+    ``objectives=False``)."""
     sesync_objective: float = float("nan")
     """SE-Sync's ``F`` of the solution over the relative-pose edges
-    (:func:`slamkit.optim.sesync_objective`; set by :func:`optimize`)."""
+    (:func:`slamkit.optim.sesync_objective`; set by :func:`optimize` unless called with
+    ``objectives=False``)."""
 
     def as_graph(self, data: GraphData) -> GraphData:
         """``data`` with its vertices replaced by the optimised values (for a writer)."""
@@ -129,6 +131,7 @@ def optimize(
     initial_landmarks: FloatArray | None = None,
     callback: Callback | None = None,
     problem: GraphProblem | None = None,
+    objectives: bool = True,
 ) -> OptimizeResult:
     """Minimise the graph's cost from the configured (or given) starting values.
 
@@ -137,7 +140,10 @@ def optimize(
     ``pose_ids`` / ``landmark_ids`` (the file's vertex order; sorted ids when the file has no
     vertices). ``callback(info)`` runs after every iteration; returning ``True`` stops.
     ``problem`` may pass a prebuilt :class:`GraphProblem` of ``data`` (built with the same
-    objective and gauge) to skip validation.
+    objective and gauge) to skip validation. ``objectives=False`` skips evaluating g2o's χ²
+    and SE-Sync's ``F`` of the solution (:attr:`OptimizeResult.g2o_chi2` and
+    :attr:`OptimizeResult.sesync_objective` are then NaN): one residual evaluation per
+    objective that a caller solving a growing graph after every change never reads.
     """
     cfg = config if config is not None else OptimizerConfig()
     t_start = time.perf_counter()
@@ -184,7 +190,9 @@ def optimize(
     out = run_least_squares(ctx, start, make_step(cfg), cfg.stopping, history, callback)
     total = time.perf_counter() - t_start
     end = out.estimate
-    g2o_value, sesync_value = problem.objective_values(end.poses, end.landmarks)
+    g2o_value = sesync_value = float("nan")
+    if objectives:
+        g2o_value, sesync_value = problem.objective_values(end.poses, end.landmarks)
     return OptimizeResult(
         pose_ids=problem.pose_ids.copy(),
         poses=problem.to_external(end.poses),

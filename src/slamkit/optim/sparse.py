@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, Literal, Protocol
 
 import numpy as np
@@ -97,13 +98,24 @@ class NormalPattern:
         V = sizes.shape[0]
         off = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         n = int(off[-1])
+        # Block pairs as keys min·V + max: every diagonal block, then the off-diagonal blocks
+        # of the products (an entry with va == vb is the diagonal block of va).
         keys = [np.arange(V, dtype=np.int64) * (V + 1)]
-        oks = []
+        oks, pairs = [], []
         for va, vb, _, _, _ in products:
             ok = (va >= 0) & (vb >= 0)
+            pair = ok & (va != vb)
             oks.append(ok)
-            keys.append(np.minimum(va, vb)[ok] * V + np.maximum(va, vb)[ok])
-        uniq, inverse = np.unique(np.concatenate(keys), return_inverse=True)
+            pairs.append(pair)
+            keys.append(np.minimum(va, vb)[pair] * V + np.maximum(va, vb)[pair])
+        every = np.concatenate(keys)
+        # The distinct blocks (one sort), then each pair's block by binary search: cheaper
+        # than np.unique with return_inverse.
+        ordered = np.sort(every)
+        distinct = np.ones(ordered.shape[0], dtype=bool)
+        distinct[1:] = ordered[1:] != ordered[:-1]
+        uniq = ordered[distinct]
+        inverse = np.searchsorted(uniq, every[V:])
         bc, br = uniq // V, uniq % V  # block column (smaller var) and row
         is_diag = bc == br
         row_size = np.where(is_diag, 0, sizes[br])
@@ -122,34 +134,35 @@ class NormalPattern:
         base = colptr - pcs[None, :]
         base = np.where(is_diag[:, None], base, base + sizes[bc][:, None] + pre[:, None])
 
-        indices = np.empty(int(indptr[-1]), dtype=np.int64)
-        for sr in np.unique(sizes):
-            for sc in np.unique(sizes):
-                sel = np.flatnonzero((sizes[br] == sr) & (sizes[bc] == sc))
-                if not sel.shape[0]:
-                    continue
-                pr, pc = np.meshgrid(np.arange(sr), np.arange(sc), indexing="ij")
-                keep = ~(is_diag[sel][:, None, None] & (pr < pc)[None])
-                b3 = np.broadcast_to(sel[:, None, None], keep.shape)[keep]
-                pr3 = np.broadcast_to(pr[None], keep.shape)[keep]
-                pc3 = np.broadcast_to(pc[None], keep.shape)[keep]
-                indices[base[b3, pc3] + pr3] = off[br[b3]] + pr3
+        # Column c = off[v] + q of variable v lists the rows R_v[q:], with R_v the rows of v's
+        # diagonal block and then of each lower block (blocks in key order, which is by
+        # column and then by row, the diagonal block first).
+        block_rows = sizes[br]
+        starts = np.concatenate([[0], np.cumsum(block_rows)])  # of each block's rows in R
+        rows = np.repeat(off[br] - starts[:-1], block_rows) + np.arange(int(starts[-1]))
+        at_col = starts[first[var_of_col]] + q_of_col - indptr[:-1]
+        indices = rows[np.repeat(at_col, lengths) + np.arange(int(indptr[-1]))]
         nnz = indices.shape[0]
         slots: list[IntArray] = []
-        at = V
-        for (va, vb, da, db, diagonal), ok in zip(products, oks, strict=True):
-            b = np.zeros(va.shape[0], dtype=np.int64)
-            k = int(ok.sum())
-            b[ok] = inverse[at : at + k]
+        at = 0
+        for (va, vb, da, db, diagonal), ok, pair in zip(products, oks, pairs, strict=True):
+            if not va.shape[0]:
+                slots.append(np.zeros((da, db, 0), dtype=np.int64))
+                continue
+            b = first[np.maximum(va, 0)]  # the diagonal block of va (right where va == vb)
+            k = int(pair.sum())
+            if k:
+                b[pair] = inverse[at : at + k]
             at += k
             p = np.arange(da)[:, None, None]
             q = np.arange(db)[None, :, None]
+            bt = base[b].T  # (max size, E): the column starts of each edge's block
             swap = (va < vb)[None, None, :]  # the row block is vb: entry (p, q) is (q, p)
-            pr = np.where(swap, q, p)
-            pc = np.where(swap, p, q)
-            pos = base[b[None, None, :], pc] + pr
+            pos = bt[None, :db, :] + p
+            if swap.any():
+                pos = np.where(swap, bt[:da, None, :] + q, pos)
             valid = ok[None, None, :] & ~(diagonal & (p < q))
-            slots.append(np.where(valid, pos, nnz).astype(np.int64))
+            slots.append(pos if valid.all() else np.where(valid, pos, nnz))
         diag = indptr[:-1].copy()  # the first entry of each column is its diagonal
         return cls(n, indptr, indices, np.zeros(0, np.int64), np.zeros(0, np.int64), diag), slots
 
@@ -176,8 +189,18 @@ class NormalPattern:
 
     def matvec(self, data: FloatArray, x: FloatArray) -> FloatArray:
         """``H x`` using the lower triangle only: ``L x + Lᵀ x - diag ⊙ x``."""
-        L = self.lower_matrix(data)
-        return np.asarray(L @ x + L.T @ x - data[self.diag] * x)
+        L, Lt = self._lower_and_transpose
+        # The same SciPy kernels as on freshly built matrices, without re-checking the index
+        # arrays on every call (the step strategies call this once per trial step).
+        L.data = Lt.data = np.asarray(data, dtype=np.float64)
+        return np.asarray(L @ x + Lt @ x - data[self.diag] * x)
+
+    @cached_property
+    def _lower_and_transpose(self) -> tuple[scipy.sparse.csc_matrix, scipy.sparse.csr_matrix]:
+        """``L`` (CSC) and ``Lᵀ`` (CSR) over this pattern, built once; :meth:`matvec` sets
+        their values (they keep those of its last call)."""
+        L = self.lower_matrix(np.zeros(self.nnz))
+        return L, L.T
 
 
 class Factorizer(Protocol):

@@ -162,8 +162,14 @@ class PoseGraph:
 
     def chi2(self) -> FloatArray:
         """``eᵀ Ω e`` of every edge at the current estimate ``(E,)``."""
-        i, j, z, info = self.edges()
-        return edge_chi2(self.poses, i, j, z, info)
+        n = self._n_edges  # views of the buffers: edge_chi2 only reads them
+        return edge_chi2(
+            self._pose_buf[: self._n_poses],
+            self._i_buf[:n],
+            self._j_buf[:n],
+            self._z_buf[:n],
+            self._info_buf[:n],
+        )
 
     def graph_data(self) -> GraphData:
         """The graph as :class:`~slamkit.optim.GraphData` (ids = keyframe indices, the
@@ -189,7 +195,8 @@ class PoseGraph:
         returns non-finite poses."""
         tic = time.perf_counter()
         data = self.graph_data()
-        result = optimize(data, self.optimizer, initial_poses=data.poses)
+        # objectives=False: the record keeps the cost; g2o's χ² and SE-Sync's F go unread.
+        result = optimize(data, self.optimizer, initial_poses=data.poses, objectives=False)
         if not np.isfinite(result.poses).all():
             raise ConvergenceError(
                 f"pose-graph optimisation over {len(self)} keyframes returned non-finite poses"
@@ -243,7 +250,8 @@ def optimize_consistent(
     while True:
         graph.optimize()
         chi2 = graph.chi2()
-        kept = [e for e in range(chi2.size) if e not in removed]
+        kept = np.ones(chi2.size, dtype=bool)
+        kept[removed] = False
         growth = float(chi2[kept].sum()) - before
         torn = bool((chi2[intact] > max_edge_chi2).any())
         if not alive or (growth <= max_chi2 * len(alive) and not torn):
