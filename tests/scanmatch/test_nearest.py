@@ -25,7 +25,7 @@ def _kdtree(points: np.ndarray, x: np.ndarray, bound: float) -> np.ndarray:
 
 
 def _grid(points: np.ndarray, cell: float) -> NearestGrid:
-    return NearestGrid(points, cell, lambda: cKDTree(points, leafsize=8))
+    return NearestGrid(points, cell)
 
 
 @pytest.mark.parametrize("offset", [0.0, 1e5])
@@ -184,3 +184,18 @@ def test_the_prior_check_is_allclose_and_eigvalsh() -> None:
         assert raised == plain
         refused += raised
     assert 0 < refused < len(cases)
+
+
+def test_a_cloud_with_its_grids_pickles() -> None:
+    """A cloud that has answered queries (its grid and KD-tree built) pickles and answers
+    the same after."""
+    import pickle
+
+    rng = np.random.default_rng(4)
+    points = rng.uniform(0.0, 5.0, (100, 2))
+    cloud = NormalCloud.build(points, np.tile([1.0, 0.0], (100, 1)))
+    x = rng.uniform(0.0, 5.0, (50, 2))
+    before = cloud.nearest(x, 0.4)
+    assert cloud.tree.n == 100
+    again = pickle.loads(pickle.dumps(cloud))
+    np.testing.assert_array_equal(again.nearest(x, 0.4), before)

@@ -42,7 +42,6 @@ numba is optional (:mod:`slamkit.scanmatch.compiled`): without it, or inside
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -76,13 +75,14 @@ def kdtree_nearest(tree: cKDTree, x: FloatArray, bound: float) -> NDArray[np.int
 
 class NearestGrid:
     """Reference points ``(M, 2)`` sorted into square cells of side ``cell`` [m] over their
-    bounding box, for :meth:`query`. ``tree`` gives the KD-tree of the same points (built
-    on demand) for the queries the grid leaves to it (ties, no numba)."""
+    bounding box, for :meth:`query`; the queries it leaves to a KD-tree (ties, no numba) go
+    to :meth:`kdtree`."""
 
-    def __init__(self, points: FloatArray, cell: float, tree: Callable[[], cKDTree]) -> None:
+    def __init__(self, points: FloatArray, cell: float) -> None:
         m = points.shape[0]
         self.n_points = m
-        self._tree = tree
+        self.points = points
+        self._tree: cKDTree | None = None
         lo = points.min(axis=0) if m else np.zeros(2)
         hi = points.max(axis=0) if m else np.zeros(2)
         span = float(max(hi[0] - lo[0], hi[1] - lo[1], 0.0))
@@ -106,12 +106,20 @@ class NearestGrid:
         self.start = np.zeros(counts.size + 1, dtype=np.intp)
         np.cumsum(counts, out=self.start[1:])
 
+    def kdtree(self) -> cKDTree:
+        """The KD-tree over the points (built on first use), as
+        :attr:`~slamkit.scanmatch.normal_icp.NormalCloud.tree` builds it (``leafsize=8``): a
+        tie's answer depends on the tree's shape."""
+        if self._tree is None:
+            self._tree = cKDTree(self.points, leafsize=8)
+        return self._tree
+
     def query(self, x: FloatArray, bound: float) -> NDArray[np.intp]:
         """The index of the nearest reference point strictly within ``bound`` [m] of each
         query point ``x (K, 2)``, ``M`` where there is none: ``cKDTree.query(x, k=1,
         distance_upper_bound=bound)[1]`` exactly (see the module docstring). ``x`` finite."""
         if not compiled.enabled() or self.n_points == 0:
-            return kdtree_nearest(self._tree(), x, bound)
+            return kdtree_nearest(self.kdtree(), x, bound)
         out = np.empty(x.shape[0], dtype=np.intp)
         tied = grid_nearest(
             self.xs, self.ys, self.index, self.start, self.origin[0], self.origin[1],
@@ -119,7 +127,7 @@ class NearestGrid:
         )  # fmt: skip
         if tied:  # equal least distances: the KD-tree's choice among them
             rows = np.flatnonzero(out < 0)
-            out[rows] = kdtree_nearest(self._tree(), x[rows], bound)
+            out[rows] = kdtree_nearest(self.kdtree(), x[rows], bound)
         return out
 
 

@@ -75,7 +75,7 @@ class NormalCloud:
         grids = self.__dict__.setdefault("_grids", {})  # the frozen dataclass's cache
         grid = grids.get(bound)
         if grid is None:
-            grid = NearestGrid(self.points, CELL_SIDE * bound, lambda: self.tree)
+            grid = NearestGrid(self.points, CELL_SIDE * bound)
             grids[bound] = grid
         return grid.query(x, bound)
 
