@@ -29,15 +29,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from slamkit._validation import FloatArray, as_array
 from slamkit.errors import ConfigError, CovarianceError, MatchError
 from slamkit.geometry.pose2 import transform_points
-from slamkit.scanmatch.covariance import line_jacobian, median, require_constrained
+from slamkit.scanmatch import compiled
+from slamkit.scanmatch.covariance import require_constrained
+from slamkit.scanmatch.nearest import CELL_SIDE, NearestGrid
+from slamkit.scanmatch.normal_terms import pair_terms
 from slamkit.scanmatch.result import MatchResult, require_points
 
 __all__ = ["NormalCloud", "NormalIcpConfig", "normal_icp", "surface_fit"]
@@ -45,18 +49,35 @@ __all__ = ["NormalCloud", "NormalIcpConfig", "normal_icp", "surface_fit"]
 
 @dataclass(frozen=True, eq=False)
 class NormalCloud:
-    """Reference points ``(M, 2)`` with unit normals ``(M, 2)`` and a KD-tree over the
-    points (build with :meth:`build`). The arrays are treated as read-only."""
+    """Reference points ``(M, 2)`` with unit normals ``(M, 2)`` (build with :meth:`build`),
+    and the search for their nearest neighbours (:meth:`nearest`). The arrays are treated as
+    read-only."""
 
     points: FloatArray
     normals: FloatArray
-    tree: cKDTree
 
     @classmethod
     def build(cls, points: ArrayLike, normals: ArrayLike) -> NormalCloud:
         pts = as_array(points, "reference points", (None, 2))
         nrm = as_array(normals, "reference normals", (pts.shape[0], 2))
-        return cls(pts, nrm, cKDTree(pts, leafsize=8))
+        return cls(pts, nrm)
+
+    @cached_property
+    def tree(self) -> cKDTree:
+        """A KD-tree over the points (built on first use)."""
+        return cKDTree(self.points, leafsize=8)
+
+    def nearest(self, x: FloatArray, bound: float) -> NDArray[np.intp]:
+        """The index of the point nearest each of ``x (K, 2)`` strictly within ``bound``
+        [m], ``M`` where none is: ``self.tree.query(x, k=1, distance_upper_bound=bound)[1]``
+        to the index, by a grid (:class:`~slamkit.scanmatch.nearest.NearestGrid`, one per
+        bound, built on first use), several times faster on ICP's small batches."""
+        grids = self.__dict__.setdefault("_grids", {})  # the frozen dataclass's cache
+        grid = grids.get(bound)
+        if grid is None:
+            grid = NearestGrid(self.points, CELL_SIDE * bound)
+            grids[bound] = grid
+        return grid.query(x, bound)
 
 
 @dataclass(frozen=True)
@@ -140,30 +161,29 @@ def normal_icp(
     lam = None
     if prior_information is not None:
         lam = as_array(prior_information, "prior information", (3, 3))
-        if not np.allclose(lam, lam.T) or np.linalg.eigvalsh(0.5 * (lam + lam.T))[0] < 0:
-            raise CovarianceError(
-                "prior information: expected a symmetric positive semi-definite 3x3 matrix"
-            )
-    P, normals = reference.points, reference.normals
-    m_ref = P.shape[0]
+        _require_prior(lam)
+    # The arrays as the kernels take them (C-ordered, writable): converted once, not per
+    # step; the rotation below keeps ``q`` itself (the BLAS product of its own layout).
+    P, normals = compiled.writable(reference.points), compiled.writable(reference.normals)
+    qc = compiled.writable(q)
     tx, ty, th = float(x0[0]), float(x0[1]), float(x0[2])
     converged = False
     seen: set[bytes] = set()  # every correspondence set met so far
     it = 0
     jac = np.zeros((0, 3))
+    jw = np.zeros((0, 3))
     qk = np.zeros((0, 2))
-    w = np.zeros(0)
     sigma = 0.0
     n_pairs = 0
     for it in range(1, cfg.max_iterations + 1):
         c, s = math.cos(th), math.sin(th)
         moved = q @ np.array([[c, s], [-s, c]])
         moved += (tx, ty)
-        _, j = reference.tree.query(
-            moved, k=1, distance_upper_bound=cfg.max_correspondence_distance
+        j = reference.nearest(moved, cfg.max_correspondence_distance)
+        terms = pair_terms(
+            moved, qc, j, P, normals, th, cfg.huber_k, cfg.noise_floor, cfg.min_correspondences
         )
-        ok = j < m_ref
-        n_pairs = int(np.count_nonzero(ok))
+        n_pairs = terms.n_pairs
         if n_pairs < cfg.min_correspondences:
             raise MatchError(
                 f"normal-icp: {n_pairs} correspondences within "
@@ -171,20 +191,13 @@ def normal_icp(
                 f"{cfg.min_correspondences} are needed",
                 "too_few_correspondences",
             )
-        stamp = np.where(ok, j, -1).tobytes()
-        if stamp in seen:  # the pairs of an earlier iterate: the steps would cycle
+        if terms.stamp in seen:  # the pairs of an earlier iterate: the steps would cycle
             converged = True
             break
-        seen.add(stamp)
-        jk, qk = j[ok], q[ok]
-        nk = normals[jk]
-        e = np.einsum("ij,ij->i", nk, moved[ok] - P[jk])
-        jac = line_jacobian(qk, nk, th)
+        seen.add(terms.stamp)
+        qk, e, jac, jw, sigma = terms.current, terms.e, terms.jac, terms.jw, terms.sigma
         if it == 1 and lam is None:
             require_constrained(jac, qk, cfg.min_eigenvalue, "normal-icp")
-        sigma = max(1.4826 * median(np.abs(e)), cfg.noise_floor)
-        w = np.minimum(1.0, cfg.huber_k * sigma / np.maximum(np.abs(e), 1e-300))
-        jw = jac * w[:, None]
         h = jw.T @ jac
         g = jw.T @ e
         if lam is not None:  # the prior, in the same units: divide the data term by σ̂²
@@ -209,7 +222,6 @@ def normal_icp(
             f"normal-icp: no convergence within {cfg.max_iterations} iterations",
             "no_convergence",
         )
-    jw = jac * w[:, None]
     if lam is None:
         require_constrained(jac, qk, cfg.min_eigenvalue, "normal-icp")
         cov = sigma * sigma * np.linalg.solve(jw.T @ jac, np.eye(3))
@@ -219,6 +231,43 @@ def normal_icp(
     frac = n_pairs / q.shape[0]
     pose = np.array([tx, ty, math.remainder(th, 2.0 * math.pi)])
     return MatchResult(pose, cov, frac, frac, it, "normal-icp")
+
+
+def _require_prior(lam: FloatArray) -> None:
+    """``CovarianceError`` unless ``lam (3, 3)`` (finite) is symmetric (``np.allclose(lam,
+    lam.T)``) and positive semi-definite (``np.linalg.eigvalsh`` of its symmetric part has
+    no eigenvalue below zero): the same verdict, without NumPy's calls for a clear case.
+
+    Symmetry: ``isclose``'s test ``|a − b| <= 1e-8 + 1e-5 |b|`` on Python floats is NumPy's
+    own float64 arithmetic. Definiteness: when the leading minors of the symmetric part
+    ``S`` (computed here, each to within ~1e-14 ‖S‖ᵏ) all exceed 1e-12 ‖S‖ᵏ (Frobenius
+    norm), ``S`` is positive definite (Sylvester) with ``λ_min ≥ det S / ‖S‖² > 1e-12 ‖S‖``,
+    far above the error of LAPACK's eigenvalues (a small multiple of 1e-16 ‖S‖): eigvalsh
+    could not find one below zero. Anything less clear is left to eigvalsh itself.
+    """
+    a = lam.tolist()
+    symmetric = all(
+        abs(a[i][k] - a[k][i]) <= 1e-8 + 1e-5 * abs(a[k][i]) for i in range(3) for k in range(3)
+    )
+    if symmetric:
+        s00, s11, s22 = (0.5 * (a[i][i] + a[i][i]) for i in range(3))
+        s01, s02, s12 = (0.5 * (a[i][k] + a[k][i]) for i, k in ((0, 1), (0, 2), (1, 2)))
+        norm = math.sqrt(
+            s00 * s00 + s11 * s11 + s22 * s22 + 2.0 * (s01 * s01 + s02 * s02 + s12 * s12)
+        )
+        minor2 = s00 * s11 - s01 * s01
+        det = (
+            s00 * (s11 * s22 - s12 * s12)
+            - s01 * (s01 * s22 - s12 * s02)
+            + s02 * (s01 * s12 - s11 * s02)
+        )
+        if s00 > 1e-12 * norm and minor2 > 1e-12 * norm**2 and det > 1e-12 * norm**3:
+            return
+        if not np.linalg.eigvalsh(0.5 * (lam + lam.T))[0] < 0:
+            return
+    raise CovarianceError(
+        "prior information: expected a symmetric positive semi-definite 3x3 matrix"
+    )
 
 
 def surface_fit(
@@ -243,7 +292,7 @@ def surface_fit(
     if q.shape[0] == 0 or reference.points.shape[0] == 0:
         return 0.0
     moved = transform_points(x, q)
-    _, j = reference.tree.query(moved, k=1, distance_upper_bound=reach)
+    j = reference.nearest(moved, reach)
     ok = j < reference.points.shape[0]
     jk = j[ok]
     e = np.einsum("ij,ij->i", reference.normals[jk], moved[ok] - reference.points[jk])

@@ -42,6 +42,15 @@ def scan_normals(points: ArrayLike) -> ScanNormals:
     return estimate_normals(p, neighbour_table(p, None, NORMAL_NEIGHBOURS), NORMAL_RADIUS)
 
 
+def _points_array(points: ArrayLike) -> FloatArray:
+    """``points`` as a float64 ``(K, 2)`` array (shape checked, finiteness not: the caller
+    checks that over all scans at once)."""
+    p = points
+    if type(p) is np.ndarray and p.dtype == np.float64 and p.ndim == 2 and p.shape[1] == 2:
+        return p
+    return as_array(points, "points", (None, 2), finite=False)
+
+
 class PointMap:
     """Scan points with normals in the world frame, one per ``voxel``-sided cell [m]."""
 
@@ -72,15 +81,37 @@ class PointMap:
         order: the same map as inserting them one by one (a voxel keeps the first point of
         the first scan that reaches it), in one pass over the voxel keys."""
         T = as_array(poses, "poses", (len(scans), 3))
-        placed = [
-            self._placed(T[a], scans[a], None if known is None else known[a])
-            for a in range(len(scans))
-        ]
-        kept = [x for x in placed if x is not None]
+        arrays = [_points_array(p) for p in scans]
+        if arrays:  # every scan's points finite (as insert checks them), in one pass
+            as_array(np.concatenate(arrays), "points")
+        # Per scan: the points with a normal, and their normals rotated into the world frame
+        # (a BLAS product per scan, as _placed computes it: its rounding is the product's).
+        kept, rotated, cos, sin, rows = [], [], [], [], []
+        for a, p in enumerate(arrays):
+            if p.shape[0] < 3:
+                continue
+            given = None if known is None else known[a]
+            normals, ok = scan_normals(p) if given is None else given
+            c, s = np.cos(T[a, 2]), np.sin(T[a, 2])
+            kept.append(p[ok])
+            rotated.append(normals[ok] @ np.array([[c, s], [-s, c]]))
+            cos.append(c)
+            sin.append(s)
+            rows.append(a)
         if not kept:
             return 0
-        world, n, keys = (np.concatenate(parts) for parts in zip(*kept, strict=True))
-        return self._add(world, n, keys)
+        # The points into the world frame all at once: per point the same operations as
+        # transform_points (x = t_x + c p_x − s p_y, y = t_y + s p_x + c p_y, in that order)
+        # with its scan's pose, so the same numbers.
+        counts = [k.shape[0] for k in kept]
+        p = np.concatenate(kept)
+        c = np.repeat(np.array(cos), counts)
+        s = np.repeat(np.array(sin), counts)
+        t = np.repeat(T[rows], counts, axis=0)
+        world = np.stack(
+            [t[:, 0] + c * p[:, 0] - s * p[:, 1], t[:, 1] + s * p[:, 0] + c * p[:, 1]], axis=-1
+        )
+        return self._add(world, np.concatenate(rotated), self._keys_of(world))
 
     def _placed(
         self, pose: ArrayLike, points: ArrayLike, known: ScanNormals | None
@@ -95,19 +126,25 @@ class PointMap:
         world = transform_points(T, p[ok])
         c, s = np.cos(T[2]), np.sin(T[2])
         n = normals[ok] @ np.array([[c, s], [-s, c]])  # rotated into the world frame
+        return world, n, self._keys_of(world)
+
+    def _keys_of(self, world: FloatArray) -> NDArray[np.int64]:
+        """The voxel keys of world points ``(N, 2)``."""
         cells = np.floor(world / self.voxel).astype(np.int64)
         # One int64 key per voxel: the column index in the low 32 bits, the row above.
-        keys = (cells[:, 0] << 32) ^ (cells[:, 1] & 0xFFFFFFFF)
-        return world, n, keys
+        return (cells[:, 0] << 32) ^ (cells[:, 1] & 0xFFFFFFFF)
 
     def _add(self, world: FloatArray, n: FloatArray, keys: NDArray[np.int64]) -> int:
         """Add the first point of each voxel among ``keys`` not in the map yet."""
         _, first = np.unique(keys, return_index=True)  # one per voxel, its first point
         idx = np.sort(first)
-        idx = idx[~np.isin(keys[idx], self._keys, assume_unique=True)]
-        if idx.size == 0:
-            return 0
-        self._keys = np.union1d(self._keys, keys[idx])
+        if self._keys.size == 0:  # a new map (local maps): nothing to compare with
+            self._keys = np.sort(keys[idx])  # unique already: their union with nothing
+        else:
+            idx = idx[~np.isin(keys[idx], self._keys, assume_unique=True)]
+            if idx.size == 0:
+                return 0
+            self._keys = np.union1d(self._keys, keys[idx])
         self._points.append(world[idx])
         self._normals.append(n[idx])
         self._cache = None
