@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 from slamkit.errors import ConfigError, MatchError, NonFiniteError, ShapeError
 from slamkit.geometry.angles import wrap_angle
 from slamkit.geometry.pose2 import between, compose, inverse_transform_points
-from slamkit.scanmatch import PlIcpConfig, icp, kernels, plicp, prepare_scan
+from slamkit.scanmatch import PlIcpConfig, compiled, icp, kernels, plicp, prepare_scan
 from slamkit.scanmatch.plicp import lagrange_quartic, largest_real_root, point_to_line_step
 from slamkit.sim import corridor_world, random_scan_pairs, rooms_world, simulated_scan_pair
 
@@ -389,6 +389,14 @@ def test_select_kth_is_the_sorted_entry():
                 work = values.copy()
                 assert kernels.select_kth(work, k) == np.sort(values)[k]
                 np.testing.assert_array_equal(np.sort(work), np.sort(values))  # a permutation
+
+
+@needs_numba
+def test_median_in_place_is_numpys_median():
+    rng = np.random.default_rng(21)
+    for n in (1, 2, 3, 4, 10, 181, 182):
+        for values in (rng.normal(size=n), rng.integers(0, 4, n).astype(float)):  # with ties
+            assert compiled.median_in_place(values.copy()) == np.median(values)
 
 
 @needs_numba

@@ -30,6 +30,7 @@ __all__ = [
     "group_bounds",
     "ieee_remainder",
     "jit",
+    "median_in_place",
     "min_eigenvalue_sym3",
     "select_kth",
     "stamp_max",
@@ -402,6 +403,22 @@ def select_kth(a: FloatArray, k: int) -> float:
         else:
             break  # a[j + 1 : i] all equal the pivot
     return a[k]
+
+
+@jit
+def median_in_place(a: FloatArray) -> float:
+    """``np.median`` of a non-empty ``a`` (the middle value, or the mean of the two middle
+    ones for an even count) by :func:`select_kth`, permuting ``a``: after the selection the
+    lower middle value is the largest of ``a[:n // 2]``."""
+    n = a.shape[0]
+    h = n // 2
+    upper = select_kth(a, h)
+    if n % 2:
+        return upper
+    lower = a[0]
+    for i in range(1, h):
+        lower = max(lower, a[i])
+    return 0.5 * (lower + upper)
 
 
 @jit

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from slamkit._validation import FloatArray
-from slamkit.scanmatch.compiled import jit, select_kth
+from slamkit.scanmatch.compiled import jit, median_in_place
 
 __all__ = ["point_to_line_cov"]
 
@@ -82,16 +82,7 @@ def point_to_line_cov(
             g_ref[idx, 0] += -2.0 * de * jac0 + e_dn * taux
             g_ref[idx, 1] += -2.0 * de * jac1 + e_dn * tauy
             g_ref[idx, 2] += -2.0 * de * jac2 + e_dn * tau_drq
-    mid = m // 2
-    upper = select_kth(ratio, mid)  # the median: the middle one, or the mean of the middle two
-    if m % 2:
-        median = upper
-    else:
-        lower = ratio[0]
-        for i in range(1, mid):
-            lower = max(lower, ratio[i])  # after the selection, ratio[:mid] <= upper
-        median = 0.5 * (lower + upper)
-    sigma = 1.4826 * median
+    sigma = 1.4826 * median_in_place(ratio)
     for j in range(n_reference):
         g0, g1, g2 = g_ref[j, 0], g_ref[j, 1], g_ref[j, 2]
         gram[0, 0] += g0 * g0

@@ -167,16 +167,7 @@ def normal_terms_kernel(
         jac[u, 2] = nx * (-s * qx - c * qy) + ny * (c * qx - s * qy)
         w[u] = abs(ek)
         u += 1
-    h = n // 2
-    mid = compiled.select_kth(w[:n], h)
-    if n % 2:
-        med = mid
-    else:  # the mean of the two middle ones: the lower is the largest below h
-        low = w[0]
-        for t in range(1, h):
-            low = max(low, w[t])
-        med = (low + mid) / 2.0
-    sigma = max(1.4826 * med, noise_floor)
+    sigma = max(1.4826 * compiled.median_in_place(w[:n]), noise_floor)
     hs = huber_k * sigma
     for u in range(n):
         wk = min(1.0, hs / max(abs(e[u]), 1e-300))
