@@ -204,6 +204,36 @@ def test_the_backend_removes_an_injected_inconsistent_closure(slam) -> None:
             assert np.abs(graph.poses[:, :2] - before[:, :2]).max() < 0.01
 
 
+def test_the_tear_check_counts_the_change_of_an_edge_not_its_value() -> None:
+    """``max_edge_chi2`` bounds how far the new closures move an earlier edge's residual
+    (``Δeᵀ Ω Δe``). Two 1 m edges (1 cm, 1 mrad) already stretched to χ² ≈ 89 each by an
+    accepted closure: a new closure bending them sideways to χ² ≈ 105 moves each by a
+    few σ only and is kept (the rule of the value, "above 100 that was below it", refused
+    it). Five closures agreeing with each other that stretch a fresh edge by more than
+    10 σ between them are removed, although their total growth is within 100 each."""
+    graph = PoseGraph(default_optimizer())
+    for x in range(3):
+        graph.add_pose([x, 0.0, 0.0])
+    chain = np.diag([1e4, 1e4, 1e6])
+    graph.add_edge(0, 1, [1.0, 0.0, 0.0], chain, "odometry")
+    graph.add_edge(1, 2, [1.0, 0.0, 0.0], chain, "odometry")
+    graph.add_edge(0, 2, [2.19, 0.0, 0.0], np.diag([1e6, 1e2, 1e2]), "loop")
+    graph.optimize()
+    strained = graph.chi2()[:2]
+    new = graph.add_edge(0, 2, [2.19, 0.12, 0.0], np.diag([1e2, 1e4, 1e2]), "loop")
+    assert optimize_consistent(graph, [new], 100.0, 100.0) == []
+    after = graph.chi2()[:2]
+    assert (strained > 80.0).all() and (strained < 100.0).all() and (after > 100.0).all()
+
+    graph = PoseGraph(default_optimizer())
+    graph.add_pose([0.0, 0.0, 0.0])
+    graph.add_pose([1.0, 0.0, 0.0])
+    graph.add_edge(0, 1, [1.0, 0.0, 0.0], np.eye(3) * 1e4, "odometry")
+    closures = [graph.add_edge(0, 1, [1.16, 0.0, 0.0], np.eye(3) * 1e4, "loop") for _ in range(5)]
+    assert sorted(optimize_consistent(graph, closures, 100.0, 100.0)) == closures
+    assert graph.chi2() == pytest.approx([0.0], abs=1e-12)  # only the edge is left
+
+
 def test_edge_chi2_and_the_search_region_by_hand() -> None:
     poses = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.1]])
     chi2 = edge_chi2(

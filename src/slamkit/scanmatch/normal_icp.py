@@ -139,6 +139,7 @@ def normal_icp(
     config: NormalIcpConfig | None = None,
     *,
     prior_information: ArrayLike | None = None,
+    prior_pose: ArrayLike | None = None,
 ) -> MatchResult:
     """Register ``current (K, 2)`` points (sensor frame, metres) to the map ``reference`` (a
     :class:`NormalCloud`, e.g. :meth:`slamkit.scanmatch.point_map.PointMap.near`) from
@@ -149,16 +150,20 @@ def normal_icp(
     ``MatchError`` (``"too_few_points"``, ``"too_few_correspondences"``, ``"degenerate"``,
     ``"no_convergence"``), ``ShapeError``/``NonFiniteError`` for malformed arrays.
 
-    ``prior_information (3, 3)``: the information (inverse covariance) of ``initial`` as a
-    prior on the pose, e.g. from odometry. The steps then minimise the posterior
-    ``Σ w e² / σ̂² + (x − x₀)ᵀ Λ (x − x₀)``, so a direction the map leaves unconstrained (a
-    corridor) keeps the prior instead of sliding, no match is refused as degenerate, and
-    the covariance returned is the posterior's ``(H/σ̂² + Λ)⁻¹``.
+    ``prior_information (3, 3)``: the information (inverse covariance) of a prior on the
+    pose at ``x₀ = prior_pose`` (default: ``initial``), e.g. from odometry. The steps then
+    minimise the posterior ``Σ w e² / σ̂² + (x − x₀)ᵀ Λ (x − x₀)`` (the heading difference
+    wrapped), so a direction the map leaves unconstrained (a corridor) keeps the prior
+    instead of sliding, no match is refused as degenerate, and the covariance returned is
+    the posterior's ``(H/σ̂² + Λ)⁻¹``. A ``prior_pose`` apart from ``initial`` lets the
+    search start from a better guess than the prior's mean (the last match moved by the
+    wheels, say) while the prior stays an independent measurement.
     """
     cfg = NormalIcpConfig() if config is None else config
     q = require_points(as_array(current, "current points", (None, 2)), cfg.min_points, "current")
     x0 = as_array(initial, "initial pose", (3,))
     lam = None
+    x_prior = x0 if prior_pose is None else as_array(prior_pose, "prior pose", (3,))
     if prior_information is not None:
         lam = as_array(prior_information, "prior information", (3, 3))
         _require_prior(lam)
@@ -201,7 +206,9 @@ def normal_icp(
         h = jw.T @ jac
         g = jw.T @ e
         if lam is not None:  # the prior, in the same units: divide the data term by σ̂²
-            dx = np.array([tx - x0[0], ty - x0[1], math.remainder(th - x0[2], 2.0 * math.pi)])
+            dx = np.array(
+                [tx - x_prior[0], ty - x_prior[1], math.remainder(th - x_prior[2], 2.0 * math.pi)]
+            )
             h = h / (sigma * sigma) + lam
             g = g / (sigma * sigma) + lam @ dx
         try:

@@ -17,6 +17,7 @@ import numpy as np
 
 from slamkit._validation import FloatArray
 from slamkit.errors import ConvergenceError, ShapeError
+from slamkit.geometry.angles import wrap_angle
 from slamkit.geometry.pose2 import between
 from slamkit.optim.data import EdgeSet, GraphData
 from slamkit.optim.settings import OptimizerConfig
@@ -171,6 +172,15 @@ class PoseGraph:
             self._info_buf[:n],
         )
 
+    def residuals(self) -> FloatArray:
+        """The residual ``e = Z⁻¹ ⊕ (X_i⁻¹ X_j)`` of every edge at the current estimate
+        ``(E, 3)`` (the angle wrapped)."""
+        n = self._n_edges
+        if n == 0:
+            return np.zeros((0, 3))
+        p = self._pose_buf[: self._n_poses]
+        return between(self._z_buf[:n], between(p[self._i_buf[:n]], p[self._j_buf[:n]]))
+
     def graph_data(self) -> GraphData:
         """The graph as :class:`~slamkit.optim.GraphData` (ids = keyframe indices, the
         first keyframe fixed), at the current estimate."""
@@ -235,15 +245,18 @@ def optimize_consistent(
     The growth is the closure's Mahalanobis distance from what the graph predicts (its
     error against the relative pose, weighted by the closure's and the graph's
     uncertainty), so a wrong closure that the graph can only absorb by bending many edges
-    is refused even when its own residual becomes small. A solve that leaves any earlier
-    edge with ``eᵀ Ω e`` above ``max_edge_chi2`` that was below it before counts as
-    inconsistent too: many closures that each fit, together, may tear the chain they were
-    added to. Returns the removed edges' indices (as they were on entry)."""
+    is refused even when its own residual becomes small. A solve that moves any earlier
+    edge's residual by more than ``max_edge_chi2`` in its own metric, ``Δeᵀ Ω Δe``, counts
+    as inconsistent too: many closures that each fit, together, may tear the chain they
+    were added to. (The change, not the value: an edge already strained by earlier
+    closures that a new one strains a little more has not been torn by it.) Returns the
+    removed edges' indices (as they were on entry)."""
     chi2 = graph.chi2()
-    mask = np.ones(chi2.size, dtype=bool)
-    mask[pending] = False
-    before = float(chi2[mask].sum())
-    intact = mask & (chi2 <= max_edge_chi2)
+    earlier = np.ones(chi2.size, dtype=bool)
+    earlier[pending] = False
+    before = float(chi2[earlier].sum())
+    residuals = graph.residuals()[earlier]
+    information = graph.edges()[3][earlier]
     start = graph.poses
     alive = list(pending)
     removed: list[int] = []
@@ -253,8 +266,11 @@ def optimize_consistent(
         kept = np.ones(chi2.size, dtype=bool)
         kept[removed] = False
         growth = float(chi2[kept].sum()) - before
-        torn = bool((chi2[intact] > max_edge_chi2).any())
-        if not alive or (growth <= max_chi2 * len(alive) and not torn):
+        if not alive or (
+            growth <= max_chi2 * len(alive)
+            and _largest_change(graph.residuals()[earlier] - residuals, information)
+            <= max_edge_chi2
+        ):
             break
         worst = max(alive, key=lambda e: chi2[e])
         alive.remove(worst)
@@ -263,3 +279,12 @@ def optimize_consistent(
         graph.disable_edges(removed)
     graph.remove_edges(removed)
     return removed
+
+
+def _largest_change(change: FloatArray, information: FloatArray) -> float:
+    """The largest ``Δeᵀ Ω Δe`` over edges ``(E, 3)``, ``(E, 3, 3)`` (0 with no edge; the
+    heading change wrapped)."""
+    if change.shape[0] == 0:
+        return 0.0
+    change[:, 2] = wrap_angle(change[:, 2])
+    return float(np.einsum("ea,eab,eb->e", change, information, change).max())
