@@ -234,6 +234,63 @@ def test_the_tear_check_counts_the_change_of_an_edge_not_its_value() -> None:
     assert graph.chi2() == pytest.approx([0.0], abs=1e-12)  # only the edge is left
 
 
+def _circle_graph(rng: np.random.Generator) -> tuple[PoseGraph, np.ndarray]:
+    """40 poses on a circle of 5 m (30 to a turn: 30-39 revisit 0-9), odometry edges of
+    1 cm and 0.25° (noisy as much) and one loose edge, 15 → 16 (5 cm, 5°), that a wrong
+    closure can bend; the truth."""
+    a = 2.0 * np.pi * np.arange(40) / 30.0
+    truth = np.stack([5.0 * np.cos(a), 5.0 * np.sin(a), a + np.pi / 2.0], axis=1)
+    graph = PoseGraph(default_optimizer())
+    for p in truth:
+        graph.add_pose(p)
+    for k in range(39):
+        sd = np.array([0.05, 0.05, np.deg2rad(5.0)]) if k == 15 else np.array([0.01, 0.01, 0.0044])
+        z = between(truth[k], truth[k + 1]) + sd * rng.standard_normal(3)
+        graph.add_edge(k, k + 1, z, np.diag(1.0 / sd**2), "odometry")
+    return graph, truth
+
+
+def test_rejudge_reverses_an_early_wrong_closure_outnumbered_by_refused_ones() -> None:
+    """Two wrong closures (31 → 1, 32 → 2, 1 m off) are in the graph, bending its loose
+    edge; three true ones nearby were refused because of them. ``rejudge`` offers all five
+    together: the wrong two are taken out, the true three kept, and the poses are those of
+    the graph with the true three alone (within 1 mm). With two refused against two in the
+    graph nothing changes."""
+    from slamkit.slam.laser_graph.backend import RefusedClosure, rejudge
+
+    closure = np.diag([1e4, 1e4, 1.0 / np.deg2rad(0.5) ** 2])
+    for pool_size, reversed_ in ((3, True), (2, False)):
+        graph, truth = _circle_graph(np.random.default_rng(0))
+        for k in (31, 32):
+            graph.add_edge(
+                k,
+                k - 30,
+                between(truth[k], truth[k - 30]) + np.array([1.0, 0.0, 0.0]),
+                closure,
+                "loop",
+            )
+        graph.optimize()
+        bent = graph.poses
+        assert np.hypot(*(bent[31, :2] - truth[31, :2])) > 0.3
+        pool = [
+            RefusedClosure(k, k - 30, between(truth[k], truth[k - 30]), closure)
+            for k in range(33, 33 + pool_size)
+        ]
+        out, readmitted, lost = rejudge(graph, pool, 20, 100.0, 100.0)
+        if reversed_:
+            assert (readmitted, lost) == (3, 2) and len(out) == 2
+            assert {(c.i, c.j) for c in out} == {(31, 1), (32, 2)}
+            assert sorted(graph.loop_pairs()) == [(33, 3), (34, 4), (35, 5)]
+            right, _ = _circle_graph(np.random.default_rng(0))  # the true closures only
+            for c in pool:
+                right.add_edge(c.i, c.j, c.measurement, c.information, "loop")
+            right.optimize()
+            assert np.abs(graph.poses - right.poses).max() < 1e-3
+        else:
+            assert (readmitted, lost) == (0, 0) and out == pool
+            assert np.array_equal(graph.poses, bent)
+
+
 def test_edge_chi2_and_the_search_region_by_hand() -> None:
     poses = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.1]])
     chi2 = edge_chi2(

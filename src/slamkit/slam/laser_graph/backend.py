@@ -23,7 +23,15 @@ from slamkit.optim.data import EdgeSet, GraphData
 from slamkit.optim.settings import OptimizerConfig
 from slamkit.optim.solvers import optimize
 
-__all__ = ["EdgeKind", "OptimizationRecord", "PoseGraph", "edge_chi2", "optimize_consistent"]
+__all__ = [
+    "EdgeKind",
+    "OptimizationRecord",
+    "PoseGraph",
+    "RefusedClosure",
+    "edge_chi2",
+    "optimize_consistent",
+    "rejudge",
+]
 
 EdgeKind = Literal["odometry", "neighbour", "loop"]
 """Where an edge came from: the scan match to the previous keyframe (or the wheels when it
@@ -288,3 +296,50 @@ def _largest_change(change: FloatArray, information: FloatArray) -> float:
         return 0.0
     change[:, 2] = wrap_angle(change[:, 2])
     return float(np.einsum("ea,eab,eb->e", change, information, change).max())
+
+
+@dataclass(frozen=True)
+class RefusedClosure:
+    """A verified closure ``i → j`` that the Δχ² check took out of the graph, kept to be
+    judged again (:func:`rejudge`)."""
+
+    i: int
+    j: int
+    measurement: FloatArray
+    information: FloatArray
+
+
+def rejudge(
+    graph: PoseGraph,
+    pool: list[RefusedClosure],
+    window: int,
+    max_chi2: float,
+    max_edge_chi2: float = np.inf,
+) -> tuple[list[RefusedClosure], int, int]:
+    """Judge the closures in ``graph`` that the refused ``pool`` contests again, together
+    with the pool: a decision of :func:`optimize_consistent` is not final when more
+    evidence against it arrives.
+
+    A closure in the graph is *contested* when a refused one joins the same two places
+    (both ends within ``window`` keyframes of its own). When the pool outnumbers the
+    closures it contests, they are all offered to :func:`optimize_consistent` at once,
+    which removes the worst residual until the rest agree with the graph: a wrong closure
+    taken early (an aliased corridor, say, absorbed by a loose edge) then gives way to the
+    many consistent ones that kept being refused because of it. Returns the new pool (the
+    refused again and the contested that lost) and the counts of closures readmitted from
+    the pool and taken out of the graph."""
+    kinds = graph.edge_kinds()
+    i, j, z, info = graph.edges()
+    loops = [e for e, kind in enumerate(kinds) if kind == "loop"]
+    contested = [
+        e
+        for e in loops
+        if any(abs(int(i[e]) - c.i) <= window and abs(int(j[e]) - c.j) <= window for c in pool)
+    ]
+    if not contested or len(pool) <= len(contested):
+        return pool, 0, 0
+    offered = [graph.add_edge(c.i, c.j, c.measurement, c.information, "loop") for c in pool]
+    removed = set(optimize_consistent(graph, contested + offered, max_chi2, max_edge_chi2))
+    out = [c for c, e in zip(pool, offered, strict=True) if e in removed]
+    lost = [RefusedClosure(int(i[e]), int(j[e]), z[e], info[e]) for e in contested if e in removed]
+    return out + lost, len(pool) - len(out), len(lost)

@@ -35,7 +35,12 @@ from slamkit.scanmatch.icp import prepare_scan
 from slamkit.scanmatch.normal_icp import NormalCloud
 from slamkit.scanmatch.point_map import ScanNormals, scan_normals
 from slamkit.scanmatch.result import scan_points
-from slamkit.slam.laser_graph.backend import PoseGraph, optimize_consistent
+from slamkit.slam.laser_graph.backend import (
+    PoseGraph,
+    RefusedClosure,
+    optimize_consistent,
+    rejudge,
+)
 from slamkit.slam.laser_graph.config import LaserGraphConfig
 from slamkit.slam.laser_graph.frontend import (
     Keyframe,
@@ -100,6 +105,7 @@ class LaserGraphSlam(EstimatorShell):
         self._pending = 0  # closures added since the last optimisation
         self._waiting: list[tuple[int, int, LoopMatch]] = []  # verified, no partner yet
         self._confirmed: list[tuple[int, int, LoopMatch]] = []  # recent ones in the graph
+        self._refused: list[RefusedClosure] = []  # by the Δχ² check, recently
         self._last_solve = 0  # the keyframe count at the last optimisation
         # (stamp, keyframe index or -1 for the start pose, offset) of every time stamp.
         self._stamps: list[float] = [float(dataset.start_time)]
@@ -304,11 +310,24 @@ class LaserGraphSlam(EstimatorShell):
         if not self._pending:
             pending = []
         s = self._cfg.loops
+        i, j, z, info = self._graph.edges()
         removed = optimize_consistent(self._graph, pending, s.max_chi2, s.max_edge_chi2)
         self._counts["loop_rejected:chi2"] += len(removed)
         self._counts["solves"] += 1
         self._pending = 0
         self._last_solve = len(self._graph)
+        if removed and s.rejudge:
+            # Refused closures wait, while their newer end is recent, for a majority
+            # against the closures that refused them (backend.rejudge).
+            window = 2 * s.pair_keyframes
+            newest = len(self._graph) - 1
+            self._refused = [c for c in self._refused if newest - c.j <= window]
+            self._refused += [RefusedClosure(int(i[e]), int(j[e]), z[e], info[e]) for e in removed]
+            self._refused, readmitted, reversed_ = rejudge(
+                self._graph, self._refused, window, s.max_chi2, s.max_edge_chi2
+            )
+            self._counts["loops_readmitted"] += readmitted
+            self._counts["loops_reversed"] += reversed_
 
     def _diagnostics(self) -> dict[str, object]:
         c = self._counts + self._tracker.counts
@@ -329,6 +348,8 @@ class LaserGraphSlam(EstimatorShell):
             "loops_added": c["loops_added"],
             "loops_unconfirmed": c["loops_verified"] - c["loops_added"],
             "loops_kept": len(self.loop_closures()),
+            "loops_readmitted": c["loops_readmitted"],
+            "loops_reversed": c["loops_reversed"],
             "loops_rejected": {
                 k[len("loop_rejected:") :]: v
                 for k, v in c.items()
