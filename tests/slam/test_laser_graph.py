@@ -87,8 +87,8 @@ def test_the_loop_is_closed_and_no_closure_is_false(slam) -> None:
 
 def test_graph_slam_beats_dead_reckoning_and_scan_to_keyframe_odometry(loop_world, result) -> None:
     """ATE (SE(2)-aligned RMSE) on the ring, seed 0: dead reckoning 0.93 m, scan-to-keyframe
-    laser odometry 0.26 m, graph SLAM 0.052 m (seeds 1, 2: 0.84 / 0.19 / 0.030 and
-    1.56 / 0.33 / 0.063 m; with the keyframe reference 0.081 / 0.098 / 0.094 m).
+    laser odometry 0.26 m, graph SLAM 0.049 m (seeds 1, 2: 0.84 / 0.19 / 0.044 and
+    1.56 / 0.33 / 0.052 m; with the keyframe reference 0.081 / 0.098 / 0.094 m).
     Laser odometry against its point map scores 0.067 m here: on a ring this small its
     20 m map reaches back to the first corridor, a closure of its own."""
     graph = evaluate(result, loop_world).scores.ate.rmse
@@ -103,9 +103,9 @@ def test_graph_slam_beats_dead_reckoning_and_scan_to_keyframe_odometry(loop_worl
 def test_the_long_hallway_is_closed_on_the_way_back() -> None:
     """The bare 50 m hallway there and back (seed 0): dead reckoning 1.76 m ATE, laser
     odometry against the keyframe 1.12 m (52 scans degenerate along the hallway). Graph SLAM
-    (the default front end: the local map with the odometry prior, which keeps the
-    prediction along the hallway): 0.106 m, 10 closures, every scan matched (seeds 1, 2:
-    0.243, 0.104 m). With the keyframe reference and degenerate scans fused with the motion
+    (the default front end: the local map with the wheels' offset as a prior, which holds
+    the pose along the hallway): 0.27 m, 5 closures, every scan matched (seeds 1, 2: 0.099,
+    0.30 m; 0.106, 0.243, 0.104 m with the prior at the prediction before 2026-12-06). With the keyframe reference and degenerate scans fused with the motion
     prior (``fuse_degenerate``): 0.27 m (seeds 1, 2: 0.14, 0.16 m); without fusing the
     degenerate stretch is bridged by the wheels alone: 1.94 m on seed 0."""
     data = load_dataset("long-hallway-laser", seed=0)
@@ -340,8 +340,8 @@ def test_run_job_writes_the_graph_as_g2o(tmp_path) -> None:
 @pytest.mark.realdata
 @pytest.mark.slow
 def test_aces_first_600_s_relations(raw_log) -> None:
-    """The first 600 s of the raw ACES log (405 keyframes): measured 0.040 ± 0.044 m and
-    0.36 ± 0.35° over the 533 relations it covers (with the keyframe reference 0.034 ±
+    """The first 600 s of the raw ACES log (405 keyframes): measured 0.034 ± 0.029 m and
+    0.35 ± 0.33° over the 533 relations it covers (with the keyframe reference 0.034 ±
     0.029 m, 0.34°; published graph mapping over the whole log: 0.044 m). ACES's raw
     odometry is good over the short relations of this window (0.031 m) but turns worse:
     0.87° against 0.36°."""
@@ -361,7 +361,7 @@ def test_aces_first_600_s_relations(raw_log) -> None:
 def test_freiburg_079_is_scored_in_the_logs_robot_frame(raw_log) -> None:
     """The first 300 s of raw Freiburg 079 (345 relations): with the registered mounting
     (the laser 4 cm behind the centre, the original log's robot_frontlaser_offset) measured
-    0.0256 ± 0.018 m; with the bag's /tf_static (4 cm ahead) 0.0376 ± 0.038 m, 1.47× worse
+    0.0256 ± 0.017 m; with the bag's /tf_static (4 cm ahead) 0.0378 ± 0.038 m, 1.48× worse
     — the benchmark's relations are in the log's robot frame (docs/relations.md)."""
     from slamkit.eval.relations import relation_errors
 
@@ -386,7 +386,7 @@ def _without_odometry(data):
 def test_a_log_without_odometry_runs_on_scan_matching_alone_and_says_so() -> None:
     """rooms-laser without its odometry: every scan but two matched (the constant-velocity
     prediction placed by a correlative search, refined by point-to-line ICP), 47 closures,
-    ATE 0.94 m (seed 0) — against 0.062 m with the wheels: along the rooms' corridor the
+    ATE 0.94 m (seed 0) — against 0.026 m with the wheels: along the rooms' corridor the
     scans hold the motion too loosely for matching alone, which the wheels' prior fixes.
     The default front end is then the keyframe's (``reference = "auto"``): the local map
     with only the coasted prediction as its prior scored 2.69 m."""
