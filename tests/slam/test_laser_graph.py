@@ -105,8 +105,9 @@ def test_the_long_hallway_is_closed_on_the_way_back() -> None:
     odometry against the keyframe 1.12 m (52 scans degenerate along the hallway). Graph SLAM
     (the default front end: the local map with the wheels' offset as a prior, which holds
     the pose along the hallway): 0.27 m, 5 closures, every scan matched (seeds 1, 2: 0.099,
-    0.30 m; 0.106, 0.243, 0.104 m with the prior at the prediction before 2026-12-06). With the keyframe reference and degenerate scans fused with the motion
-    prior (``fuse_degenerate``): 0.27 m (seeds 1, 2: 0.14, 0.16 m); without fusing the
+    0.30 m; 0.106, 0.243, 0.104 m with the prior at the prediction before 2026-12-06).
+    With the keyframe reference and degenerate scans fused with the motion prior
+    (``fuse_degenerate``): 0.27 m (seeds 1, 2: 0.14, 0.16 m); without fusing the
     degenerate stretch is bridged by the wheels alone: 1.94 m on seed 0."""
     data = load_dataset("long-hallway-laser", seed=0)
     dead = evaluate(run("dead-reckoning", data), data).scores.ate.rmse
