@@ -324,10 +324,13 @@ def rejudge(
     (both ends within ``window`` keyframes of its own). When the pool outnumbers the
     closures it contests, they are all offered to :func:`optimize_consistent` at once,
     which removes the worst residual until the rest agree with the graph: a wrong closure
-    taken early (an aliased corridor, say, absorbed by a loose edge) then gives way to the
-    many consistent ones that kept being refused because of it. Returns the new pool (the
-    refused again and the contested that lost) and the counts of closures readmitted from
-    the pool and taken out of the graph."""
+    taken early (an aliased corridor, say, absorbed by a loose stretch of the chain) then
+    gives way to the many consistent ones that kept being refused because of it. They are
+    judged from the graph solved without the contested closures: judged from the estimate
+    those strained, the chain's relief when they go would count for the offered ones, and
+    in the simulated bare hallway that let a majority of aliased closures in. Returns the
+    new pool (the refused again and the contested that lost) and the counts of closures
+    readmitted from the pool and taken out of the graph."""
     kinds = graph.edge_kinds()
     i, j, z, info = graph.edges()
     loops = [e for e, kind in enumerate(kinds) if kind == "loop"]
@@ -338,6 +341,11 @@ def rejudge(
     ]
     if not contested or len(pool) <= len(contested):
         return pool, 0, 0
+    # Judged from the graph without the contested closures: where they strained the chain,
+    # taking them out relaxes it, and that relief is no credit to the ones offered instead.
+    graph.disable_edges(contested)
+    graph.optimize()
+    graph.disable_edges([])
     offered = [graph.add_edge(c.i, c.j, c.measurement, c.information, "loop") for c in pool]
     removed = set(optimize_consistent(graph, contested + offered, max_chi2, max_edge_chi2))
     out = [c for c, e in zip(pool, offered, strict=True) if e in removed]
