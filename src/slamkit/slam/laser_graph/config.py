@@ -150,8 +150,9 @@ class LoopSettings(Section):
     closure is removed and the graph solved again
     (:func:`~slamkit.slam.laser_graph.backend.optimize_consistent`)."""
     max_edge_chi2: float = setting(100.0, finite_above(0.0), "a finite number > 0")
-    """Consistency: ... and may leave no front-end edge with ``eᵀ Ω e`` above this (10
-    standard deviations) that was below it before."""
+    """Consistency: ... and may move no earlier edge's residual by more than this in its
+    own metric, ``Δeᵀ Ω Δe`` (10 standard deviations): the change, not the value, so an
+    edge already strained by earlier closures is not counted as torn by a few σ more."""
     rejudge: bool = True
     """Closures the Δχ² check refused wait (while their newer end is among the last
     ``2 · pair_keyframes`` keyframes); once they outnumber the closures in the graph that

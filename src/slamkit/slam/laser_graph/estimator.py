@@ -1,13 +1,16 @@
 """Graph-based 2D laser SLAM on the estimator shell (registered as ``graph-slam``).
 
-Front end (:mod:`~slamkit.slam.laser_graph.frontend`): scans tracked against the current
-keyframe by point-to-line ICP from the odometry's prediction; keyframes every
-``keyframe_distance`` / ``keyframe_angle_deg``; edges to the previous keyframe and to a few
-before it. Loops (:mod:`~slamkit.slam.laser_graph.loops`): candidates in a search region
-grown with the path travelled, correlative matching against the candidate's submap,
-verification and refinement. Back end (:mod:`~slamkit.slam.laser_graph.backend`): the pose
-graph, optimised (Levenberg-Marquardt, Cauchy kernel, warm start) after each keyframe that
-brings closures and once more at the end, with closures whose residual stays large removed.
+Front end (:mod:`~slamkit.slam.laser_graph.frontend`): scans tracked against the local map
+of the last keyframes by point-to-normal ICP with the wheels' offset as a prior (or against
+the current keyframe by point-to-line ICP); keyframes every ``keyframe_distance`` /
+``keyframe_angle_deg``; an edge to the previous keyframe. Loops
+(:mod:`~slamkit.slam.laser_graph.loops`): candidates in a search region grown with the path
+travelled, correlative matching against the candidate's submap, verification, refinement
+and pairwise consistency. Back end (:mod:`~slamkit.slam.laser_graph.backend`): the pose
+graph, optimised (Levenberg-Marquardt, plain least squares, warm start) after each keyframe
+that brings closures and once more at the end; closures that raise the graph's χ² too much
+or tear its edges are removed, and refused ones judged again once they outnumber the
+closures that refused them.
 
 Every time stamp is held as *(keyframe, offset from it)*, so the path at the end is each
 keyframe's optimised pose composed with the offset (:attr:`EstimatorOutput.trajectory`,
