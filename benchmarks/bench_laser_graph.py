@@ -17,7 +17,7 @@ run`` does; loading and scoring not timed). Needs the real data (``SLAMKIT_DATA`
 max range stays "no return") moved by Gaussian noise of standard deviation ``SCALE`` [m]
 (``numpy.random.default_rng(seed)``), one run per seed, results to
 ``results/laser_graph_perturbed.*``: how much of a score is where the closure decisions
-happen to fall (``docs/estimators/laser_graph.md``, "Left to do").
+happen to fall (``docs/estimators/laser_graph.md``, "Robustness").
 """
 
 from __future__ import annotations

@@ -50,8 +50,7 @@ def edge_chi2(
     if len(i) == 0:
         return np.zeros(0)
     predicted = between(poses[i], poses[j])
-    e = between(measurement, predicted)
-    return np.einsum("ea,eab,eb->e", e, information, e)
+    return _weighted(between(measurement, predicted), information)
 
 
 @dataclass(frozen=True)
@@ -259,25 +258,26 @@ def optimize_consistent(
     were added to. (The change, not the value: an edge already strained by earlier
     closures that a new one strains a little more has not been torn by it.) Returns the
     removed edges' indices (as they were on entry)."""
-    chi2 = graph.chi2()
+    information = graph.edges()[3]
+    residuals = graph.residuals()
+    chi2 = _weighted(residuals, information)
     earlier = np.ones(chi2.size, dtype=bool)
     earlier[pending] = False
     before = float(chi2[earlier].sum())
-    residuals = graph.residuals()[earlier]
-    information = graph.edges()[3][earlier]
+    residuals = residuals[earlier]
     start = graph.poses
     alive = list(pending)
     removed: list[int] = []
     while True:
         graph.optimize()
-        chi2 = graph.chi2()
+        now = graph.residuals()
+        chi2 = _weighted(now, information)
         kept = np.ones(chi2.size, dtype=bool)
         kept[removed] = False
         growth = float(chi2[kept].sum()) - before
         if not alive or (
             growth <= max_chi2 * len(alive)
-            and _largest_change(graph.residuals()[earlier] - residuals, information)
-            <= max_edge_chi2
+            and _largest_change(now[earlier] - residuals, information[earlier]) <= max_edge_chi2
         ):
             break
         worst = max(alive, key=lambda e: chi2[e])
@@ -289,13 +289,18 @@ def optimize_consistent(
     return removed
 
 
+def _weighted(e: FloatArray, information: FloatArray) -> FloatArray:
+    """``eᵀ Ω e`` of every row ``(E, 3)``, ``(E, 3, 3)`` (as :func:`edge_chi2`)."""
+    return np.einsum("ea,eab,eb->e", e, information, e)
+
+
 def _largest_change(change: FloatArray, information: FloatArray) -> float:
     """The largest ``Δeᵀ Ω Δe`` over edges ``(E, 3)``, ``(E, 3, 3)`` (0 with no edge; the
-    heading change wrapped)."""
+    heading change wrapped, in place)."""
     if change.shape[0] == 0:
         return 0.0
     change[:, 2] = wrap_angle(change[:, 2])
-    return float(np.einsum("ea,eab,eb->e", change, information, change).max())
+    return float(_weighted(change, information).max())
 
 
 @dataclass(frozen=True)
@@ -331,14 +336,13 @@ def rejudge(
     in the simulated bare hallway that let a majority of aliased closures in. Returns the
     new pool (the refused again and the contested that lost) and the counts of closures
     readmitted from the pool and taken out of the graph."""
-    kinds = graph.edge_kinds()
     i, j, z, info = graph.edges()
-    loops = [e for e, kind in enumerate(kinds) if kind == "loop"]
-    contested = [
-        e
-        for e in loops
-        if any(abs(int(i[e]) - c.i) <= window and abs(int(j[e]) - c.j) <= window for c in pool)
-    ]
+    loops = np.flatnonzero(np.array([kind == "loop" for kind in graph.edge_kinds()], bool))
+    ends = np.array([(c.i, c.j) for c in pool], dtype=np.int64).reshape(-1, 2)
+    near = (np.abs(i[loops, None] - ends[None, :, 0]) <= window) & (
+        np.abs(j[loops, None] - ends[None, :, 1]) <= window
+    )
+    contested = loops[near.any(axis=1)].tolist()
     if not contested or len(pool) <= len(contested):
         return pool, 0, 0
     # Judged from the graph without the contested closures: where they strained the chain,

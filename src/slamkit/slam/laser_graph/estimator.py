@@ -313,19 +313,23 @@ class LaserGraphSlam(EstimatorShell):
         if not self._pending:
             pending = []
         s = self._cfg.loops
-        i, j, z, info = self._graph.edges()
+        # The pending closures as they are, for re-judging (the check removes refused ones).
+        offered: dict[int, RefusedClosure] = {}
+        if pending and s.rejudge:
+            i, j, z, info = self._graph.edges()
+            offered = {e: RefusedClosure(int(i[e]), int(j[e]), z[e], info[e]) for e in pending}
         removed = optimize_consistent(self._graph, pending, s.max_chi2, s.max_edge_chi2)
         self._counts["loop_rejected:chi2"] += len(removed)
         self._counts["solves"] += 1
         self._pending = 0
         self._last_solve = len(self._graph)
-        if removed and s.rejudge:
+        if removed and offered:
             # Refused closures wait, while their newer end is recent, for a majority
             # against the closures that refused them (backend.rejudge).
             window = 2 * s.pair_keyframes
             newest = len(self._graph) - 1
             self._refused = [c for c in self._refused if newest - c.j <= window]
-            self._refused += [RefusedClosure(int(i[e]), int(j[e]), z[e], info[e]) for e in removed]
+            self._refused += [offered[e] for e in removed]
             self._refused, readmitted, reversed_ = rejudge(
                 self._graph, self._refused, window, s.max_chi2, s.max_edge_chi2
             )
