@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray, as_array, as_covariance, as_positive
+from slamkit.datasets.reading import ReadingSummary
 from slamkit.datasets.relations import Relations
 from slamkit.errors import InputError, NonFiniteError, ShapeError
 from slamkit.geometry.angles import wrap_angle
@@ -336,7 +337,9 @@ class Dataset:
     ``initial_pose``/``initial_cov`` is the prior an estimator may start from (absent for
     global localization and for data sets whose start is unknown). ``known_landmarks`` and
     ``known_grid`` are maps a *localization* estimator may use; SLAM estimators ignore them.
-    ``truth`` is for evaluation only: estimators must not read it. (Settings measured to
+    ``truth`` is for evaluation only: estimators must not read it. ``reading`` says what a
+    reader of a real file dropped and repaired (:class:`~slamkit.datasets.reading.
+    ReadingSummary`; None for simulated data). (Settings measured to
     suit one estimator on a data set are not part of it: see :mod:`slamkit.app.presets`.)
     """
 
@@ -352,6 +355,7 @@ class Dataset:
     truth: GroundTruth = field(default_factory=GroundTruth)
     description: str = ""
     metadata: dict[str, Any] = field(default_factory=dict)
+    reading: ReadingSummary | None = None
 
     def __post_init__(self) -> None:
         if self.initial_pose is not None:
