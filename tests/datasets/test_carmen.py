@@ -116,7 +116,7 @@ def test_param_lines_set_max_range_and_geometry(tmp_path):
     assert ds.laser is not None and ds.laser.n_beams == 360
     np.testing.assert_allclose(np.rad2deg(ds.laser.beam_angles[[0, 1, 359]]), [-90, -89.5, 89.5])
     assert ds.laser.max_range == 30.5 and ds.metadata["max_range_from"].startswith("PARAM")
-    assert ds.metadata["geometry_from"] == "options/PARAM"
+    assert ds.metadata["geometry_from"] == "PARAM"
     scan = next(ev for ev in ds.events if isinstance(ev, LaserScan))
     assert scan.ranges[-1] == 30.5
     # The options win over PARAM.
@@ -187,10 +187,15 @@ def test_geometry_from_param_must_match_the_beam_count(tmp_path):
     assert info.value.line == 3
 
 
-def test_unknown_beam_count_needs_the_geometry(tmp_path):
+def test_an_unusual_beam_count_is_taken_over_180_degrees_and_said(tmp_path):
     path = _write(tmp_path, [_flaser(_ranges(100), (0, 0, 0), 1.0)])
-    with pytest.raises(DatasetFormatError, match="give fov_deg"):
-        read_carmen_log(path)
+    assumed = read_carmen_log(path)
+    assert assumed.laser is not None
+    np.testing.assert_allclose(
+        np.rad2deg(assumed.laser.beam_angles[[0, 1, 99]]), [-90, -88.2, 88.2]
+    )
+    assert assumed.reading is not None
+    assert assumed.reading.notes == ("no field of view stated: 100 beams taken over 180°",)
     ds = read_carmen_log(path, {"fov_deg": 99.0, "angular_resolution_deg": 1.0})
     assert ds.laser is not None and ds.laser.n_beams == 100
     np.testing.assert_allclose(np.rad2deg(ds.laser.beam_angles[[0, 99]]), [-49.5, 49.5])
@@ -213,8 +218,11 @@ def test_out_of_order_time_stamps_are_repaired_in_file_order(tmp_path):
     lines = [_flaser(_ranges(), (0, 0, 0), t) for t in (1.0, 2.0, 1.5, 3.0)]
     ds = read_carmen_log(_write(tmp_path, lines))
     assert ds.truth.times is not None
-    np.testing.assert_allclose(ds.truth.times, [1.0, 2.0, 2.001, 3.0])
+    # 1.5 goes back: the longest increasing run 1, 2, 3 keeps its stamps and the third
+    # scan is placed between its neighbours in the file.
+    np.testing.assert_allclose(ds.truth.times, [1.0, 2.0, 2.5, 3.0])
     assert ds.metadata["timestamps_repaired"] == 1
+    assert ds.reading is not None and dict(ds.reading.repaired) == {"stamps out of order": 1}
 
 
 def test_odometry_noise_is_known_and_seeded(tmp_path):

@@ -48,10 +48,10 @@ CLF = "\n".join(
         ("a.bag", "rosbag"),
         ("a.db3", "rosbag"),
         ("a.mcap", "rosbag"),
-        ("a.clf", "carmen"),
-        ("a.log", "carmen"),
-        ("a.log.gz", "carmen"),
-        ("a.gz", "carmen"),
+        ("a.clf", "carmen-raw"),
+        ("a.log", "carmen-raw"),
+        ("a.log.gz", "carmen-raw"),
+        ("a.gz", "carmen-raw"),
     ],
 )
 def test_file_format_by_suffix(tmp_path, name, kind):

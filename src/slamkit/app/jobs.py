@@ -13,6 +13,7 @@ from slamkit.app.mapping import USABLE_RANGE_ESTIMATORS, with_usable_range
 from slamkit.app.outputs import check_formats, write_result_files
 from slamkit.app.presets import resolve_preset
 from slamkit.datasets.files import load_data
+from slamkit.datasets.reading import ReadingSummary
 from slamkit.datasets.stream import Dataset
 from slamkit.errors import ConfigError
 from slamkit.eval.records import RunScores
@@ -71,11 +72,21 @@ class RunReport:
     """The preset the run used, if any."""
     preset_settings: dict[str, Any] = field(default_factory=dict)
     """The preset's settings the run used (those the config left unset)."""
+    reading: ReadingSummary | None = None
+    """What reading the data file dropped and repaired (None: simulated data)."""
 
     @property
     def metrics(self) -> dict[str, Any]:
         """The scores as written to ``metrics.json``."""
-        return self.scores.as_dict()
+        return run_metrics(self.scores, self.reading)
+
+
+def run_metrics(scores: RunScores, reading: ReadingSummary | None) -> dict[str, Any]:
+    """``metrics.json``: the scores, and under ``"reading"`` what reading the file did."""
+    metrics = scores.as_dict()
+    if reading is not None:
+        metrics["reading"] = reading.to_dict()
+    return metrics
 
 
 def run_job(
@@ -154,7 +165,7 @@ def run_job(
     }
     with atomic_folder(request.out_dir, overwrite=request.overwrite) as tmp:
         write_tum(tmp / "trajectory.tum", result.times, result.poses)
-        write_json(tmp / "metrics.json", evaluation.metrics)
+        write_json(tmp / "metrics.json", run_metrics(evaluation.scores, dataset.reading))
         write_json(tmp / "config.json", resolved)
         write_result_files(tmp, result, dataset, request.formats)  # landmarks, truth, graph
         if figures:
@@ -201,6 +212,7 @@ def run_job(
         result,
         None if preset is None else preset.name,
         used,
+        dataset.reading,
     )
 
 

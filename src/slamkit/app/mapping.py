@@ -21,7 +21,9 @@ from pathlib import Path
 from typing import Any
 
 from slamkit.config import config_from_mapping, config_to_dict
-from slamkit.datasets import Dataset, load_dataset
+from slamkit.datasets import Dataset
+from slamkit.datasets.files import load_data
+from slamkit.datasets.reading import ReadingSummary
 from slamkit.io import atomic_folder, write_json
 from slamkit.io.rosmap import write_ros_map
 from slamkit.mapping import (
@@ -78,6 +80,8 @@ class OccupancyMapReport:
     quality: dict[str, Any]
     stats: dict[str, Any]
     grid: OccupancyGrid
+    reading: ReadingSummary | None = None
+    """What reading the data file dropped and repaired (None: simulated data)."""
 
 
 def _config(
@@ -107,7 +111,7 @@ def occupancy_map_job(
     progress: Callable[[int, int], None] | None = None,
     plots: bool = True,
 ) -> OccupancyMapReport:
-    """Build the occupancy map of ``dataset`` (a registered name, or a loaded
+    """Build the occupancy map of ``dataset`` (a registered name, a log's path, or a loaded
     :class:`Dataset`) at ``resolution`` metres (None: the config's) and write the files of
     the module docstring into ``out_dir``.
 
@@ -121,7 +125,7 @@ def occupancy_map_job(
     if isinstance(dataset, Dataset):
         data = dataset
     else:
-        data = load_dataset(dataset, seed=seed, options=ds_options, data_root=data_root)
+        data = load_data(dataset, seed=seed, options=ds_options, data_root=data_root)
     result = build_occupancy_map(data, cfg, progress)
     quality: dict[str, Any] = {"map": map_quality(result.grid).as_dict()}
     if agreement:
@@ -148,10 +152,11 @@ def occupancy_map_job(
         if plots:
             _save_map_view(result.grid, result.poses, data.name, tmp / "map_view.png")
         write_ros_map(result.grid, tmp / "map.pgm", tmp / "map.yaml")
-        write_json(tmp / "quality.json", {**quality, "stats": stats})
+        reading = {} if data.reading is None else {"reading": data.reading.to_dict()}
+        write_json(tmp / "quality.json", {**quality, "stats": stats, **reading})
         write_json(tmp / "config.json", resolved)
         files = tuple(sorted(p.name for p in tmp.iterdir()))
-    return OccupancyMapReport(Path(out_dir), files, quality, stats, result.grid)
+    return OccupancyMapReport(Path(out_dir), files, quality, stats, result.grid, data.reading)
 
 
 def _save_map_view(grid: OccupancyGrid, poses: Any, name: str, path: Path) -> None:

@@ -180,6 +180,9 @@ def _run(
     if report.preset_settings:
         used = ", ".join(f"{k}={v}" for k, v in report.preset_settings.items())
         console.print(f"preset {report.preset} (config.json has every setting): {used}")
+    if report.reading is not None and not report.reading.clean:
+        for line in report.reading.lines():
+            console.print(escape(line))
     console.print(_render_metrics(report.scores))
     for warning in report.scores.warnings:  # the consistency monitor (slamkit.eval.monitor)
         console.print(f"[bold yellow]warning:[/] {escape(warning.message)}")

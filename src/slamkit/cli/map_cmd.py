@@ -216,5 +216,8 @@ def _occupancy(
             overwrite=overwrite,
             progress=progress,
         )
+    if report.reading is not None and not report.reading.clean:
+        for line in report.reading.lines():
+            console.print(escape(line))
     console.print(_table(report.quality, report.stats))
     console.print(f"wrote {', '.join(report.files)} to [bold]{report.out_dir}[/]")

@@ -77,6 +77,7 @@ from slamkit.datasets.carmen_parse import (
     CarmenLog,
     LineProblems,
     beam_angles_from_geometry,
+    log_geometry,
     parse_carmen_log,
     parse_floats,
     read_lines,
@@ -84,6 +85,8 @@ from slamkit.datasets.carmen_parse import (
 )
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.paths import require_file
+from slamkit.datasets.reading import ReadingSummary, check_dropped_share
+from slamkit.datasets.stamps import RESTAMP_REASON, StampRepair, repair_stamps
 from slamkit.datasets.stream import (
     Dataset,
     Event,
@@ -125,7 +128,9 @@ CARMEN_FILES: dict[str, str] = {
 }
 """Registered data set name → file under the data root."""
 
-_TIME_REPAIR_STEP = 1e-3  # [s] added to the previous time stamp of an out-of-order scan
+STAMP_PERIOD = 1.0
+"""[s] between scans of a log whose stamps carry no timing (all zero, or one rounded value),
+re-made from the line order: the corrected logs keep a scan every 1-5 s."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -208,17 +213,6 @@ class DpSlamOptions:
         return np.diag([sr**2, self.odometry_sigma_trans**2, sr**2])
 
 
-def _repair_times(times: FloatArray) -> tuple[FloatArray, int]:
-    """Make time stamps strictly increasing, keeping the file order (see module docstring)."""
-    out = times.copy()
-    repaired = 0
-    for k in range(1, out.size):
-        if out[k] <= out[k - 1]:
-            out[k] = out[k - 1] + _TIME_REPAIR_STEP
-            repaired += 1
-    return out, repaired
-
-
 def _noisy_odometry(poses: FloatArray, cov: FloatArray, rng: np.random.Generator) -> FloatArray:
     """Odometry poses ``(N, 3)``: the true steps ``(rot1, trans, rot2)`` plus N(0, cov) noise,
     integrated from the first true pose with the odometry model
@@ -233,6 +227,40 @@ def _noisy_odometry(poses: FloatArray, cov: FloatArray, rng: np.random.Generator
     out[:, 0] = poses[0, 0] + np.concatenate([[0.0], np.cumsum(trans * np.cos(heading))])
     out[:, 1] = poses[0, 1] + np.concatenate([[0.0], np.cumsum(trans * np.sin(heading))])
     out[:, 2] = wrap_angle(theta)
+    return out
+
+
+def _reading_summary(log: CarmenLog, stamps: StampRepair, note: str | None) -> ReadingSummary:
+    """What reading the log did: the scans kept of the FLASER lines, the lines dropped (a
+    lenient read) and the stamps repaired, by reason."""
+    flaser = int(log.counts.get("FLASER", log.n_scans))
+    dropped = _skipped_by_reason(log.skipped)
+    check_dropped_share(log.path, flaser, flaser - log.n_scans)
+    notes = [] if note is None else [note]
+    if stamps.restamped:
+        notes.append(
+            f"{log.n_scans} stamps carry no timing: re-made from the line order, "
+            f"{stamps.period:g} s apart"
+        )
+    return ReadingSummary(
+        file=log.path.name,
+        records=flaser,
+        used=log.n_scans,
+        dropped=dropped,
+        repaired={k: v for k, v in stamps.counts.items() if k != RESTAMP_REASON},
+        notes=tuple(notes),
+    )
+
+
+def _skipped_by_reason(skipped: tuple[tuple[int, str], ...]) -> dict[str, int]:
+    """Dropped lines by reason: the message of each line up to its first colon, so that
+    ``FLASER: ranges must be finite and >= 0, got -1.0`` counts as ``FLASER``'s kind of
+    problem, not one reason per value."""
+    out: dict[str, int] = {}
+    for _, message in skipped:
+        head, _, rest = message.partition(": ")
+        reason = f"{head}: {rest.split(',')[0]}" if rest else head
+        out[reason] = out.get(reason, 0) + 1
     return out
 
 
@@ -256,24 +284,19 @@ def carmen_dataset(
     """The :class:`Dataset` of a parsed corrected CARMEN log (see the module docstring)."""
     if log.n_scans < 1:
         raise DatasetFormatError("no valid FLASER scans", log.path)
-    fov = options.fov_deg
-    if fov is None:
-        fov = log.param_float("laser_front_laser_fov")
-    res = options.angular_resolution_deg
-    if res is None:
-        res = log.param_float("laser_front_laser_resolution")
-    geometry = resolve_geometry(log.n_beams, fov, res, "declared")
+    geometry = log.geometry or log_geometry(
+        log.n_beams, log.params, log.param_lines, log.path, options.fov_deg,
+        options.angular_resolution_deg,
+    )  # fmt: skip
     if geometry is None:  # parse_carmen_log already checked this; a hand-made log may not be
         raise DatasetFormatError(
-            f"{log.n_beams} beams do not match a field of view of {fov} deg at {res} deg",
-            log.path,
+            f"{log.n_beams} beams do not match the declared field of view", log.path
         )
-    fov_deg, res_deg, how = geometry
-    if how == "declared":
-        how = "options/PARAM"
+    fov_deg, res_deg, how = geometry.fov_deg, geometry.resolution_deg, geometry.source
     max_range, max_source = _max_range_source(options, log)
     ranges = np.where(log.ranges >= max_range, max_range, log.ranges)
-    times, repaired = _repair_times(log.times)
+    times, stamps = repair_stamps(log.times, STAMP_PERIOD)
+    repaired = stamps.repaired
     truth_poses = log.laser_poses.copy()
     truth_poses[:, 2] = wrap_angle(truth_poses[:, 2])
     rng = np.random.default_rng(seed)
@@ -288,6 +311,7 @@ def carmen_dataset(
         beam_angles_from_geometry(log.n_beams, fov_deg, res_deg), max_range, options.range_sigma
     )
     n_max = int(np.count_nonzero(log.ranges >= max_range))
+    reading = _reading_summary(log, stamps, geometry.note)
     return Dataset(
         name=name,
         events=tuple(events),
@@ -319,6 +343,7 @@ def carmen_dataset(
                 "first": [{"line": n, "reason": m} for n, m in log.skipped[:SKIPPED_SHOWN]],
             },
         },
+        reading=reading,
     )
 
 

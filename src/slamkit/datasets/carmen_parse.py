@@ -21,10 +21,15 @@ from slamkit.datasets.text import ascii_fields, read_text, text_lines
 from slamkit.errors import DatasetFormatError
 
 __all__ = [
+    "FOV_PARAMS",
+    "RESOLUTION_PARAMS",
     "SKIPPED_SHOWN",
     "CarmenLog",
     "LineProblems",
+    "LogGeometry",
     "beam_angles_from_geometry",
+    "count_geometry",
+    "log_geometry",
     "parse_carmen_log",
     "parse_floats",
     "read_lines",
@@ -34,13 +39,15 @@ __all__ = [
 SKIPPED_SHOWN = 20
 """Malformed lines listed (line number and reason) in the metadata of a lenient read."""
 
-# Beam counts whose geometry is known without PARAM lines: count -> (fov, resolution) in deg.
-_KNOWN_COUNTS: dict[int, tuple[float, float]] = {
-    180: (180.0, 1.0),
-    181: (180.0, 1.0),
-    360: (180.0, 0.5),
-    361: (180.0, 0.5),
-}
+FOV_PARAMS = ("laser_front_laser_fov", "laser_frontlaser_fov")
+"""``PARAM`` names of the front laser's field of view, in the spellings logs use."""
+RESOLUTION_PARAMS = ("laser_front_laser_resolution", "laser_frontlaser_resolution")
+"""``PARAM`` names of the front laser's angle between beams."""
+RADIAN_RESOLUTION_BELOW = 0.05
+"""A ``PARAM`` resolution below this is radians (0.05 rad is 2.9°; no laser's beams are
+under 0.05° apart)."""
+ASSUMED_FOV_DEG = 180.0
+"""The field of view of a log that states none: the SICK LMS and PLS of the CARMEN era."""
 
 
 def read_lines(path: Path) -> list[str]:
@@ -147,28 +154,107 @@ def _geometry_counts(fov_deg: float, resolution_deg: float) -> tuple[int, int]:
     return n, n + 1
 
 
+def count_geometry(n_beams: int) -> tuple[float, float]:
+    """``(fov, resolution)`` [deg] of ``n_beams`` over :data:`ASSUMED_FOV_DEG`: both ends
+    included for an odd count (181 at 1°, 361 at 0.5°), the last end excluded for an even
+    one (180 at 1°, 360 at 0.5°)."""
+    gaps = n_beams - 1 if n_beams % 2 else n_beams
+    return ASSUMED_FOV_DEG, ASSUMED_FOV_DEG / max(gaps, 1)
+
+
 def resolve_geometry(
     n_beams: int, fov: float | None, res: float | None, source: str
 ) -> tuple[float, float, str] | None:
-    """``(fov, resolution, how)`` for ``n_beams`` given what is declared (either may be
-    None); None if the declared geometry contradicts the beam count or is impossible (a
-    field of view outside (0°, 360°], a resolution outside (0, fov])."""
+    """``(fov, resolution, how)`` [deg] for ``n_beams`` given what is declared (either may
+    be None; nothing declared: :func:`count_geometry`); None if the declared geometry
+    contradicts the beam count or is impossible (a field of view outside (0°, 360°], a
+    resolution outside (0, fov])."""
     if fov is None and res is None:
-        if n_beams not in _KNOWN_COUNTS:
+        if n_beams < 2:
             return None
-        f, r = _KNOWN_COUNTS[n_beams]
+        f, r = count_geometry(n_beams)
         return f, r, "beam count"
     if fov is None:
         assert res is not None
         fov = n_beams * res if n_beams * res <= 180.0 + 1e-9 else (n_beams - 1) * res
-    if res is None:
-        known = _KNOWN_COUNTS.get(n_beams)
-        res = known[1] if known is not None and abs(known[0] - fov) < 1e-9 else fov / n_beams
+    if res is None:  # both ends included for an odd count, as count_geometry
+        res = fov / (n_beams - 1 if n_beams % 2 and n_beams > 1 else n_beams)
     if not (0.0 < fov <= 360.0 + 1e-9 and 0.0 < res <= fov):  # e.g. 90° steps, 1000° views
         return None
     if n_beams not in _geometry_counts(fov, res):
         return None
     return fov, res, source
+
+
+@dataclass(frozen=True)
+class LogGeometry:
+    """A log's beam geometry [deg], where it came from, and a note when a ``PARAM`` value
+    had to be read in radians or no geometry was stated for an unusual beam count."""
+
+    fov_deg: float
+    resolution_deg: float
+    source: str
+    note: str | None = None
+
+
+def _first_param(
+    params: Mapping[str, str], lines: Mapping[str, int], path: Path, names: tuple[str, ...]
+) -> tuple[str, float] | None:
+    for name in names:
+        value = _param_number(params, lines, path, name)
+        if value is not None:
+            return name, value
+    return None
+
+
+def log_geometry(
+    n_beams: int,
+    params: Mapping[str, str],
+    param_lines: Mapping[str, int],
+    path: Path,
+    fov_deg: float | None = None,
+    resolution_deg: float | None = None,
+) -> LogGeometry | None:
+    """The geometry of a log's ``n_beams`` scans: the options (degrees) if given, else the
+    ``PARAM`` lines, else the beam count over 180°. A ``PARAM`` field of view up to 2π, or a
+    resolution under :data:`RADIAN_RESOLUTION_BELOW`, is radians (a log of the Radish
+    collection writes its field of view as 3.14…; read as degrees it would fit 181 beams as
+    a 3° fan), other values degrees; if the geometry in that unit does not fit the beam
+    count, the other unit is tried. Radians are said in the note. None when nothing
+    declared fits the beam count."""
+    if fov_deg is not None or resolution_deg is not None:
+        found = resolve_geometry(n_beams, fov_deg, resolution_deg, "options")
+        return None if found is None else LogGeometry(found[0], found[1], found[2])
+    fov = _first_param(params, param_lines, path, FOV_PARAMS)
+    res = _first_param(params, param_lines, path, RESOLUTION_PARAMS)
+    f, r = (None if fov is None else fov[1]), (None if res is None else res[1])
+    if fov is None and res is None:
+        found = resolve_geometry(n_beams, None, None, "beam count")
+        if found is None:
+            return None
+        usual = n_beams in (180, 181, 360, 361)
+        note = None if usual else f"no field of view stated: {n_beams} beams taken over 180°"
+        return LogGeometry(found[0], found[1], found[2], note)
+    # The unit by the value (no laser of the field has a view under 2π degrees or beams
+    # under 0.05° apart), then by the fit to the beam count.
+    radians_first = (f is not None and f <= 2.0 * math.pi + 1e-6) or (
+        r is not None and r < RADIAN_RESOLUTION_BELOW
+    )
+    f_deg = None if f is None else math.degrees(f)
+    r_deg = None if r is None else math.degrees(r)
+    tries = [(f, r, "PARAM"), (f_deg, r_deg, "PARAM (radians)")]
+    found = None
+    for fov_try, res_try, how in tries[::-1] if radians_first else tries:
+        found = resolve_geometry(n_beams, fov_try, res_try, how)
+        if found is not None:
+            break
+    if found is None:
+        return None
+    if found[2] == "PARAM":
+        return LogGeometry(found[0], found[1], found[2])
+    said = [f"PARAM {p[0]} {p[1]:g}" for p in (fov, res) if p is not None]
+    note = f"{' and '.join(said)} read as radians ({found[0]:g}° at {found[1]:g}°)"
+    return LogGeometry(found[0], found[1], found[2], note)
 
 
 # --------------------------------------------------------------------------------------------
@@ -185,7 +271,8 @@ class CarmenLog:
     ``times (N,)`` the ``ts`` field; ``line_numbers (N,)`` 1-based lines of the scans;
     ``params`` the ``PARAM`` values as text (``param_lines`` their line numbers);
     ``counts`` the number of lines per message type; ``skipped`` the malformed lines a
-    lenient read dropped, as (line, reason).
+    lenient read dropped, as (line, reason); ``geometry`` the beams' (None: resolve it
+    from ``params`` with :func:`log_geometry`).
     """
 
     path: Path
@@ -198,6 +285,7 @@ class CarmenLog:
     param_lines: dict[str, int] = field(default_factory=dict)
     counts: dict[str, int] = field(default_factory=dict)
     skipped: tuple[tuple[int, str], ...] = ()
+    geometry: LogGeometry | None = None
 
     def param_float(self, name: str) -> float | None:
         """The ``PARAM`` value ``name`` as a number > 0, or None when the log does not set
@@ -296,26 +384,19 @@ def parse_carmen_log(
             if len(fields_) != 1 or parse_floats(fields_) is None:
                 problems.report(number, "NEFF: expected one number")
 
-    fov = fov_deg
-    if fov is None:
-        fov = _param_number(params, param_lines, p, "laser_front_laser_fov")
-    res = angular_resolution_deg
-    if res is None:
-        res = _param_number(params, param_lines, p, "laser_front_laser_resolution")
-    declared = fov is not None or res is not None
     n_beams: int | None = None
+    geometry: LogGeometry | None = None
     keep: list[int] = []
     for i, n in enumerate(beams_of):
         if n_beams is None:
-            geometry = resolve_geometry(n, fov, res, "declared")
+            geometry = log_geometry(n, params, param_lines, p, fov_deg, angular_resolution_deg)
             if geometry is None:
-                what = (
-                    f"field of view {fov} deg at {res} deg"
-                    if declared
-                    else "the known laser geometries (180/181 or 360/361 beams); "
-                    "give fov_deg and angular_resolution_deg"
+                problems.report(
+                    body_lines[i],
+                    f"FLASER: {n} beams do not match the declared field of view and "
+                    "resolution (in degrees or in radians); give fov_deg and "
+                    "angular_resolution_deg",
                 )
-                problems.report(body_lines[i], f"FLASER: {n} beams do not match {what}")
                 continue
             n_beams = n
         elif n != n_beams:
@@ -325,7 +406,7 @@ def parse_carmen_log(
             )
             continue
         keep.append(i)
-    if n_beams is None:
+    if n_beams is None or geometry is None:
         raise DatasetFormatError("no FLASER scans found", p)
 
     width = n_beams + 6
@@ -361,4 +442,5 @@ def parse_carmen_log(
         param_lines=param_lines,
         counts=counts,
         skipped=tuple(sorted(problems.lines)),
+        geometry=geometry,
     )

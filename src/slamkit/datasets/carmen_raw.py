@@ -45,9 +45,10 @@ before) raises :class:`~slamkit.errors.DatasetFormatError` naming the file and t
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -59,9 +60,9 @@ from slamkit.config import config_from_mapping, config_to_dict
 from slamkit.datasets.carmen_parse import (
     LineProblems,
     beam_angles_from_geometry,
+    log_geometry,
     parse_floats,
     read_lines,
-    resolve_geometry,
 )
 from slamkit.datasets.raw_odometry import (
     DEFAULT_MAX_ODOM_GAP,
@@ -74,6 +75,8 @@ from slamkit.datasets.raw_odometry import (
     raw_odometry_cov,
     repeat_mask,
 )
+from slamkit.datasets.reading import ReadingSummary, check_dropped_share
+from slamkit.datasets.stamps import StampRepair, repair_stamps
 from slamkit.datasets.stream import Dataset, LaserSpec
 from slamkit.errors import ConfigError, DatasetFormatError
 from slamkit.geometry.angles import wrap_angle
@@ -148,7 +151,10 @@ class CarmenRawLog:
     [rad]; ``line_max_range (N,)`` each line's max range (NaN for FLASER);
     ``laser_poses``/``odom_poses (N, 3)`` the two poses of each line, or None (RAWLASER);
     ``odom_times (M,)``/``odom_lines (M, 3)`` the ODOM lines in time order (repeats, counted
-    in ``odom_repeats``, and lines out of order left out); ``line_numbers (N,)`` 1-based;
+    in ``odom_repeats``, and lines stamped 0 or out of order, ``odom_unordered``, left out);
+    ``line_numbers (N,)`` 1-based; ``stamps`` what repairing the scans' stamps did
+    (:func:`~slamkit.datasets.stamps.repair_stamps`); ``geometry_note`` how an unusual
+    FLASER geometry was read;
     ``param_max_range`` PARAM ``robot_front_laser_max``; ``counts`` lines per message type;
     ``skipped`` the malformed lines of a lenient read."""
 
@@ -167,6 +173,9 @@ class CarmenRawLog:
     counts: dict[str, int]
     skipped: dict[str, Any]
     odom_repeats: int = 0
+    odom_unordered: int = 0
+    stamps: StampRepair = field(default_factory=StampRepair)
+    geometry_note: str | None = None
 
     @property
     def n_scans(self) -> int:
@@ -309,7 +318,6 @@ def parse_carmen_raw(path: str | Path, options: CarmenRawOptions | None = None) 
     scans: list[_Scan] = []
     numbers: list[int] = []
     odom_rows: list[list[float]] = []
-    odom_numbers: list[int] = []
     for number, line in enumerate(lines, start=1):
         tokens = line.split()
         if not tokens or (tokens[0] != laser and tokens[0] != "ODOM"):
@@ -320,7 +328,6 @@ def parse_carmen_raw(path: str | Path, options: CarmenRawOptions | None = None) 
                 problems.report(number, row)
             else:
                 odom_rows.append(row)
-                odom_numbers.append(number)
             continue
         if laser == "FLASER":
             scan = _parse_flaser(tokens[1:])
@@ -340,34 +347,23 @@ def parse_carmen_raw(path: str | Path, options: CarmenRawOptions | None = None) 
         else:
             scans.append(scan)
             numbers.append(number)
-    angles, scans, numbers = _geometry(scans, numbers, laser, opts, params, param_lines, p,
-                                       problems)  # fmt: skip
-    times = np.asarray([s.t for s in scans], dtype=np.float64)
-    order = increasing_mask(times)
-    for i in np.flatnonzero(~order):
-        problems.report(
-            numbers[int(i)],
-            f"{laser}: time stamp {float(times[i])!r} is not later than the scans before it",
-        )
-    keep = np.flatnonzero(order).tolist()
-    scans = [scans[i] for i in keep]
-    numbers = [numbers[i] for i in keep]
+    angles, scans, numbers, note = _geometry(
+        scans, numbers, laser, opts, params, param_lines, p, problems
+    )
+    times, stamps = repair_stamps(np.asarray([s.t for s in scans], dtype=np.float64))
     odom = np.asarray(odom_rows, dtype=np.float64).reshape(-1, 4)
     odom[:, 3] = wrap_angle(odom[:, 3])
     repeats = repeat_mask(odom[:, 0], odom[:, 1:])
-    odom, odom_at = odom[~repeats], np.asarray(odom_numbers, dtype=np.int64)[~repeats]
-    odom_order = increasing_mask(odom[:, 0])
-    for i in np.flatnonzero(~odom_order):
-        problems.report(
-            int(odom_at[i]),
-            f"ODOM: time stamp {float(odom[i, 0])!r} is not later than the lines before",
-        )
+    odom = odom[~repeats]
+    # ODOM lines stamped 0 or out of order cannot be placed in time: left out and counted
+    # (they matter only to a laser without poses, which interpolates them).
+    odom_order = increasing_mask(odom[:, 0]) & (odom[:, 0] > 0.0)
     odom = odom[odom_order]
     with_poses = laser in ("FLASER", "ROBOTLASER1")
     return CarmenRawLog(
         path=p,
         laser=laser,
-        times=times[order],
+        times=times,
         ranges=np.asarray([s.ranges for s in scans], dtype=np.float64).reshape(len(scans), -1),
         beam_angles=angles,
         line_max_range=np.asarray(
@@ -386,6 +382,9 @@ def parse_carmen_raw(path: str | Path, options: CarmenRawOptions | None = None) 
         counts=counts,
         skipped=problems.metadata(),
         odom_repeats=int(np.count_nonzero(repeats)),
+        odom_unordered=int(np.count_nonzero(~odom_order)),
+        stamps=stamps,
+        geometry_note=note,
     )
 
 
@@ -398,27 +397,28 @@ def _geometry(
     param_lines: dict[str, int],
     path: Path,
     problems: LineProblems,
-) -> tuple[FloatArray, list[_Scan], list[int]]:
-    """The beam angles of the log and the scans that have them (others reported)."""
+) -> tuple[FloatArray, list[_Scan], list[int], str | None]:
+    """The beam angles of the log, the scans that have them (others reported), and a note
+    on how an unusual FLASER geometry was read."""
     if not scans:
         raise DatasetFormatError(f"no valid {laser} scans", path)
     kept: list[int] = []
     first = scans[0]
     n0 = len(first.ranges)
+    note = None
     if first.geometry is None:  # FLASER: declared or known from the count
-        fov = opts.fov_deg or _param_float(params, param_lines, path, "laser_front_laser_fov")
-        res = opts.angular_resolution_deg or _param_float(
-            params, param_lines, path, "laser_front_laser_resolution"
+        geometry = log_geometry(
+            n0, params, param_lines, path, opts.fov_deg, opts.angular_resolution_deg
         )
-        geometry = resolve_geometry(n0, fov, res, "declared")
         if geometry is None:
             raise DatasetFormatError(
-                f"FLASER: {n0} beams match no known laser geometry (180/181 or 360/361 "
-                "beams); give fov_deg and angular_resolution_deg",
+                f"FLASER: {n0} beams do not match the declared field of view and resolution "
+                "(in degrees or in radians); give fov_deg and angular_resolution_deg",
                 path,
                 numbers[0],
             )
-        angles = beam_angles_from_geometry(n0, geometry[0], geometry[1])
+        note = geometry.note
+        angles = beam_angles_from_geometry(n0, geometry.fov_deg, geometry.resolution_deg)
         for i, s in enumerate(scans):
             if len(s.ranges) != n0:
                 problems.report(numbers[i], f"FLASER: {len(s.ranges)} beams, the log has {n0}")
@@ -439,7 +439,7 @@ def _geometry(
                 )
             else:
                 kept.append(i)
-    return angles, [scans[i] for i in kept], [numbers[i] for i in kept]
+    return angles, [scans[i] for i in kept], [numbers[i] for i in kept], note
 
 
 def _mounting(log: CarmenRawLog) -> tuple[tuple[float, float, float], float]:
@@ -495,6 +495,7 @@ def read_carmen_raw_log(
     laser = LaserSpec(log.beam_angles, max_range, opts.range_sigma, mounting=mounting)
     n = int(keep.sum())
     p = log.path
+    reading = _reading_summary(log, n, dropped)
     metadata: dict[str, Any] = {
         "kind": "real",
         "format": "carmen-raw",
@@ -510,13 +511,14 @@ def read_carmen_raw_log(
         "odometry_from": odometry_from,
         "odom_lines": int(log.odom_times.size),
         "odometry_repeats_dropped": log.odom_repeats,
+        "odometry_unordered_dropped": log.odom_unordered,
         "mounting": list(laser.mounting),
         "mounting_spread": spread,
         "dropped": dropped,
         "message_counts": dict(log.counts),
         "skipped_lines": log.skipped,
     }
-    return raw_laser_dataset(
+    dataset = raw_laser_dataset(
         name=name or p.name,
         times=log.times[keep],
         odometry=odometry,
@@ -526,6 +528,35 @@ def read_carmen_raw_log(
         description=f"raw CARMEN log {p.name}: {n} {log.laser} scans × "
         f"{log.beam_angles.size} beams, raw odometry ({odometry_from})",
         metadata=metadata,
+    )
+    return dataclasses.replace(dataset, reading=reading)
+
+
+def _reading_summary(log: CarmenRawLog, used: int, dropped: Mapping[str, int]) -> ReadingSummary:
+    """What reading the log did: scans kept of the laser's lines, dropped by reason (a
+    lenient read's malformed lines, scans without odometry), stamps repaired by reason."""
+    lines = int(log.counts.get(log.laser, log.n_scans))
+    by_reason = {k.replace("_", " ") + " (scans)": v for k, v in dropped.items() if v}
+    malformed = lines - log.n_scans
+    if malformed:
+        by_reason["malformed lines"] = malformed
+    check_dropped_share(log.path, lines, lines - used)
+    notes = [] if log.geometry_note is None else [log.geometry_note]
+    if log.stamps.restamped:
+        notes.append(
+            f"{log.n_scans} stamps carry no timing: re-made from the line order, "
+            f"{log.stamps.period:g} s apart"
+        )
+    repaired = {} if log.stamps.restamped else dict(log.stamps.counts)
+    if log.odom_unordered and log.odom_poses is None:  # the ODOM lines were used
+        notes.append(f"{log.odom_unordered} ODOM lines stamped 0 or out of order left out")
+    return ReadingSummary(
+        file=log.path.name,
+        records=lines,
+        used=used,
+        dropped=by_reason,
+        repaired=repaired,
+        notes=tuple(notes),
     )
 
 

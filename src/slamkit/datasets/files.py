@@ -5,15 +5,21 @@
 * ``*.bag``: a ROS 1 bag; a folder holding ``metadata.yaml``: a ROS 2 bag; ``*.db3`` or
   ``*.mcap``: one ROS 2 storage file — all read by :func:`slamkit.datasets.rosbag.read_rosbag`;
 * ``*.clf``, ``*.log`` and gzipped ones (``*.gz``: ``.log.gz``, ``.clf.gz``, gzip recognised
-  by the content): a raw CARMEN log, read by
-  :func:`slamkit.datasets.carmen_raw.read_carmen_raw_log`;
+  by the content): a laser log of the CARMEN family, its reader chosen by the content
+  (:func:`laser_log_format`): a *corrected* CARMEN log (its scans' poses are a SLAM result;
+  ``NEFF`` lines, or "corrected" in the name) by
+  :func:`slamkit.datasets.carmen.read_carmen_log`, which keeps the poses as the truth and
+  makes odometry from them with known noise (seeded); a DP-SLAM log (``Odometry``/``Laser``
+  lines) by :func:`slamkit.datasets.carmen.read_dpslam_log`; any other by
+  :func:`slamkit.datasets.carmen_raw.read_carmen_raw_log`, with the robot's raw odometry;
 * ``*.csv``: landmark data (controls or odometry, readings, optional truth), read by
   :func:`slamkit.datasets.landmark_csv.read_landmark_csv`.
 
 ``options`` are the reader's options (:class:`~slamkit.datasets.rosbag.RosbagOptions`,
-:class:`~slamkit.datasets.carmen_raw.CarmenRawOptions`), from a config file's ``[dataset]``
-table. :func:`load_data` is what ``slamkit run --data`` calls: a registered name loads that
-data set, anything else is taken as a path. A path that is one of the registered raw bags
+:class:`~slamkit.datasets.carmen_raw.CarmenRawOptions`, …), from a config file's
+``[dataset]`` table; the key ``reader`` (one of :data:`READERS`) overrides the choice.
+:func:`load_data` is what ``slamkit run --data`` calls: a registered name loads that data
+set, anything else is taken as a path. A path that is one of the registered raw bags
 under the data folder is read with that data set's default options (the registered name is
 in ``metadata["registered_as"]``), so ``--data …/aces.bag`` reads what ``--data aces-raw``
 reads, without its relations. ``metadata["path"]`` holds the absolute path read.
@@ -29,9 +35,18 @@ from typing import Any, Literal
 from slamkit.datasets.paths import find_data_root
 from slamkit.datasets.registry import DATASETS, load_dataset
 from slamkit.datasets.stream import Dataset
-from slamkit.errors import DataNotFoundError, DatasetFormatError, UnknownNameError
+from slamkit.datasets.text import head_lines
+from slamkit.errors import ConfigError, DataNotFoundError, DatasetFormatError, UnknownNameError
 
-__all__ = ["SUPPORTED_FORMATS", "data_label", "file_format", "load_data", "load_file"]
+__all__ = [
+    "READERS",
+    "SUPPORTED_FORMATS",
+    "data_label",
+    "file_format",
+    "laser_log_format",
+    "load_data",
+    "load_file",
+]
 
 SUPPORTED_FORMATS = (
     "ROS 1 .bag, ROS 2 bag folder (with metadata.yaml), ROS 2 .db3 or .mcap file, "
@@ -44,7 +59,35 @@ _CARMEN_SUFFIXES = (".clf", ".log", ".gz")
 _CSV_SUFFIXES = (".csv",)
 _LABEL_SUFFIXES = (".gz", ".bag", ".db3", ".mcap", ".clf", ".log", ".csv")
 
-FileFormat = Literal["rosbag", "carmen", "landmark-csv"]
+FileFormat = Literal["rosbag", "carmen-raw", "carmen-corrected", "dpslam", "landmark-csv"]
+READERS: tuple[FileFormat, ...] = (
+    "rosbag",
+    "carmen-raw",
+    "carmen-corrected",
+    "dpslam",
+    "landmark-csv",
+)
+"""The readers a path can go to; the ``reader`` option names one to bypass the choice."""
+
+SNIFF_LINES = 2000
+"""Lines of a CARMEN-family log read to tell its kind (a corrected log's first ``NEFF``
+follows its first scan)."""
+
+
+def laser_log_format(path: Path) -> FileFormat:
+    """Which reader reads a log of the CARMEN family: ``"dpslam"`` when its first message
+    is ``Odometry`` or ``Laser``; ``"carmen-corrected"`` when it has ``NEFF`` lines (the
+    effective sample size the correcting filter wrote beside each scan) or its name says
+    "corrected"; else ``"carmen-raw"``."""
+    if "corrected" in path.name.lower():
+        return "carmen-corrected"
+    kinds = [line.split(None, 1)[0] for line in head_lines(path, SNIFF_LINES) if line.strip()]
+    kinds = [k for k in kinds if not k.startswith("#")]
+    if kinds and kinds[0] in ("Odometry", "Laser"):
+        return "dpslam"
+    if "NEFF" in kinds:
+        return "carmen-corrected"
+    return "carmen-raw"
 
 
 def file_format(path: str | Path) -> FileFormat:
@@ -65,7 +108,7 @@ def file_format(path: str | Path) -> FileFormat:
     if suffix in _ROS_SUFFIXES:
         return "rosbag"
     if suffix in _CARMEN_SUFFIXES:
-        return "carmen"
+        return laser_log_format(p)
     if suffix in _CSV_SUFFIXES:
         return "landmark-csv"
     raise DatasetFormatError(
@@ -74,26 +117,53 @@ def file_format(path: str | Path) -> FileFormat:
 
 
 def load_file(
-    path: str | Path, options: Mapping[str, Any] | None = None, *, name: str | None = None
+    path: str | Path,
+    options: Mapping[str, Any] | None = None,
+    *,
+    name: str | None = None,
+    seed: int = 0,
 ) -> Dataset:
-    """Read the laser log at ``path`` with the reader its kind calls for (see the module
-    docstring); ``options`` go to that reader (unknown keys: ConfigError)."""
+    """Read the log at ``path`` with the reader its kind calls for (see the module
+    docstring); ``options`` go to that reader (unknown keys: ConfigError), except
+    ``reader``, which names the reader; ``seed`` draws the noise of a corrected log's
+    odometry."""
     p = Path(path).expanduser()
-    kind = file_format(p)
+    opts = dict(options or {})
+    kind = _reader_option(opts.pop("reader", None)) or file_format(p)
+    if not p.exists():
+        raise DataNotFoundError(f"{p}: not found (supported: {SUPPORTED_FORMATS})")
     if kind == "rosbag":
         from slamkit.datasets.rosbag import read_rosbag
 
-        dataset = read_rosbag(p, options, name=name)
+        dataset = read_rosbag(p, opts, name=name)
     elif kind == "landmark-csv":
         from slamkit.datasets.landmark_csv import read_landmark_csv
 
-        dataset = read_landmark_csv(p, options, name=name)
+        dataset = read_landmark_csv(p, opts, name=name)
+    elif kind == "carmen-corrected":
+        from slamkit.datasets.carmen import read_carmen_log
+
+        dataset = read_carmen_log(p, opts, seed=seed, name=name)
+    elif kind == "dpslam":
+        from slamkit.datasets.carmen import read_dpslam_log
+
+        dataset = read_dpslam_log(p, opts, name=name)
     else:
         from slamkit.datasets.carmen_raw import read_carmen_raw_log
 
-        dataset = read_carmen_raw_log(p, options, name=name)
+        dataset = read_carmen_raw_log(p, opts, name=name)
     dataset.metadata["path"] = str(p.resolve())
+    dataset.metadata["reader"] = kind
     return dataset
+
+
+def _reader_option(value: Any) -> FileFormat | None:
+    if value is None:
+        return None
+    for reader in READERS:
+        if value == reader:
+            return reader
+    raise ConfigError(f"reader: expected one of {', '.join(READERS)}, got {value!r}")
 
 
 def load_data(
@@ -119,7 +189,7 @@ def load_data(
     registered = registered_bag_defaults(p, find_data_root(data_root)) if p.exists() else None
     if registered is not None:
         merged = {**registered[1], **merged}
-    dataset = load_file(p, merged)
+    dataset = load_file(p, merged, seed=seed)
     if registered is not None:
         dataset.metadata["registered_as"] = registered[0]
     return dataset

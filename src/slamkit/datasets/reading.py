@@ -11,7 +11,7 @@ here, by reason, so that the user reads in one or two lines what happened to the
 
 :func:`check_dropped_share` is the one rule that keeps a lenient read honest: a reader may
 drop malformed lines, but never more than :data:`MAX_DROPPED_SHARE` of a file's records
-without an error. Two scans of 406 are a failure, not a result.
+(beyond :data:`FEW_DROPPED`) without an error. Two scans of 406 are a failure, not a result.
 """
 
 from __future__ import annotations
@@ -23,11 +23,14 @@ from typing import Any
 
 from slamkit.errors import DatasetFormatError
 
-__all__ = ["MAX_DROPPED_SHARE", "ReadingSummary", "check_dropped_share"]
+__all__ = ["FEW_DROPPED", "MAX_DROPPED_SHARE", "ReadingSummary", "check_dropped_share"]
 
 MAX_DROPPED_SHARE = 0.1
 """The largest share of a file's records (scans, odometry lines) a reader may drop without
 an error, lenient or not."""
+FEW_DROPPED = 2
+"""Dropping this many records is never an error, whatever the share: a bad line or two in
+a short file is a quirk, not a file the reader cannot trust."""
 
 
 @dataclass(frozen=True)
@@ -85,12 +88,11 @@ def _counts(counts: Mapping[str, int]) -> str:
     return ", ".join(f"{n} {reason}" for reason, n in counts.items())
 
 
-def check_dropped_share(
-    path: str | Path, records: int, dropped: int, what: str = "scans"
-) -> None:
+def check_dropped_share(path: str | Path, records: int, dropped: int, what: str = "scans") -> None:
     """Raise :class:`DatasetFormatError` when more than :data:`MAX_DROPPED_SHARE` of the
-    ``records`` were ``dropped``: a read that keeps too little of a file is not a result."""
-    if records > 0 and dropped > MAX_DROPPED_SHARE * records:
+    ``records`` (and more than :data:`FEW_DROPPED`) were ``dropped``: a read that keeps too
+    little of a file is not a result."""
+    if dropped > FEW_DROPPED and dropped > MAX_DROPPED_SHARE * records:
         raise DatasetFormatError(
             f"{dropped} of {records} {what} could not be used (more than "
             f"{MAX_DROPPED_SHARE:.0%}); the file is not a log this reader can trust",

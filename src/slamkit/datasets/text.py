@@ -87,6 +87,28 @@ def read_text(path: Path) -> str:
         raise DatasetFormatError(f"not UTF-8 text ({exc.reason})", path, line) from exc
 
 
+def head_lines(path: Path, count: int) -> list[str]:
+    """The first ``count`` lines of a (gzip or plain) text file, for telling formats apart
+    by their content without reading a whole log; bytes that are not UTF-8 are replaced and
+    a damaged gzip stream ends the lines early (the reader proper reports both)."""
+    try:
+        with path.open("rb") as f:
+            magic = f.read(2)
+    except OSError as exc:
+        raise DataNotFoundError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
+    opener = gzip.open if magic == GZIP_MAGIC else open
+    lines: list[str] = []
+    try:
+        with opener(path, "rt", encoding="utf-8", errors="replace") as f:
+            for line in f:
+                lines.append(line.rstrip("\r\n"))
+                if len(lines) >= count:
+                    break
+    except (gzip.BadGzipFile, EOFError, zlib.error, OSError):
+        pass
+    return lines
+
+
 def text_lines(text: str) -> list[str]:
     """The lines of ``text``, split at ``\n`` only (a trailing ``\r`` removed), so that line
     numbers are those of an editor: ``str.splitlines`` also breaks at ``\x0b``, ``\x0c``,
