@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -52,6 +53,18 @@ def _spec(bags: SimpleNamespace, **changes: object) -> object:
     spec = bags.Bag(scans, odometry, tf_static=[("base_link", "laser", (0.04, 0.02, 0.1))])
     for key, value in changes.items():
         setattr(spec, key, value)
+    return spec
+
+
+def _padded(bags: SimpleNamespace, spec: Any, scans: int = 16, odometry: int = 16) -> Any:
+    """``spec`` with ``scans`` more good scans every 0.1 s from 10.4 s and ``odometry`` more
+    odometry messages every 0.1 s from 10.45 s: a lenient read that drops one or two of the
+    first four scans still keeps 90% of the bag (``reading.MAX_DROPPED_SHARE``)."""
+    after = range(1, max(scans, odometry) + 1)
+    extra_scans = [bags.Scan(SCAN_NS[-1] + k * S // 10, [4.0] * 5) for k in after]
+    extra_odom = [bags.Odom(round((ODOM_T[-1] + 0.1 * k) * S), _odom_pose(4 + k)) for k in after]
+    spec.scans = [*spec.scans, *extra_scans[:scans]]
+    spec.odometry = [*spec.odometry, *extra_odom[:odometry]]
     return spec
 
 
@@ -182,10 +195,22 @@ def test_bag_stamps_option_uses_the_recording_times(bags, tmp_path):
 
 def test_scans_outside_the_odometry_are_dropped_and_counted(bags, tmp_path):
     odometry = [bags.Odom(round(t * S), _odom_pose(k)) for k, t in enumerate(ODOM_T)]
-    spec = _spec(bags, odometry=odometry[1:4])  # 10.05 .. 10.25
+    # odometry 10.05 .. 11.85 s, scans 10.0 .. 11.9 s: the first and the last have none
+    spec = _padded(bags, _spec(bags, odometry=odometry[1:4]), scans=16, odometry=15)
     ds = read_rosbag(_write(bags, tmp_path, spec))
-    assert [e.t for e in _scans(ds)] == [10.1, 10.2]
+    times = [e.t for e in _scans(ds)]
+    assert len(times) == 18 and times[:3] == [10.1, 10.2, 10.3] and times[-1] == 11.8
     assert ds.metadata["dropped"] == {"before_odometry": 1, "after_odometry": 1, "odometry_gap": 0}
+    assert ds.reading is not None and (ds.reading.records, ds.reading.used) == (20, 18)
+    assert ds.reading.dropped == {"before the odometry": 1, "after the odometry": 1}
+    # 2 of 20 is the most a reader may drop; 2 of 4 is not a result, strict or lenient
+    short = bags.write(tmp_path / "short.bag", _spec(bags, odometry=odometry[1:4]))
+    for lenient in (False, True):
+        with pytest.raises(
+            DatasetFormatError,
+            match=r"2 of 4 scans could not be used \(1 before the odometry, 1 after the odometry\)",
+        ):
+            read_rosbag(short, {"lenient": lenient})
 
 
 def test_a_repeated_odometry_message_is_dropped_and_counted(bags, tmp_path):
@@ -241,19 +266,38 @@ def test_nan_or_negative_range_is_an_error_or_lenient_no_return(bags, tmp_path, 
     assert ds.metadata["lenient"]["counts"] == {"invalid_readings": 1}
 
 
-def test_beam_count_disagreeing_with_angle_max_is_an_error(bags, tmp_path):
+def test_angle_max_one_increment_off_is_read_with_the_increment_and_noted_once(bags, tmp_path):
+    """5 beams from -1 by 0.5 end at 1.0 rad; every scan says angle_max 1.5 (one increment
+    over) or 0.5 (one under): read, the beams at angle_min + i·increment, one note."""
+    scans = [bags.Scan(ns, r, angle_max=1.5) for ns, r in zip(SCAN_NS, RANGES, strict=True)]
+    scans[2].angle_max = 0.5
+    ds = read_rosbag(_write(bags, tmp_path, _spec(bags, scans=scans)))
+    assert len(_scans(ds)) == 4
+    np.testing.assert_array_equal(ds.laser.beam_angles, -1.0 + 0.5 * np.arange(5))
+    assert ds.reading is not None and ds.reading.dropped == {} and ds.reading.repaired == {}
+    assert ds.reading.notes == (
+        "angle_max up to 1.00 increments off the last beam on 4 of 4 scans: the beams are "
+        "angle_min + i·angle_increment",
+    )
+    assert ds.metadata["lenient"]["counts"] == {}
+
+
+def test_angle_max_two_increments_off_is_an_error_or_dropped(bags, tmp_path):
     scans = [bags.Scan(ns, r) for ns, r in zip(SCAN_NS, RANGES, strict=True)]
-    scans[1].angle_max = 1.3  # 5 beams from -1 by 0.5 end at 1.0: 0.3 > half an increment
-    path = _write(bags, tmp_path, _spec(bags, scans=scans))
+    scans[1].angle_max = 2.0  # the last beam is at 1.0: two increments of 0.5 off
+    path = _write(bags, tmp_path, _padded(bags, _spec(bags, scans=scans)))
     with pytest.raises(
-        DatasetFormatError, match=r"/scan message 1: 5 beams .* angle_max is 1.2999"
-    ):
+        DatasetFormatError,
+        match=r"/scan message 1: 5 beams from angle_min -1 by 0.5 end at 1 rad, but angle_max "
+        r"is 2 \(more than 1.5 increments off\)",
+    ) as info:
         read_rosbag(path)
+    assert info.value.path == path and str(path) in str(info.value)
     ds = read_rosbag(path, {"lenient": True})
-    assert [e.t for e in _scans(ds)] == [10.0, 10.2, 10.3]
+    assert [e.t for e in _scans(ds)][:3] == [10.0, 10.2, 10.3]
     assert ds.metadata["lenient"]["counts"] == {"geometry": 1}
-    scans[1].angle_max = 1.2  # 0.2 off: within half an increment (0.25) is accepted
-    assert len(_scans(read_rosbag(bags.write(tmp_path / "ok.bag", _spec(bags, scans=scans))))) == 4
+    assert ds.reading is not None and ds.reading.dropped == {"bad geometry": 1}
+    assert (ds.reading.records, ds.reading.used, ds.reading.notes) == (20, 19, ())
 
 
 def test_a_scan_with_another_geometry_is_an_error(bags, tmp_path):
@@ -269,11 +313,12 @@ def test_scan_stamps_out_of_order_are_an_error_or_dropped(bags, tmp_path):
         bags.Scan(ns, r, bag_ns=SCAN_NS[i])
         for i, (ns, r) in enumerate(zip(order, RANGES, strict=True))
     ]
-    path = _write(bags, tmp_path, _spec(bags, scans=scans))
+    path = _write(bags, tmp_path, _padded(bags, _spec(bags, scans=scans)))
     with pytest.raises(DatasetFormatError, match=r"/scan message 2: stamp 10.100000000 not later"):
         read_rosbag(path)
     ds = read_rosbag(path, {"lenient": True})
-    assert [e.t for e in _scans(ds)] == [10.0, 10.2, 10.3]
+    assert [e.t for e in _scans(ds)][:3] == [10.0, 10.2, 10.3]
+    assert ds.reading is not None and ds.reading.dropped == {"stamp out of order": 1}
     assert ds.metadata["lenient"]["counts"] == {"scans_out_of_order": 1}
 
 
@@ -290,12 +335,30 @@ def test_odometry_out_of_order_is_an_error(bags, tmp_path):
 
 def test_odometry_gap_longer_than_the_limit_is_an_error_or_dropped(bags, tmp_path):
     odometry = [bags.Odom(round(t * S), _odom_pose(k)) for k, t in enumerate(ODOM_T)]
-    path = _write(bags, tmp_path, _spec(bags, odometry=[odometry[0], odometry[1], odometry[4]]))
-    with pytest.raises(DatasetFormatError, match=r"/scan message 1: scan at t=10.1.* 0.300 s gap"):
-        read_rosbag(path, {"max_odom_gap": 0.25})
-    ds = read_rosbag(path, {"max_odom_gap": 0.25, "lenient": True})
-    assert [e.t for e in _scans(ds)] == [10.0]
-    assert ds.metadata["dropped"]["odometry_gap"] == 3
+    # odometry at 9.95, 10.05, 10.25, 10.35 ...: scans 10.1 and 10.2 lie in a 0.2 s gap
+    spec = _padded(bags, _spec(bags, odometry=[*odometry[:2], *odometry[3:]]))
+    path = _write(bags, tmp_path, spec)
+    with pytest.raises(DatasetFormatError, match=r"/scan message 1: scan at t=10.1.* 0.200 s gap"):
+        read_rosbag(path, {"max_odom_gap": 0.15})
+    ds = read_rosbag(path, {"max_odom_gap": 0.15, "lenient": True})
+    assert [e.t for e in _scans(ds)][:2] == [10.0, 10.3]
+    assert ds.metadata["dropped"]["odometry_gap"] == 2
+    assert ds.reading is not None and ds.reading.dropped == {"in an odometry gap": 2}
+    assert (ds.reading.records, ds.reading.used) == (20, 18)
+
+
+def test_lenient_read_dropping_more_than_a_tenth_of_the_scans_is_an_error(bags, tmp_path):
+    """Three of 20 scans in an odometry gap: lenient would keep 17 (85%); the reader refuses
+    rather than silently drop more than 10% (``reading.check_dropped_share``)."""
+    odometry = [bags.Odom(round(t * S), _odom_pose(k)) for k, t in enumerate(ODOM_T)]
+    spec = _padded(bags, _spec(bags, odometry=[odometry[0], odometry[1], odometry[4]]))
+    path = _write(bags, tmp_path, spec)  # scans 10.1, 10.2, 10.3 in a 0.3 s gap
+    assert len(_scans(read_rosbag(path, {"max_odom_gap": 0.35, "lenient": True}))) == 20
+    with pytest.raises(
+        DatasetFormatError, match=r"3 of 20 scans could not be used \(3 in an odometry gap\)"
+    ) as info:
+        read_rosbag(path, {"max_odom_gap": 0.25, "lenient": True})
+    assert info.value.path == path
 
 
 def test_odometry_with_a_zero_quaternion_is_an_error(bags, tmp_path):
