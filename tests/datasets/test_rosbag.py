@@ -222,6 +222,77 @@ def test_a_repeated_odometry_message_is_dropped_and_counted(bags, tmp_path):
     assert len(_odometry(ds)) == 4
 
 
+# ------------------------------------------------------------------------ odometry from /tf
+def _tf(stamps_s: list[float], child: str = "base_link") -> list:
+    return [(round(t * S), "odom", child, _odom_pose(k)) for k, t in enumerate(stamps_s)]
+
+
+def test_odometry_from_tf_when_the_bag_has_no_odometry_topic(bags, tmp_path):
+    """No /odom, the odometry as /tf odom → base_link at the odometry's stamps: the Odometry
+    events are those transforms interpolated to the scan stamps, as from the topic."""
+    path = _write(bags, tmp_path, _spec(bags, odometry=[], tf=_tf(ODOM_T)))
+    ds = read_rosbag(path)
+    got = np.array([e.pose for e in _odometry(ds)])
+    # scan j (10.0 + 0.1 j) is halfway between transforms j and j + 1 (9.95 + 0.1 j, ...)
+    expected = np.array(
+        [[0.2 * j + 0.1, -0.1 * j - 0.05, wrap_angle(3.1 + 0.2 * j)] for j in range(4)]
+    )
+    np.testing.assert_allclose(got[:, :2], expected[:, :2], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(wrap_angle(got[:, 2] - expected[:, 2]), 0.0, atol=1e-9)
+    assert [e.t for e in _odometry(ds)] == [10.0, 10.1, 10.2, 10.3]
+    (tmp_path / "topic").mkdir()
+    from_topic = read_rosbag(_write(bags, tmp_path / "topic", _spec(bags)))
+    np.testing.assert_array_equal(got, [e.pose for e in _odometry(from_topic)])
+    assert ds.metadata["odometry_topic"] == "/tf"
+    assert ds.metadata["odometry_from"] == "/tf (odom → base_link)"
+    assert from_topic.metadata["odometry_from"] == "/odom"
+    assert "raw odometry (/tf (odom → base_link))" in ds.description
+    assert ds.reading is not None and ds.reading.notes == ("odometry from /tf (odom → base_link)",)
+    assert ds.metadata["mounting_from"] == "/tf_static: base_link → laser"
+    # asked for the topic only: the scans alone; the twist's direction needs a topic
+    alone = read_rosbag(path, {"odometry_source": "topic"})
+    assert alone.motion is None and not _odometry(alone) and len(_scans(alone)) == 4
+    assert alone.reading is not None and alone.reading.notes == ("no odometry: the scans alone",)
+    with pytest.raises(DatasetFormatError, match=r"'twist' needs the twist of an odometry topic"):
+        read_rosbag(path, {"odometry_direction": "twist"})
+
+
+def test_odometry_from_tf_chains_a_static_base_footprint_and_is_chosen_over_the_topic(
+    bags, tmp_path
+):
+    """/odom and /tf odom → base_footprint (at the scan stamps) with /tf_static
+    base_footprint → base_link: ``odometry_source="tf"`` reads T_odom_base =
+    T_odom_footprint ⊕ T_footprint_base; ``"auto"`` keeps the topic."""
+    fixed = (0.1, -0.05, 0.3)
+    tf_static = [("base_footprint", "base_link", fixed), ("base_link", "laser", (0.0, 0.0, 0.0))]
+    stamps = [ns / S for ns in SCAN_NS]
+    spec = _spec(bags, tf=_tf(stamps, "base_footprint"), tf_static=tf_static)
+    path = _write(bags, tmp_path, spec)
+    ds = read_rosbag(path, {"odometry_source": "tf"})
+    got = np.array([e.pose for e in _odometry(ds)])
+    fx, fy, fyaw = fixed
+    for j, pose in enumerate(got):
+        x, y, yaw = _odom_pose(j)
+        expected = (
+            x + math.cos(yaw) * fx - math.sin(yaw) * fy,
+            y + math.sin(yaw) * fx + math.cos(yaw) * fy,
+            yaw + fyaw,
+        )
+        np.testing.assert_allclose(pose[:2], expected[:2], rtol=0, atol=1e-9)
+        assert float(wrap_angle(pose[2] - expected[2])) == pytest.approx(0.0, abs=1e-9)
+    assert ds.metadata["odometry_from"] == "/tf (odom → base_footprint → base_link)"
+    assert read_rosbag(path).metadata["odometry_from"] == "/odom"
+    with pytest.raises(
+        DatasetFormatError,
+        match=r"no transform odom → robot on /tf \(transforms from 'odom': odom → base_footprint\)",
+    ):
+        read_rosbag(path, {"odometry_source": "tf", "base_frame": "robot"})
+    (tmp_path / "bare").mkdir()
+    bare = _write(bags, tmp_path / "bare", _spec(bags))
+    with pytest.raises(DatasetFormatError, match=r"odometry from tf asked, but the bag has no /tf"):
+        read_rosbag(bare, {"odometry_source": "tf"})
+
+
 # ------------------------------------------------------------------------ typed errors
 def test_missing_topic_and_wrong_type_name_the_topic_and_list_the_bag(bags, tmp_path):
     path = _write(bags, tmp_path, _spec(bags))
@@ -391,6 +462,10 @@ def test_truncated_corrupt_and_missing_bags_are_typed_errors(bags, tmp_path):
 def test_options_are_checked():
     with pytest.raises(ConfigError, match="max_odom_gap"):
         RosbagOptions(max_odom_gap=0.0)
+    with pytest.raises(ConfigError, match="odometry_source: expected 'auto', 'topic' or 'tf'"):
+        RosbagOptions(odometry_source="wheels")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="odom_frame: expected a frame name"):
+        RosbagOptions(odom_frame="/")
     with pytest.raises(ConfigError, match="scan_topic"):
         RosbagOptions(scan_topic="")
     with pytest.raises(ConfigError, match="unknown"):
@@ -462,6 +537,12 @@ def test_freiburg_dropped_scans_mounting_and_repeats(freiburg):
     assert freiburg["intel-raw"].metadata["dropped"]["after_odometry"] == 1
     assert freiburg["fr079-raw"].metadata["dropped"]["before_odometry"] == 1
     assert freiburg["aces-raw"].metadata["odometry_repeats_dropped"] == 1
+    readings = {name: freiburg[name].reading for name in FREIBURG}
+    assert [(r.records, r.used, dict(r.dropped), r.notes) for r in readings.values()] == [
+        (13_631, 13_630, {"after the odometry": 1}, ()),
+        (7_374, 7_374, {}, ()),
+        (4_934, 4_933, {"before the odometry": 1}, ()),
+    ]
     # The registered fr079-raw overrides the bag's /tf_static (+0.04 m) with the original
     # log's robot_frontlaser_offset (-0.04 m), the frame of the benchmark's relations.
     assert freiburg["fr079-raw"].laser.mounting == (-0.04, 0.0, 0.0)
@@ -517,3 +598,20 @@ def test_fr079_raw_odometry_backs_up_where_the_relations_do(freiburg, data_root)
     assert back == 27 and agree == 0 and 0.055 < trans < 0.059, (trans, back, agree)
     trans, back, agree = short_relations(freiburg["fr079-raw"])
     assert back == 27 and agree == 27 and 0.036 < trans < 0.040, (trans, back, agree)
+
+
+@pytest.mark.realdata
+def test_aces_odometry_from_tf_is_the_odom_topics(freiburg, data_root):
+    """The Freiburg bags carry their odometry twice, on /odom and as /tf odom → base_link:
+    read from /tf, ACES's Odometry events are bit-identical to the registered ones (so are
+    Intel's and Freiburg 079's with the poses' direction, measured)."""
+    ds = read_rosbag(
+        data_root / FREIBURG_BAGS["aces-raw"].bag,
+        {**FREIBURG_BAGS["aces-raw"].defaults, "odometry_source": "tf"},
+    )
+    registered = freiburg["aces-raw"]
+    assert ds.metadata["odometry_from"] == "/tf (odom → base_link)"
+    assert [e.t for e in _odometry(ds)] == [e.t for e in _odometry(registered)]
+    np.testing.assert_array_equal(
+        [e.pose for e in _odometry(ds)], [e.pose for e in _odometry(registered)]
+    )
