@@ -11,20 +11,28 @@ whose :class:`rosbags.highlevel.AnyReader` opens
   are used.
 
 Only the scan and odometry topics are deserialised (plus ``/tf_static``, and ``/tf`` when the
-laser's mounting is not static).
+laser's mounting is not static or the odometry comes from it).
 
 Conversion (all in one pass over arrays once the messages are read):
 
 * ``sensor_msgs/msg/LaserScan`` on ``scan_topic`` → one :class:`LaserScan` per message at its
   header stamp (``sec + nanosec·1e-9``, float64). Beam ``i`` points at
-  ``angle_min + i·angle_increment`` in the laser's frame; ``angle_max`` must be the last
-  beam's angle to half an increment, and every scan must have the first scan's geometry.
+  ``angle_min + i·angle_increment`` in the laser's frame: the increment and the number of
+  ranges win over ``angle_max``, as in gmapping, slam_toolbox and Cartographer. An
+  ``angle_max`` up to :data:`~slamkit.datasets.rosbag_checks.ANGLE_MAX_TOLERANCE` (1.5)
+  increments from the last beam's angle is read (drivers and converters often write it a beam
+  off) and noted once for the bag; further off is an error. Every scan must have the first
+  scan's geometry.
   Ranges ``>= range_max`` or ``+inf`` are no return, and so are ranges below ``range_min`` or
   ``-inf`` (REP 117: too close): stored as exactly ``max_range``, slamkit's convention. A NaN
   or a negative finite range is an error (lenient: that beam becomes no return, counted).
 * ``nav_msgs/msg/Odometry`` on ``odom_topic`` → the robot's pose ``(x, y, yaw)`` in the
   odometry frame (yaw from the quaternion), interpolated to each scan stamp under the rules of
   :mod:`slamkit.datasets.raw_odometry` → one :class:`Odometry` event per scan, just before it.
+  A bag without an odometry topic (``odometry_source="auto"``), or ``odometry_source="tf"``:
+  the transforms ``odom_frame → base_frame`` on ``/tf`` over the whole bag (directly, or
+  ``odom → X`` then a fixed ``X → … → base_link`` on ``/tf_static``) take the messages' place
+  on the same path; ``metadata["odometry_from"]`` and the reading summary's notes say so.
 * The laser's mounting on the robot: the transform from the odometry's child frame (or
   ``base_frame``) to the scan's ``frame_id``, chained through ``/tf_static`` (else the first
   10 s of ``/tf``) → :attr:`LaserSpec.mounting` ``(x, y, yaw)``. A tilted mounting (roll or
@@ -35,7 +43,10 @@ Errors: a missing topic, a topic of another message type, a bag that cannot be r
 order, a scan inside an odometry gap → :class:`~slamkit.errors.DatasetFormatError` naming the
 bag, and the topic and message index (0-based, in bag order) where one is at fault. With
 ``lenient=True`` the bad messages are dropped (bad beams marked no return) and counted in
-``metadata``.
+``metadata``. :attr:`Dataset.reading <slamkit.datasets.Dataset.reading>` says what was read,
+dropped (by reason), repaired and noted; a read that would drop more than 10% of the scans
+(lenient or not: bad messages, scans outside the odometry) is an error instead
+(:func:`~slamkit.datasets.reading.check_dropped_share`).
 
 The Freiburg benchmark's three raw logs are registered here as ``intel-raw``, ``aces-raw`` and
 ``fr079-raw``, with the benchmark's reference relations as ground truth.
