@@ -46,6 +46,8 @@ class BagSpec:
     scans: list[ScanSpec]
     odometry: list[OdomSpec]
     tf_static: list[tuple[str, str, tuple[float, float, float]]] = field(default_factory=list)
+    # /tf: one message per entry, (stamp [ns], parent, child, (x, y, yaw))
+    tf: list[tuple[int, str, str, tuple[float, float, float]]] = field(default_factory=list)
     scan_topic: str = "/scan"
     odom_topic: str = "/odom"
 
@@ -95,21 +97,26 @@ def _messages(ts: Any, spec: BagSpec, ros1: bool) -> list[tuple[str, str, int, A
         )
         bag_ns = o.stamp_ns if o.bag_ns is None else o.bag_ns
         out.append((spec.odom_topic, "nav_msgs/msg/Odometry", bag_ns, msg))
+
+    def transform(ns: int, parent: str, child: str, pose: tuple[float, float, float]) -> Any:
+        x, y, yaw = pose
+        return T["geometry_msgs/msg/TransformStamped"](
+            header=header(ns, parent),
+            child_frame_id=child,
+            transform=T["geometry_msgs/msg/Transform"](
+                translation=Vec(x, y, 0.0),
+                rotation=Quat(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)),
+            ),
+        )
+
     if spec.tf_static:
-        transforms = []
-        for parent, child, (x, y, yaw) in spec.tf_static:
-            transforms.append(
-                T["geometry_msgs/msg/TransformStamped"](
-                    header=header(spec.scans[0].stamp_ns, parent),
-                    child_frame_id=child,
-                    transform=T["geometry_msgs/msg/Transform"](
-                        translation=Vec(x, y, 0.0),
-                        rotation=Quat(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)),
-                    ),
-                )
-            )
+        ns0 = spec.scans[0].stamp_ns
+        transforms = [transform(ns0, parent, child, p) for parent, child, p in spec.tf_static]
         tf = T["tf2_msgs/msg/TFMessage"](transforms=transforms)
-        out.append(("/tf_static", "tf2_msgs/msg/TFMessage", spec.scans[0].stamp_ns, tf))
+        out.append(("/tf_static", "tf2_msgs/msg/TFMessage", ns0, tf))
+    for ns, parent, child, p in spec.tf:
+        tf = T["tf2_msgs/msg/TFMessage"](transforms=[transform(ns, parent, child, p)])
+        out.append(("/tf", "tf2_msgs/msg/TFMessage", ns, tf))
     return sorted(out, key=lambda m: m[2])
 
 

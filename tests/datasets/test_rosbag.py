@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -52,6 +53,18 @@ def _spec(bags: SimpleNamespace, **changes: object) -> object:
     spec = bags.Bag(scans, odometry, tf_static=[("base_link", "laser", (0.04, 0.02, 0.1))])
     for key, value in changes.items():
         setattr(spec, key, value)
+    return spec
+
+
+def _padded(bags: SimpleNamespace, spec: Any, scans: int = 16, odometry: int = 16) -> Any:
+    """``spec`` with ``scans`` more good scans every 0.1 s from 10.4 s and ``odometry`` more
+    odometry messages every 0.1 s from 10.45 s: a lenient read that drops one or two of the
+    first four scans still keeps 90% of the bag (``reading.MAX_DROPPED_SHARE``)."""
+    after = range(1, max(scans, odometry) + 1)
+    extra_scans = [bags.Scan(SCAN_NS[-1] + k * S // 10, [4.0] * 5) for k in after]
+    extra_odom = [bags.Odom(round((ODOM_T[-1] + 0.1 * k) * S), _odom_pose(4 + k)) for k in after]
+    spec.scans = [*spec.scans, *extra_scans[:scans]]
+    spec.odometry = [*spec.odometry, *extra_odom[:odometry]]
     return spec
 
 
@@ -182,10 +195,22 @@ def test_bag_stamps_option_uses_the_recording_times(bags, tmp_path):
 
 def test_scans_outside_the_odometry_are_dropped_and_counted(bags, tmp_path):
     odometry = [bags.Odom(round(t * S), _odom_pose(k)) for k, t in enumerate(ODOM_T)]
-    spec = _spec(bags, odometry=odometry[1:4])  # 10.05 .. 10.25
+    # odometry 10.05 .. 11.85 s, scans 10.0 .. 11.9 s: the first and the last have none
+    spec = _padded(bags, _spec(bags, odometry=odometry[1:4]), scans=16, odometry=15)
     ds = read_rosbag(_write(bags, tmp_path, spec))
-    assert [e.t for e in _scans(ds)] == [10.1, 10.2]
+    times = [e.t for e in _scans(ds)]
+    assert len(times) == 18 and times[:3] == [10.1, 10.2, 10.3] and times[-1] == 11.8
     assert ds.metadata["dropped"] == {"before_odometry": 1, "after_odometry": 1, "odometry_gap": 0}
+    assert ds.reading is not None and (ds.reading.records, ds.reading.used) == (20, 18)
+    assert ds.reading.dropped == {"before the odometry": 1, "after the odometry": 1}
+    # 2 of 20 is the most a reader may drop; 2 of 4 is not a result, strict or lenient
+    short = bags.write(tmp_path / "short.bag", _spec(bags, odometry=odometry[1:4]))
+    for lenient in (False, True):
+        with pytest.raises(
+            DatasetFormatError,
+            match=r"2 of 4 scans could not be used \(1 before the odometry, 1 after the odometry\)",
+        ):
+            read_rosbag(short, {"lenient": lenient})
 
 
 def test_a_repeated_odometry_message_is_dropped_and_counted(bags, tmp_path):
@@ -195,6 +220,77 @@ def test_a_repeated_odometry_message_is_dropped_and_counted(bags, tmp_path):
     ds = read_rosbag(_write(bags, tmp_path, spec))
     assert ds.metadata["odometry_repeats_dropped"] == 1
     assert len(_odometry(ds)) == 4
+
+
+# ------------------------------------------------------------------------ odometry from /tf
+def _tf(stamps_s: list[float], child: str = "base_link") -> list:
+    return [(round(t * S), "odom", child, _odom_pose(k)) for k, t in enumerate(stamps_s)]
+
+
+def test_odometry_from_tf_when_the_bag_has_no_odometry_topic(bags, tmp_path):
+    """No /odom, the odometry as /tf odom → base_link at the odometry's stamps: the Odometry
+    events are those transforms interpolated to the scan stamps, as from the topic."""
+    path = _write(bags, tmp_path, _spec(bags, odometry=[], tf=_tf(ODOM_T)))
+    ds = read_rosbag(path)
+    got = np.array([e.pose for e in _odometry(ds)])
+    # scan j (10.0 + 0.1 j) is halfway between transforms j and j + 1 (9.95 + 0.1 j, ...)
+    expected = np.array(
+        [[0.2 * j + 0.1, -0.1 * j - 0.05, wrap_angle(3.1 + 0.2 * j)] for j in range(4)]
+    )
+    np.testing.assert_allclose(got[:, :2], expected[:, :2], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(wrap_angle(got[:, 2] - expected[:, 2]), 0.0, atol=1e-9)
+    assert [e.t for e in _odometry(ds)] == [10.0, 10.1, 10.2, 10.3]
+    (tmp_path / "topic").mkdir()
+    from_topic = read_rosbag(_write(bags, tmp_path / "topic", _spec(bags)))
+    np.testing.assert_array_equal(got, [e.pose for e in _odometry(from_topic)])
+    assert ds.metadata["odometry_topic"] == "/tf"
+    assert ds.metadata["odometry_from"] == "/tf (odom → base_link)"
+    assert from_topic.metadata["odometry_from"] == "/odom"
+    assert "raw odometry (/tf (odom → base_link))" in ds.description
+    assert ds.reading is not None and ds.reading.notes == ("odometry from /tf (odom → base_link)",)
+    assert ds.metadata["mounting_from"] == "/tf_static: base_link → laser"
+    # asked for the topic only: the scans alone; the twist's direction needs a topic
+    alone = read_rosbag(path, {"odometry_source": "topic"})
+    assert alone.motion is None and not _odometry(alone) and len(_scans(alone)) == 4
+    assert alone.reading is not None and alone.reading.notes == ("no odometry: the scans alone",)
+    with pytest.raises(DatasetFormatError, match=r"'twist' needs the twist of an odometry topic"):
+        read_rosbag(path, {"odometry_direction": "twist"})
+
+
+def test_odometry_from_tf_chains_a_static_base_footprint_and_is_chosen_over_the_topic(
+    bags, tmp_path
+):
+    """/odom and /tf odom → base_footprint (at the scan stamps) with /tf_static
+    base_footprint → base_link: ``odometry_source="tf"`` reads T_odom_base =
+    T_odom_footprint ⊕ T_footprint_base; ``"auto"`` keeps the topic."""
+    fixed = (0.1, -0.05, 0.3)
+    tf_static = [("base_footprint", "base_link", fixed), ("base_link", "laser", (0.0, 0.0, 0.0))]
+    stamps = [ns / S for ns in SCAN_NS]
+    spec = _spec(bags, tf=_tf(stamps, "base_footprint"), tf_static=tf_static)
+    path = _write(bags, tmp_path, spec)
+    ds = read_rosbag(path, {"odometry_source": "tf"})
+    got = np.array([e.pose for e in _odometry(ds)])
+    fx, fy, fyaw = fixed
+    for j, pose in enumerate(got):
+        x, y, yaw = _odom_pose(j)
+        expected = (
+            x + math.cos(yaw) * fx - math.sin(yaw) * fy,
+            y + math.sin(yaw) * fx + math.cos(yaw) * fy,
+            yaw + fyaw,
+        )
+        np.testing.assert_allclose(pose[:2], expected[:2], rtol=0, atol=1e-9)
+        assert float(wrap_angle(pose[2] - expected[2])) == pytest.approx(0.0, abs=1e-9)
+    assert ds.metadata["odometry_from"] == "/tf (odom → base_footprint → base_link)"
+    assert read_rosbag(path).metadata["odometry_from"] == "/odom"
+    with pytest.raises(
+        DatasetFormatError,
+        match=r"no transform odom → robot on /tf \(transforms from 'odom': odom → base_footprint\)",
+    ):
+        read_rosbag(path, {"odometry_source": "tf", "base_frame": "robot"})
+    (tmp_path / "bare").mkdir()
+    bare = _write(bags, tmp_path / "bare", _spec(bags))
+    with pytest.raises(DatasetFormatError, match=r"odometry from tf asked, but the bag has no /tf"):
+        read_rosbag(bare, {"odometry_source": "tf"})
 
 
 # ------------------------------------------------------------------------ typed errors
@@ -241,19 +337,38 @@ def test_nan_or_negative_range_is_an_error_or_lenient_no_return(bags, tmp_path, 
     assert ds.metadata["lenient"]["counts"] == {"invalid_readings": 1}
 
 
-def test_beam_count_disagreeing_with_angle_max_is_an_error(bags, tmp_path):
+def test_angle_max_one_increment_off_is_read_with_the_increment_and_noted_once(bags, tmp_path):
+    """5 beams from -1 by 0.5 end at 1.0 rad; every scan says angle_max 1.5 (one increment
+    over) or 0.5 (one under): read, the beams at angle_min + i·increment, one note."""
+    scans = [bags.Scan(ns, r, angle_max=1.5) for ns, r in zip(SCAN_NS, RANGES, strict=True)]
+    scans[2].angle_max = 0.5
+    ds = read_rosbag(_write(bags, tmp_path, _spec(bags, scans=scans)))
+    assert len(_scans(ds)) == 4
+    np.testing.assert_array_equal(ds.laser.beam_angles, -1.0 + 0.5 * np.arange(5))
+    assert ds.reading is not None and ds.reading.dropped == {} and ds.reading.repaired == {}
+    assert ds.reading.notes == (
+        "angle_max up to 1.00 increments off the last beam on 4 of 4 scans: the beams are "
+        "angle_min + i·angle_increment",
+    )
+    assert ds.metadata["lenient"]["counts"] == {}
+
+
+def test_angle_max_two_increments_off_is_an_error_or_dropped(bags, tmp_path):
     scans = [bags.Scan(ns, r) for ns, r in zip(SCAN_NS, RANGES, strict=True)]
-    scans[1].angle_max = 1.3  # 5 beams from -1 by 0.5 end at 1.0: 0.3 > half an increment
-    path = _write(bags, tmp_path, _spec(bags, scans=scans))
+    scans[1].angle_max = 2.0  # the last beam is at 1.0: two increments of 0.5 off
+    path = _write(bags, tmp_path, _padded(bags, _spec(bags, scans=scans)))
     with pytest.raises(
-        DatasetFormatError, match=r"/scan message 1: 5 beams .* angle_max is 1.2999"
-    ):
+        DatasetFormatError,
+        match=r"/scan message 1: 5 beams from angle_min -1 by 0.5 end at 1 rad, but angle_max "
+        r"is 2 \(more than 1.5 increments off\)",
+    ) as info:
         read_rosbag(path)
+    assert info.value.path == path and str(path) in str(info.value)
     ds = read_rosbag(path, {"lenient": True})
-    assert [e.t for e in _scans(ds)] == [10.0, 10.2, 10.3]
+    assert [e.t for e in _scans(ds)][:3] == [10.0, 10.2, 10.3]
     assert ds.metadata["lenient"]["counts"] == {"geometry": 1}
-    scans[1].angle_max = 1.2  # 0.2 off: within half an increment (0.25) is accepted
-    assert len(_scans(read_rosbag(bags.write(tmp_path / "ok.bag", _spec(bags, scans=scans))))) == 4
+    assert ds.reading is not None and ds.reading.dropped == {"bad geometry": 1}
+    assert (ds.reading.records, ds.reading.used, ds.reading.notes) == (20, 19, ())
 
 
 def test_a_scan_with_another_geometry_is_an_error(bags, tmp_path):
@@ -269,11 +384,12 @@ def test_scan_stamps_out_of_order_are_an_error_or_dropped(bags, tmp_path):
         bags.Scan(ns, r, bag_ns=SCAN_NS[i])
         for i, (ns, r) in enumerate(zip(order, RANGES, strict=True))
     ]
-    path = _write(bags, tmp_path, _spec(bags, scans=scans))
+    path = _write(bags, tmp_path, _padded(bags, _spec(bags, scans=scans)))
     with pytest.raises(DatasetFormatError, match=r"/scan message 2: stamp 10.100000000 not later"):
         read_rosbag(path)
     ds = read_rosbag(path, {"lenient": True})
-    assert [e.t for e in _scans(ds)] == [10.0, 10.2, 10.3]
+    assert [e.t for e in _scans(ds)][:3] == [10.0, 10.2, 10.3]
+    assert ds.reading is not None and ds.reading.dropped == {"stamp out of order": 1}
     assert ds.metadata["lenient"]["counts"] == {"scans_out_of_order": 1}
 
 
@@ -290,12 +406,30 @@ def test_odometry_out_of_order_is_an_error(bags, tmp_path):
 
 def test_odometry_gap_longer_than_the_limit_is_an_error_or_dropped(bags, tmp_path):
     odometry = [bags.Odom(round(t * S), _odom_pose(k)) for k, t in enumerate(ODOM_T)]
-    path = _write(bags, tmp_path, _spec(bags, odometry=[odometry[0], odometry[1], odometry[4]]))
-    with pytest.raises(DatasetFormatError, match=r"/scan message 1: scan at t=10.1.* 0.300 s gap"):
-        read_rosbag(path, {"max_odom_gap": 0.25})
-    ds = read_rosbag(path, {"max_odom_gap": 0.25, "lenient": True})
-    assert [e.t for e in _scans(ds)] == [10.0]
-    assert ds.metadata["dropped"]["odometry_gap"] == 3
+    # odometry at 9.95, 10.05, 10.25, 10.35 ...: scans 10.1 and 10.2 lie in a 0.2 s gap
+    spec = _padded(bags, _spec(bags, odometry=[*odometry[:2], *odometry[3:]]))
+    path = _write(bags, tmp_path, spec)
+    with pytest.raises(DatasetFormatError, match=r"/scan message 1: scan at t=10.1.* 0.200 s gap"):
+        read_rosbag(path, {"max_odom_gap": 0.15})
+    ds = read_rosbag(path, {"max_odom_gap": 0.15, "lenient": True})
+    assert [e.t for e in _scans(ds)][:2] == [10.0, 10.3]
+    assert ds.metadata["dropped"]["odometry_gap"] == 2
+    assert ds.reading is not None and ds.reading.dropped == {"in an odometry gap": 2}
+    assert (ds.reading.records, ds.reading.used) == (20, 18)
+
+
+def test_lenient_read_dropping_more_than_a_tenth_of_the_scans_is_an_error(bags, tmp_path):
+    """Three of 20 scans in an odometry gap: lenient would keep 17 (85%); the reader refuses
+    rather than silently drop more than 10% (``reading.check_dropped_share``)."""
+    odometry = [bags.Odom(round(t * S), _odom_pose(k)) for k, t in enumerate(ODOM_T)]
+    spec = _padded(bags, _spec(bags, odometry=[odometry[0], odometry[1], odometry[4]]))
+    path = _write(bags, tmp_path, spec)  # scans 10.1, 10.2, 10.3 in a 0.3 s gap
+    assert len(_scans(read_rosbag(path, {"max_odom_gap": 0.35, "lenient": True}))) == 20
+    with pytest.raises(
+        DatasetFormatError, match=r"3 of 20 scans could not be used \(3 in an odometry gap\)"
+    ) as info:
+        read_rosbag(path, {"max_odom_gap": 0.25, "lenient": True})
+    assert info.value.path == path
 
 
 def test_odometry_with_a_zero_quaternion_is_an_error(bags, tmp_path):
@@ -328,6 +462,10 @@ def test_truncated_corrupt_and_missing_bags_are_typed_errors(bags, tmp_path):
 def test_options_are_checked():
     with pytest.raises(ConfigError, match="max_odom_gap"):
         RosbagOptions(max_odom_gap=0.0)
+    with pytest.raises(ConfigError, match="odometry_source: expected 'auto', 'topic' or 'tf'"):
+        RosbagOptions(odometry_source="wheels")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="odom_frame: expected a frame name"):
+        RosbagOptions(odom_frame="/")
     with pytest.raises(ConfigError, match="scan_topic"):
         RosbagOptions(scan_topic="")
     with pytest.raises(ConfigError, match="unknown"):
@@ -399,6 +537,12 @@ def test_freiburg_dropped_scans_mounting_and_repeats(freiburg):
     assert freiburg["intel-raw"].metadata["dropped"]["after_odometry"] == 1
     assert freiburg["fr079-raw"].metadata["dropped"]["before_odometry"] == 1
     assert freiburg["aces-raw"].metadata["odometry_repeats_dropped"] == 1
+    readings = {name: freiburg[name].reading for name in FREIBURG}
+    assert [(r.records, r.used, dict(r.dropped), r.notes) for r in readings.values()] == [
+        (13_631, 13_630, {"after the odometry": 1}, ()),
+        (7_374, 7_374, {}, ()),
+        (4_934, 4_933, {"before the odometry": 1}, ()),
+    ]
     # The registered fr079-raw overrides the bag's /tf_static (+0.04 m) with the original
     # log's robot_frontlaser_offset (-0.04 m), the frame of the benchmark's relations.
     assert freiburg["fr079-raw"].laser.mounting == (-0.04, 0.0, 0.0)
@@ -454,3 +598,20 @@ def test_fr079_raw_odometry_backs_up_where_the_relations_do(freiburg, data_root)
     assert back == 27 and agree == 0 and 0.055 < trans < 0.059, (trans, back, agree)
     trans, back, agree = short_relations(freiburg["fr079-raw"])
     assert back == 27 and agree == 27 and 0.036 < trans < 0.040, (trans, back, agree)
+
+
+@pytest.mark.realdata
+def test_aces_odometry_from_tf_is_the_odom_topics(freiburg, data_root):
+    """The Freiburg bags carry their odometry twice, on /odom and as /tf odom → base_link:
+    read from /tf, ACES's Odometry events are bit-identical to the registered ones (so are
+    Intel's and Freiburg 079's with the poses' direction, measured)."""
+    ds = read_rosbag(
+        data_root / FREIBURG_BAGS["aces-raw"].bag,
+        {**FREIBURG_BAGS["aces-raw"].defaults, "odometry_source": "tf"},
+    )
+    registered = freiburg["aces-raw"]
+    assert ds.metadata["odometry_from"] == "/tf (odom → base_link)"
+    assert [e.t for e in _odometry(ds)] == [e.t for e in _odometry(registered)]
+    np.testing.assert_array_equal(
+        [e.pose for e in _odometry(ds)], [e.pose for e in _odometry(registered)]
+    )

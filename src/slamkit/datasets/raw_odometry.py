@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
+from slamkit.datasets.reading import ReadingSummary
 from slamkit.datasets.relations import Relations
 from slamkit.datasets.stream import (
     Dataset,
@@ -197,11 +198,13 @@ def raw_laser_dataset(
     description: str,
     metadata: dict[str, Any],
     relations: Relations | None = None,
+    reading: ReadingSummary | None = None,
 ) -> Dataset:
     """The :class:`Dataset` of a raw log: per scan an :class:`Odometry` event (the robot's
     pose in the odometry frame) and a :class:`LaserScan` at the same stamp, in that order;
     an odometry :class:`MotionSpec` with the nominal ``motion_cov``; the prior around the
-    first odometry pose (:data:`RAW_INITIAL_COV`); ``relations`` as the ground truth.
+    first odometry pose (:data:`RAW_INITIAL_COV`); ``relations`` as the ground truth;
+    ``reading``, what the reader did to the file.
     ``odometry=None`` (a log without it): scans only, no motion model, the prior at the
     origin."""
     events: list[Event] = []
@@ -223,4 +226,5 @@ def raw_laser_dataset(
         truth=GroundTruth(relations=relations),
         description=description,
         metadata=metadata,
+        reading=reading,
     )

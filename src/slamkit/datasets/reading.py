@@ -88,13 +88,21 @@ def _counts(counts: Mapping[str, int]) -> str:
     return ", ".join(f"{n} {reason}" for reason, n in counts.items())
 
 
-def check_dropped_share(path: str | Path, records: int, dropped: int, what: str = "scans") -> None:
+def check_dropped_share(
+    path: str | Path,
+    records: int,
+    dropped: int,
+    what: str = "scans",
+    reasons: Mapping[str, int] | None = None,
+) -> None:
     """Raise :class:`DatasetFormatError` when more than :data:`MAX_DROPPED_SHARE` of the
     ``records`` (and more than :data:`FEW_DROPPED`) were ``dropped``: a read that keeps too
-    little of a file is not a result."""
+    little of a file is not a result. ``reasons`` (the drops by reason) are named in the
+    message."""
     if dropped > FEW_DROPPED and dropped > MAX_DROPPED_SHARE * records:
+        why = f" ({_counts(reasons)})" if reasons else ""
         raise DatasetFormatError(
-            f"{dropped} of {records} {what} could not be used (more than "
-            f"{MAX_DROPPED_SHARE:.0%}); the file is not a log this reader can trust",
+            f"{dropped} of {records} {what} could not be used{why}, more than "
+            f"{MAX_DROPPED_SHARE:.0%}; the file is not a log this reader can trust",
             path,
         )

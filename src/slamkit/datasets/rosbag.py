@@ -11,20 +11,28 @@ whose :class:`rosbags.highlevel.AnyReader` opens
   are used.
 
 Only the scan and odometry topics are deserialised (plus ``/tf_static``, and ``/tf`` when the
-laser's mounting is not static).
+laser's mounting is not static or the odometry comes from it).
 
 Conversion (all in one pass over arrays once the messages are read):
 
 * ``sensor_msgs/msg/LaserScan`` on ``scan_topic`` → one :class:`LaserScan` per message at its
   header stamp (``sec + nanosec·1e-9``, float64). Beam ``i`` points at
-  ``angle_min + i·angle_increment`` in the laser's frame; ``angle_max`` must be the last
-  beam's angle to half an increment, and every scan must have the first scan's geometry.
+  ``angle_min + i·angle_increment`` in the laser's frame: the increment and the number of
+  ranges win over ``angle_max``, as in gmapping, slam_toolbox and Cartographer. An
+  ``angle_max`` up to :data:`~slamkit.datasets.rosbag_checks.ANGLE_MAX_TOLERANCE` (1.5)
+  increments from the last beam's angle is read (drivers and converters often write it a beam
+  off) and noted once for the bag; further off is an error. Every scan must have the first
+  scan's geometry.
   Ranges ``>= range_max`` or ``+inf`` are no return, and so are ranges below ``range_min`` or
   ``-inf`` (REP 117: too close): stored as exactly ``max_range``, slamkit's convention. A NaN
   or a negative finite range is an error (lenient: that beam becomes no return, counted).
 * ``nav_msgs/msg/Odometry`` on ``odom_topic`` → the robot's pose ``(x, y, yaw)`` in the
   odometry frame (yaw from the quaternion), interpolated to each scan stamp under the rules of
   :mod:`slamkit.datasets.raw_odometry` → one :class:`Odometry` event per scan, just before it.
+  A bag without an odometry topic (``odometry_source="auto"``), or ``odometry_source="tf"``:
+  the transforms ``odom_frame → base_frame`` on ``/tf`` over the whole bag (directly, or
+  ``odom → X`` then a fixed ``X → … → base_link`` on ``/tf_static``) take the messages' place
+  on the same path; ``metadata["odometry_from"]`` and the reading summary's notes say so.
 * The laser's mounting on the robot: the transform from the odometry's child frame (or
   ``base_frame``) to the scan's ``frame_id``, chained through ``/tf_static`` (else the first
   10 s of ``/tf``) → :attr:`LaserSpec.mounting` ``(x, y, yaw)``. A tilted mounting (roll or
@@ -35,7 +43,10 @@ Errors: a missing topic, a topic of another message type, a bag that cannot be r
 order, a scan inside an odometry gap → :class:`~slamkit.errors.DatasetFormatError` naming the
 bag, and the topic and message index (0-based, in bag order) where one is at fault. With
 ``lenient=True`` the bad messages are dropped (bad beams marked no return) and counted in
-``metadata``.
+``metadata``. :attr:`Dataset.reading <slamkit.datasets.Dataset.reading>` says what was read,
+dropped (by reason), repaired and noted; a read that would drop more than 10% of the scans
+(lenient or not: bad messages, scans outside the odometry) is an error instead
+(:func:`~slamkit.datasets.reading.check_dropped_share`).
 
 The Freiburg benchmark's three raw logs are registered here as ``intel-raw``, ``aces-raw`` and
 ``fr079-raw``, with the benchmark's reference relations as ground truth.
@@ -68,8 +79,10 @@ from slamkit.datasets.raw_odometry import (
     repeat_mask,
     signed_by_speed,
 )
+from slamkit.datasets.reading import ReadingSummary, check_dropped_share
 from slamkit.datasets.relations import Relations, read_relations
-from slamkit.datasets.rosbag_read import BagContents, read_bag
+from slamkit.datasets.rosbag_checks import Problems, check_geometry, clean_ranges, header_stamps
+from slamkit.datasets.rosbag_read import BagContents, OdometryRequest, read_bag
 from slamkit.datasets.stream import Dataset, LaserSpec
 from slamkit.errors import ConfigError, DatasetFormatError
 
@@ -83,9 +96,6 @@ __all__ = [
     "read_rosbag",
     "registered_bag_defaults",
 ]
-
-LENIENT_SHOWN = 20
-"""Problems listed (topic, index, reason) in the metadata of a lenient read."""
 
 
 @dataclass(frozen=True)
@@ -146,7 +156,15 @@ class RosbagOptions:
     odom_topic: str | None = DEFAULT_ODOM_TOPIC
     """Topic of the ``nav_msgs/msg/Odometry`` messages (the robot's raw odometry); None: read
     no odometry. Left at the default on a bag without any odometry topic, the bag is read
-    without it (scans only; the description says so) instead of being refused."""
+    with the odometry of ``/tf`` (``odometry_source``), else without odometry (scans only;
+    the description says so) instead of being refused."""
+    odometry_source: Literal["auto", "topic", "tf"] = "auto"
+    """Where the odometry comes from: ``"topic"``, ``odom_topic``; ``"tf"``, the transforms
+    ``odom_frame → base_frame`` on ``/tf`` over the whole bag (what many bags have instead
+    of an odometry topic); ``"auto"``, the topic when the bag has one, else ``/tf`` when it
+    holds that transform, else none."""
+    odom_frame: str = "odom"
+    """The odometry frame of the ``/tf`` odometry (REP 105's ``odom``)."""
     max_odom_gap: float = DEFAULT_MAX_ODOM_GAP
     """A scan between two odometry messages further apart than this [s] is an error
     (lenient: dropped); ``inf``: no limit."""
@@ -157,7 +175,8 @@ class RosbagOptions:
     mounting: tuple[float, float, float] | None = None
     """The laser's pose ``(x, y, yaw)`` on the robot [m, m, rad]; None: from the bag's tf."""
     base_frame: str | None = None
-    """The robot's frame for the mounting; None: the odometry's ``child_frame_id``."""
+    """The robot's frame for the mounting and the ``/tf`` odometry; None: the odometry's
+    ``child_frame_id`` (``base_link`` for the ``/tf`` odometry)."""
     stamps: Literal["header", "bag"] = "header"
     """Time of a message: its header stamp, or the time it was recorded in the bag."""
     range_sigma: float = 0.01
@@ -193,6 +212,16 @@ class RosbagOptions:
             raise ConfigError(
                 f"odometry_direction: expected 'pose' or 'twist', got {self.odometry_direction!r}"
             )
+        if self.odometry_source not in ("auto", "topic", "tf"):
+            raise ConfigError(
+                f"odometry_source: expected 'auto', 'topic' or 'tf', got {self.odometry_source!r}"
+            )
+        for name in ("odom_frame", "base_frame"):
+            value = getattr(self, name)
+            if (value is not None and not str(value).strip("/")) or (
+                name == "odom_frame" and value is None
+            ):
+                raise ConfigError(f"{name}: expected a frame name, got {value!r}")
         if self.stamps not in ("header", "bag"):
             raise ConfigError(f"stamps: expected 'header' or 'bag', got {self.stamps!r}")
         for name in ("range_sigma", "odometry_sigma_trans", "odometry_sigma_rot_deg"):
@@ -202,115 +231,13 @@ class RosbagOptions:
             raise ConfigError(f"max_duration_s: expected a number > 0 [s] or nothing, got {d!r}")
 
 
-class _Problems:
-    """Bad messages: raise at the first, or (lenient) count them by kind."""
-
-    def __init__(self, path: Path, lenient: bool) -> None:
-        self.path = path
-        self.lenient = lenient
-        self.counts: dict[str, int] = {}
-        self.first: list[dict[str, Any]] = []
-
-    def report(self, kind: str, topic: str, indices: NDArray[np.int64], why: str) -> None:
-        """Messages ``indices`` of ``topic`` are bad (``why`` of the first); raise unless
-        lenient."""
-        if indices.size == 0:
-            return
-        where = f"{topic} message {int(indices[0])}"
-        if not self.lenient:
-            raise DatasetFormatError(f"{where}: {why}", self.path)
-        self.counts[kind] = self.counts.get(kind, 0) + int(indices.size)
-        if len(self.first) < LENIENT_SHOWN:
-            self.first.append({"topic": topic, "message": int(indices[0]), "reason": why})
-
-
-def _stamps(sec: NDArray[np.int64], nsec: NDArray[np.int64]) -> FloatArray:
-    """Stamps [s] as float64 ``sec + nanosec·1e-9`` (the relations files' values exactly)."""
-    return sec.astype(np.float64) + nsec.astype(np.float64) * 1e-9
-
-
-def _check_geometry(bag: BagContents, topic: str, problems: _Problems) -> NDArray[np.bool_]:
-    """Scans with the first scan's geometry and a consistent ``angle_max``."""
-    s = bag.scans
-    n = s.beam_counts
-    ok = np.ones(n.size, dtype=bool)
-    n0, amin0, inc0 = int(n[0]), float(s.angle_min[0]), float(s.angle_increment[0])
-    finite = np.isfinite(s.angle_min) & np.isfinite(s.angle_increment) & np.isfinite(s.angle_max)
-    bad = np.flatnonzero(~finite | (n < 1) | ((n > 1) & (s.angle_increment == 0)))
-    problems.report("geometry", topic, bad, "angle_min/angle_increment not usable")
-    ok[bad] = False
-    last = s.angle_min + (n - 1) * s.angle_increment
-    tol = np.maximum(np.abs(s.angle_increment) / 2.0, 1e-9)
-    bad = np.flatnonzero(ok & (np.abs(last - s.angle_max) > tol))
-    if bad.size:
-        i = int(bad[0])
-        why = (
-            f"{int(n[i])} beams from angle_min {s.angle_min[i]:.9g} by {s.angle_increment[i]:.9g}"
-            f" end at {last[i]:.9g} rad, but angle_max is {s.angle_max[i]:.9g} (more than half "
-            "an increment off)"
-        )
-        problems.report("geometry", topic, bad, why)
-    ok[bad] = False
-    changed = (n != n0) | (np.abs(s.angle_min - amin0) > 1e-6)
-    changed |= np.abs(s.angle_increment - inc0) * np.maximum(n - 1, 0) > 1e-6
-    bad = np.flatnonzero(ok & changed)
-    problems.report(
-        "geometry",
-        topic,
-        bad,
-        f"beam geometry differs from the first scan's ({n0} beams from {amin0:.9g} rad by "
-        f"{inc0:.9g})",
-    )
-    ok[bad] = False
-    limits = np.isfinite(s.range_max) & (s.range_max > 0) & np.isfinite(s.range_min)
-    limits &= (s.range_min >= 0) & (s.range_min < s.range_max)
-    bad = np.flatnonzero(ok & ~limits)
-    problems.report("geometry", topic, bad, "range_min/range_max: expected 0 <= min < max")
-    ok[bad] = False
-    return ok
-
-
-def _clean_ranges(
-    raw: FloatArray,
-    range_min: FloatArray,
-    range_max: FloatArray,
-    max_range: float,
-    index: NDArray[np.int64],
-    topic: str,
-    problems: _Problems,
-) -> tuple[FloatArray, dict[str, int]]:
-    """Ranges ``(N, B)`` with every no return (at/over range_max or +inf, under range_min or
-    -inf) and (lenient) every bad reading (NaN, negative) set to ``max_range``."""
-    with np.errstate(invalid="ignore"):
-        invalid = np.isnan(raw) | (np.isfinite(raw) & (raw < 0.0))
-        far = raw >= np.minimum(range_max, max_range)[:, None]
-        near = ~invalid & (raw < range_min[:, None])
-    rows = np.flatnonzero(invalid.any(axis=1))
-    if rows.size:
-        r = int(rows[0])
-        b = int(np.argmax(invalid[r]))
-        problems.report(
-            "invalid_readings",
-            topic,
-            index[rows],
-            f"beam {b}: range {float(raw[r, b])!r} is not a reading (expected >= 0, +inf or -inf)",
-        )
-    out = np.where(invalid | far | near, max_range, raw)
-    counts = {
-        "no_return_far": int(np.count_nonzero(far & ~invalid)),
-        "no_return_near": int(np.count_nonzero(near)),
-        "invalid_readings": int(np.count_nonzero(invalid)),
-    }
-    return out, counts
-
-
 def _odometry(
-    bag: BagContents, opts: RosbagOptions, problems: _Problems
+    bag: BagContents, opts: RosbagOptions, problems: Problems
 ) -> tuple[FloatArray, FloatArray, int]:
     """Odometry stamps ``(M,)`` and poses ``(M, 3)``, checked; and the repeats dropped."""
     o = bag.odometry
-    topic = str(bag.odometry_topic)
-    t = o.bag_times if opts.stamps == "bag" else _stamps(o.sec, o.nsec)
+    topic = bag.odometry_from or str(bag.odometry_topic)
+    t = o.bag_times if opts.stamps == "bag" else header_stamps(o.sec, o.nsec)
     q = o.orientation  # (M, 4) x y z w
     norm = np.linalg.norm(q, axis=1)
     ok = np.isfinite(o.position).all(axis=1) & np.isfinite(norm) & (norm > 1e-9)
@@ -334,6 +261,12 @@ def _odometry(
     )
     t, poses = t[order], poses[order]
     if opts.odometry_direction == "twist":
+        if bag.odometry_topic != opts.odom_topic:
+            raise DatasetFormatError(
+                f"odometry_direction 'twist' needs the twist of an odometry topic; the "
+                f"odometry is from {bag.odometry_from}, which has none",
+                problems.path,
+            )
         poses = signed_by_speed(poses, o.speed[idx[order]])
     return t, poses, int(np.count_nonzero(repeats))
 
@@ -343,13 +276,13 @@ def _odometry_at_scans(
     opts: RosbagOptions,
     t: FloatArray,
     index: NDArray[np.int64],
-    problems: _Problems,
+    problems: Problems,
 ) -> tuple[FloatArray | None, NDArray[np.bool_], dict[str, int], int]:
     """The odometry at the scan stamps ``t`` (None without odometry), which scans to keep,
     the dropped counts, the repeated odometry messages dropped."""
     if bag.odometry_topic is None:
         return None, np.ones(t.size, dtype=bool), {}, 0
-    topic = bag.odometry_topic
+    topic = bag.odometry_from
     odom_t, odom_poses, repeats = _odometry(bag, opts, problems)
     at = odometry_at_scans(t, odom_t, odom_poses, opts.max_odom_gap)
     if at.in_gap.any():
@@ -373,20 +306,20 @@ def _odometry_at_scans(
 def _convert(
     bag: BagContents, opts: RosbagOptions, path: Path, name: str, relations: Relations | None
 ) -> Dataset:
-    problems = _Problems(path, opts.lenient)
+    problems = Problems(path, opts.lenient)
     s = bag.scans
     topic = opts.scan_topic
     if s.beam_counts.size == 0:
         raise DatasetFormatError(f"no messages on {topic}", path)
     if bag.odometry_topic is not None and bag.odometry.sec.size == 0:
-        raise DatasetFormatError(f"no messages on {bag.odometry_topic}", path)
-    ok = _check_geometry(bag, topic, problems)
+        raise DatasetFormatError(f"no messages on {bag.odometry_from}", path)
+    ok, angle_note = check_geometry(bag, topic, problems)
     index = np.flatnonzero(ok)
     n_beams = int(s.beam_counts[index[0]]) if index.size else 0
     if index.size == 0:
         raise DatasetFormatError(f"no usable scans on {topic}", path)
     raw = np.vstack([s.ranges[i] for i in index.tolist()]).astype(np.float64)
-    t_all = s.bag_times if opts.stamps == "bag" else _stamps(s.sec, s.nsec)
+    t_all = s.bag_times if opts.stamps == "bag" else header_stamps(s.sec, s.nsec)
     t = t_all[index]
     order = increasing_mask(t)
     if not order.all():
@@ -397,12 +330,13 @@ def _convert(
             f"stamp {t[~order][0]:.9f} not later than the scans before it (out of order)",
         )
     index, t, raw = index[order], t[order], raw[order]
+    n_before_cut = index.size
     if opts.max_duration_s is not None:
         within = t <= t[0] + opts.max_duration_s
         index, t, raw = index[within], t[within], raw[within]
         relations = None if relations is None else relations.until(float(t[-1]))
     max_range = opts.max_range if opts.max_range is not None else float(s.range_max[index[0]])
-    ranges, reading_counts = _clean_ranges(
+    ranges, reading_counts = clean_ranges(
         raw, s.range_min[index], s.range_max[index], max_range, index, topic, problems
     )
     odometry, keep, dropped, repeats = _odometry_at_scans(bag, opts, t, index, problems)
@@ -415,7 +349,7 @@ def _convert(
         f"{'ROS 1' if bag.ros1 else 'ROS 2'} bag {path.name}: {n_kept} scans × {n_beams} beams "
         f"({topic}), "
         + (
-            f"raw odometry ({bag.odometry_topic})"
+            f"raw odometry ({bag.odometry_from})"
             if odometry is not None
             else "no odometry (scan matching alone)"
         )
@@ -428,6 +362,7 @@ def _convert(
         "scans": n_kept,
         "scan_messages": int(s.beam_counts.size),
         "odometry_topic": bag.odometry_topic,
+        "odometry_from": bag.odometry_from or None,
         "odometry_messages": int(bag.odometry.sec.size),
         "odometry_repeats_dropped": repeats,
         "beams": n_beams,
@@ -441,6 +376,15 @@ def _convert(
         "topics": dict(bag.topics),
         "cut_at_s": opts.max_duration_s,
     }
+    notes = [n for n in (angle_note, _odometry_note(bag, problems)) if n]
+    if index.size < n_before_cut:
+        notes.append(
+            f"cut after the first {opts.max_duration_s:g} s: {index.size} of {n_before_cut} scans"
+        )
+    reading = _summary(path, int(s.beam_counts.size), n_kept, problems, dropped, notes)
+    check_dropped_share(
+        path, reading.records, sum(reading.dropped.values()), reasons=reading.dropped
+    )
     return raw_laser_dataset(
         name=name,
         times=t[keep],
@@ -451,7 +395,56 @@ def _convert(
         description=description,
         metadata=metadata,
         relations=relations,
+        reading=reading,
     )
+
+
+SCAN_DROPS = {
+    "geometry": "bad geometry",
+    "scans_out_of_order": "stamp out of order",
+    "before_odometry": "before the odometry",
+    "after_odometry": "after the odometry",
+    "odometry_gap": "in an odometry gap",
+}
+"""The reader's counts of dropped scans (``metadata["lenient"]["counts"]`` and
+``metadata["dropped"]``) → the reasons of the :class:`ReadingSummary`."""
+
+
+def _summary(
+    path: Path,
+    records: int,
+    used: int,
+    problems: Problems,
+    dropped: Mapping[str, int],
+    notes: list[str],
+) -> ReadingSummary:
+    """What reading the bag did to its scans: drops and repairs by reason, and notes."""
+    counts = {**problems.counts, **dropped}
+    by_reason = {SCAN_DROPS[k]: n for k, n in counts.items() if k in SCAN_DROPS and n}
+    bad_beams = problems.counts.get("invalid_readings", 0)
+    repaired = {"NaN or negative ranges set to no return": bad_beams} if bad_beams else {}
+    return ReadingSummary(
+        file=path.name,
+        records=records,
+        used=used,
+        dropped=by_reason,
+        repaired=repaired,
+        notes=tuple(notes),
+    )
+
+
+def _odometry_note(bag: BagContents, problems: Problems) -> str:
+    """Where the odometry came from when that is not its topic, and the odometry messages a
+    lenient read dropped."""
+    parts = []
+    if bag.odometry_topic is None:
+        parts.append("no odometry: the scans alone")
+    elif bag.odometry_from != bag.odometry_topic:
+        parts.append(f"odometry from {bag.odometry_from}")
+    bad = problems.counts.get("bad_odometry", 0) + problems.counts.get("odometry_out_of_order", 0)
+    if bad:
+        parts.append(f"{bad} odometry messages dropped (bad pose or out of order)")
+    return "; ".join(parts)
 
 
 def _mounting(
@@ -495,9 +488,14 @@ def read_rosbag(
     ground truth."""
     opts = _options(options, "rosbag options")
     p = Path(path)
-    bag = read_bag(
-        p, opts.scan_topic, opts.odom_topic, odom_optional=opts.odom_topic == DEFAULT_ODOM_TOPIC
+    request = OdometryRequest(
+        topic=opts.odom_topic,
+        source=opts.odometry_source,
+        optional=opts.odom_topic == DEFAULT_ODOM_TOPIC,
+        odom_frame=opts.odom_frame.strip("/"),
+        base_frame=(opts.base_frame or "base_link").strip("/"),
     )
+    bag = read_bag(p, opts.scan_topic, request)
     return _convert(bag, opts, p, name or p.name, relations)
 
 
@@ -535,6 +533,7 @@ def _freiburg(name: str, options: Mapping[str, Any], data_root: Path | None) -> 
         truth=ds.truth,
         description=summary,
         metadata={**ds.metadata, "relations_file": Path(entry.relations).name},
+        reading=ds.reading,
     )
 
 
