@@ -54,6 +54,7 @@ __all__ = [
     "dataset_status",
     "download_file",
     "fetch_dataset",
+    "fetch_source",
     "fetch_target_root",
     "file_digest",
     "mirror_url",
@@ -330,8 +331,26 @@ def fetch_dataset(
             f"{name!r}: no size and checksum known for {', '.join(source.unknown)} "
             "(slamkit.datasets.checksums)"
         )
-    root = fetch_target_root(data_root)
-    base = mirror_url(mirror)
+    return fetch_source(
+        source,
+        fetch_target_root(data_root),
+        mirror_url(mirror),
+        timeout=timeout,
+        progress=progress,
+    )
+
+
+def fetch_source(
+    source: DataSource,
+    root: Path,
+    base: str | None,
+    *,
+    timeout: float = 60.0,
+    progress: Callable[[int, int], None] | None = None,
+) -> FetchReport:
+    """The work of :func:`fetch_dataset` on resolved arguments: ``source``'s files under
+    ``root`` (created when needed), fetched from the mirror base URL ``base`` (``None``:
+    report the missing files ``by hand``, download nothing, create nothing)."""
     todo: list[DataFile] = []
     done: dict[str, Action] = {}
     for f in source.files:
@@ -372,4 +391,4 @@ def fetch_dataset(
         FetchedFile(f, root / f.path, done[f.path], origin_of(f.path), urls.get(f.path))
         for f in source.files
     )
-    return FetchReport(name, root, base, files, source)
+    return FetchReport(source.name, root, base, files, source)
