@@ -15,6 +15,7 @@ __all__ = [
     "CovarianceError",
     "DataNotFoundError",
     "DatasetFormatError",
+    "FetchError",
     "GeometryError",
     "InputError",
     "MatchError",
@@ -68,6 +69,20 @@ class UnknownNameError(SlamkitError, KeyError):
 
 class DataNotFoundError(SlamkitError, FileNotFoundError):
     """A data file or folder that a loader needs is not there."""
+
+
+class FetchError(SlamkitError, OSError):
+    """A data file could not be fetched: the connection failed or dropped, the server said
+    no, or what arrived does not match the file's size and SHA-256. Nothing of that file is
+    left behind; ``url`` and ``path`` (its target) say which."""
+
+    def __init__(self, message: str, url: str | None = None, path: str | Path | None = None):
+        self.url = url
+        self.path = None if path is None else Path(path)
+        super().__init__(message)
+
+    def __str__(self) -> str:  # OSError would format (errno, strerror)
+        return str(self.args[0])
 
 
 class DatasetFormatError(SlamkitError, ValueError):

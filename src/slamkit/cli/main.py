@@ -27,6 +27,7 @@ from slamkit.cli._common import (
 )
 from slamkit.cli.compare_cmd import compare_command
 from slamkit.cli.config_cmd import config_app
+from slamkit.cli.data_cmd import data_app
 from slamkit.cli.eval_cmd import eval_app
 from slamkit.cli.map_cmd import map_app
 from slamkit.cli.optimize_cmd import optimize_command
@@ -39,7 +40,6 @@ app = command_group(
     name="slamkit",
     help="Probabilistic robot localization, mapping and SLAM.",
 )
-data_app = command_group("Data sets: simulated scenarios and real-data loaders.")
 app.add_typer(data_app, name="data")
 app.add_typer(map_app, name="map")
 app.add_typer(eval_app, name="eval")
@@ -332,21 +332,6 @@ def estimators_command() -> None:
     table = Table("name", "needs", "description", header_style="bold")
     for e in list_estimators():
         table.add_row(e.name, ", ".join(e.requires), e.description)
-    console.print(table)
-
-
-@data_app.command("list")
-@known_errors
-def data_list_command(
-    data_root: DataRootOption = None,
-) -> None:
-    """List the registered data sets and whether each is available here."""
-    from slamkit.datasets import dataset_available, list_datasets
-
-    table = Table("name", "kind", "available", "description", header_style="bold")
-    for e in list_datasets():
-        ok = dataset_available(e, data_root)
-        table.add_row(e.name, e.kind, "yes" if ok else "[red]no[/]", e.description)
     console.print(table)
 
 
