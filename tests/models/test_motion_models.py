@@ -19,6 +19,7 @@ from slamkit.models import (
     OdometryModel,
     UnicycleArc,
     UnicycleEuler,
+    integrate_odometry,
     odometry_control,
     odometry_noise_cov,
     propagate_gaussian,
@@ -217,6 +218,22 @@ def test_odometry_control_hand_values_and_round_trip() -> None:
     assert np.all(u[:, 1] >= 0)
     assert np.all(np.abs(u[:, [0, 2]]) <= np.pi)
     np.testing.assert_allclose(pose_diff(OdometryModel().apply(a, u, 0.0), b), 0.0, atol=1e-12)
+
+
+def test_integrate_odometry_inverts_odometry_control_and_matches_the_model() -> None:
+    rng = np.random.default_rng(4)
+    path = np.column_stack([rng.uniform(-5, 5, (40, 2)), rng.uniform(-np.pi, np.pi, 40)])
+    u = odometry_control(path[:-1], path[1:])
+    poses = integrate_odometry(path[0], u)
+    assert poses.shape == (40, 3)
+    np.testing.assert_allclose(pose_diff(poses, path), 0.0, atol=1e-9)
+    stepwise = [path[0]]
+    for step in u:  # one application of the model per step gives the same poses
+        stepwise.append(OdometryModel().apply(stepwise[-1], step, 0.0))
+    np.testing.assert_allclose(pose_diff(poses, np.array(stepwise)), 0.0, atol=1e-9)
+    np.testing.assert_array_equal(
+        integrate_odometry([1.0, 2.0, 3.0], np.zeros((0, 3))), [[1, 2, 3]]
+    )
 
 
 def test_odometry_control_without_translation_puts_all_rotation_in_rot2() -> None:

@@ -98,7 +98,7 @@ from slamkit.datasets.stream import (
 )
 from slamkit.errors import ConfigError, DatasetFormatError
 from slamkit.geometry.angles import wrap_angle
-from slamkit.models import OdometryModel, odometry_control
+from slamkit.models import OdometryModel, integrate_odometry, odometry_control
 
 __all__ = [
     "CARMEN_FILES",
@@ -215,19 +215,10 @@ class DpSlamOptions:
 
 def _noisy_odometry(poses: FloatArray, cov: FloatArray, rng: np.random.Generator) -> FloatArray:
     """Odometry poses ``(N, 3)``: the true steps ``(rot1, trans, rot2)`` plus N(0, cov) noise,
-    integrated from the first true pose with the odometry model
-    (``x_k = x_{k-1} + trans cos(theta_{k-1} + rot1)``, ``theta_k = theta_{k-1} + rot1 + rot2``),
-    written as cumulative sums so that the whole log is integrated at once."""
+    integrated from the first true pose (:func:`~slamkit.models.integrate_odometry`)."""
     steps = odometry_control(poses[:-1], poses[1:])
     noisy = steps + rng.standard_normal(steps.shape) * np.sqrt(np.diag(cov))
-    rot1, trans, rot2 = noisy[:, 0], noisy[:, 1], noisy[:, 2]
-    theta = poses[0, 2] + np.concatenate([[0.0], np.cumsum(rot1 + rot2)])  # unwrapped
-    heading = theta[:-1] + rot1
-    out = np.empty_like(poses)
-    out[:, 0] = poses[0, 0] + np.concatenate([[0.0], np.cumsum(trans * np.cos(heading))])
-    out[:, 1] = poses[0, 1] + np.concatenate([[0.0], np.cumsum(trans * np.sin(heading))])
-    out[:, 2] = wrap_angle(theta)
-    return out
+    return integrate_odometry(poses[0], noisy)
 
 
 def _reading_summary(log: CarmenLog, stamps: StampRepair, note: str | None) -> ReadingSummary:

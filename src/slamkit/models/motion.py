@@ -41,6 +41,7 @@ __all__ = [
     "OdometryModel",
     "UnicycleArc",
     "UnicycleEuler",
+    "integrate_odometry",
     "motion_kernels",
     "odometry_control",
     "odometry_noise_cov",
@@ -650,6 +651,24 @@ def odometry_control(
     rot1 = np.where(moved, wrap_angle(np.arctan2(dy, dx) - a[..., 2]), 0.0)
     rot2 = wrap_angle(b[..., 2] - a[..., 2] - rot1)
     return np.stack(np.broadcast_arrays(rot1, trans, rot2), axis=-1)
+
+
+def integrate_odometry(start: ArrayLike, u: ArrayLike) -> FloatArray:
+    """Odometry poses ``(N + 1, 3)``: ``start (3,)`` followed by the poses reached by applying
+    the increments ``u (N, 3) = (rot1, trans, rot2)`` one after the other with
+    :class:`OdometryModel` (``x_k = x_{k-1} + trans cos(theta_{k-1} + rot1)``,
+    ``theta_k = theta_{k-1} + rot1 + rot2``), written as cumulative sums so that a whole log
+    is integrated at once. The inverse of :func:`odometry_control` along a path."""
+    x0 = as_array(start, "start", (3,))
+    steps = as_array(u, "u", (None, 3))
+    rot1, trans, rot2 = steps[:, 0], steps[:, 1], steps[:, 2]
+    theta = x0[2] + np.concatenate([[0.0], np.cumsum(rot1 + rot2)])  # unwrapped
+    heading = theta[:-1] + rot1
+    out = np.empty((steps.shape[0] + 1, 3))
+    out[:, 0] = x0[0] + np.concatenate([[0.0], np.cumsum(trans * np.cos(heading))])
+    out[:, 1] = x0[1] + np.concatenate([[0.0], np.cumsum(trans * np.sin(heading))])
+    out[:, 2] = wrap_angle(theta)
+    return out
 
 
 def odometry_noise_cov(u: ArrayLike, alphas: ArrayLike) -> FloatArray:
