@@ -85,9 +85,7 @@ def _counts(counts: Mapping[str, int]) -> str:
     return ", ".join(f"{n} {reason}" for reason, n in counts.items())
 
 
-def check_dropped_share(
-    path: str | Path, records: int, dropped: int, what: str = "scans"
-) -> None:
+def check_dropped_share(path: str | Path, records: int, dropped: int, what: str = "scans") -> None:
     """Raise :class:`DatasetFormatError` when more than :data:`MAX_DROPPED_SHARE` of the
     ``records`` were ``dropped``: a read that keeps too little of a file is not a result."""
     if records > 0 and dropped > MAX_DROPPED_SHARE * records:
