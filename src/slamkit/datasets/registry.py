@@ -191,6 +191,19 @@ DATASETS: dict[str, DatasetEntry] = {
             ),
         ),
         DatasetEntry(
+            "victoria-park-laser",
+            "real",
+            "Victoria Park truck, raw laser: 7230 scans × 361 beams (0.5°, laser 3.78 m ahead "
+            "of the rear axle), 40 Hz Ackermann speed/steering, GPS positions as reference",
+            "slamkit.datasets.victoria_park_laser:load_victoria_park_laser",
+            files=(
+                "landmarks/victoria_park/raw_laser/laser.txt.gz",
+                "landmarks/victoria_park/raw_laser/drs.txt.gz",
+                "landmarks/victoria_park/raw_laser/gps.txt.gz",
+                "landmarks/victoria_park/raw_laser/sensors_manager.txt.gz",
+            ),
+        ),
+        DatasetEntry(
             "intel",
             "real",
             "Intel Research Lab, corrected CARMEN log: 910 scans × 180 beams, corrected poses "

@@ -32,8 +32,10 @@ __all__ = [
     "MAX_EXACT_INTEGER",
     "NumericTable",
     "ascii_fields",
+    "check_times",
     "integer_column",
     "integer_values",
+    "raise_at_first",
     "read_table",
     "read_text",
     "text_lines",
@@ -236,6 +238,28 @@ def read_table(
         line_numbers=np.asarray(numbers, dtype=np.int64),
         skipped=len(bad),
         skipped_lines=tuple(bad[:MAX_REPORTED_LINES]),
+    )
+
+
+def raise_at_first(table: NumericTable, bad: NDArray[np.bool_], path: Path, message: str) -> None:
+    """Raise :class:`DatasetFormatError` at the line of the first row of ``table`` flagged in
+    ``bad (n,)``, if any; ``message`` is formatted with that row's values (``{0}`` the first
+    column), so a vectorised check still names the value, the file and the line."""
+    rows = np.flatnonzero(bad)
+    if rows.size:
+        r = int(rows[0])
+        raise DatasetFormatError(message.format(*table.values[r]), path, int(table.line_numbers[r]))
+
+
+def check_times(table: NumericTable, path: Path, *, strict: bool, unit: str = "s") -> None:
+    """Check that the first column (a time in ``unit``) increases (``strict``) or never
+    decreases down the rows; else :class:`DatasetFormatError` at the first line that breaks
+    the order."""
+    step = np.diff(table.values[:, 0])
+    what = "increasing" if strict else "non-decreasing"
+    bad = np.concatenate([[False], step <= 0 if strict else step < 0])
+    raise_at_first(
+        table, bad, path, f"expected {what} times, got {{0:g}} {unit} after the row above"
     )
 
 

@@ -143,7 +143,13 @@ from slamkit.datasets.stream import (
     MotionSpec,
     measured_detection_range,
 )
-from slamkit.datasets.text import NumericTable, integer_values, read_table
+from slamkit.datasets.text import (
+    NumericTable,
+    check_times,
+    integer_values,
+    raise_at_first,
+    read_table,
+)
 from slamkit.errors import ConfigError, DataNotFoundError, DatasetFormatError
 from slamkit.geometry import wrap_angle
 from slamkit.models import Ackermann
@@ -156,11 +162,16 @@ __all__ = [
     "LASER_MAX_RANGE",
     "LASER_OFFSET",
     "ODOMETRY_FILE",
+    "SIGMA_SPEED",
+    "SIGMA_STEERING",
     "VICTORIA_PARK_FILES",
     "WHEELBASE",
     "VictoriaParkOptions",
+    "ackermann_motion",
     "laser_to_vehicle",
     "load_victoria_park",
+    "odometry_controls",
+    "read_odometry",
 ]
 
 FOLDER = "landmarks/victoria_park"
@@ -179,6 +190,11 @@ LASER_OFFSET = (3.78, 0.50)
 docstring for why not ``info.txt``'s 0.95 m)."""
 LASER_MAX_RANGE = 80.0
 """The SICK laser's maximum range [m] (``info.txt``: 8000 cm and beyond = no return)."""
+SIGMA_SPEED = 0.5
+"""Nominal speed noise per 25-ms odometry sample [m/s] (module docstring, "Nominal noise")."""
+SIGMA_STEERING = 0.3
+"""Nominal steering noise per 25-ms odometry sample [rad] (why 0.3 and not 0.1: module
+docstring, "Nominal noise")."""
 
 _MS = 1e-3
 
@@ -200,9 +216,9 @@ class VictoriaParkOptions:
     """``H`` [m], left of the centre line."""
     steering_offset: float = 0.0
     """Added to every steering reading [rad] (the data suggest +0.0035 to +0.0059)."""
-    sigma_speed: float = 0.5
+    sigma_speed: float = SIGMA_SPEED
     """Nominal speed noise per 25-ms sample [m/s]."""
-    sigma_steering: float = 0.3
+    sigma_steering: float = SIGMA_STEERING
     """Nominal steering noise per 25-ms sample [rad]."""
     sigma_range: float = 0.1
     """Nominal range noise [m]."""
@@ -249,44 +265,81 @@ def _require(root: Path, relative: str) -> Path:
     return path
 
 
-def _first_bad(table: NumericTable, bad: NDArray[np.bool_], path: Path, message: str) -> None:
-    """Raise ``message`` at the line of the first row flagged in ``bad``, if any."""
-    rows = np.flatnonzero(bad)
-    if rows.size:
-        r = int(rows[0])
-        raise DatasetFormatError(message.format(*table.values[r]), path, int(table.line_numbers[r]))
-
-
-def _check_times(table: NumericTable, path: Path, *, strict: bool) -> None:
-    step = np.diff(table.values[:, 0])
-    what = "increasing" if strict else "non-decreasing"
-    bad = np.concatenate([[False], step <= 0 if strict else step < 0])
-    _first_bad(table, bad, path, f"expected {what} times, got {{0:g}} ms after the row above")
-
-
-def _read_odometry(path: Path, opts: VictoriaParkOptions) -> NumericTable:
+def read_odometry(
+    path: Path,
+    *,
+    steering_offset: float = 0.0,
+    wheelbase: float = WHEELBASE,
+    encoder_offset: float = ENCODER_OFFSET,
+    unit: str = "ms",
+) -> NumericTable:
+    """Read the truck's ``time speed steering`` samples (time in ``unit``) and check them:
+    at least two, strictly increasing times, and every steering angle (plus
+    ``steering_offset``) one the :class:`~slamkit.models.Ackermann` model can take
+    (``|alpha| < pi/2``, the encoder wheel inside the turn circle). Shared by every reader
+    of this truck's odometry (the ACFR ``.csv`` in ms, the raw laser release's ``drs`` in
+    s), so both refuse the same rows with the same :class:`DatasetFormatError`."""
     odo = read_table(path, 3)
     if len(odo) < 2:
         raise DatasetFormatError(f"expected at least 2 odometry samples, got {len(odo)}", path)
-    _check_times(odo, path, strict=True)
-    alpha = odo.values[:, 2] + opts.steering_offset
+    check_times(odo, path, strict=True, unit=unit)
+    alpha = odo.values[:, 2] + steering_offset
     # The Ackermann model needs |alpha| < pi/2 and the encoder wheel inside the turn circle.
     with np.errstate(invalid="ignore"):
-        inside = 1.0 - np.tan(alpha) * opts.encoder_offset / opts.wheelbase
+        inside = 1.0 - np.tan(alpha) * encoder_offset / wheelbase
     wild = (np.abs(alpha) >= np.pi / 2) | ~(inside > 1e-9)
-    _first_bad(odo, wild, path, "steering {2:g} rad: not a steering angle of this vehicle")
+    raise_at_first(odo, wild, path, "steering {2:g} rad: not a steering angle of this vehicle")
     return odo
+
+
+def odometry_controls(
+    times: FloatArray,
+    samples: FloatArray,
+    cuts: FloatArray,
+    *,
+    steering_offset: float = 0.0,
+    split: bool = True,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The Ackermann controls of odometry samples ``samples (N, 2)`` = ``(speed, steering)``
+    at ``times (N,)`` [s, increasing]: sample ``k`` is held over ``(t_k, t_{k+1}]`` with
+    ``steering_offset`` added to its steering; the last sample has no successor and gives
+    none. With ``split``, an interval that holds one of the times ``cuts`` strictly inside
+    is cut there into pieces with the same control, so an event at that time sees the pose
+    of its own time stamp. Returns the end time ``(C,)``, duration ``(C,)`` and control
+    ``(C, 2)`` of every piece, in time order (``Control(end, u, dt)``)."""
+    u = np.array(samples[:-1, :2], dtype=np.float64)
+    u[:, 1] += steering_offset
+    t_begin, t_end = times[:-1], times[1:]
+    if split:
+        ends, dts, owner = cut_intervals(t_begin, t_end, cuts)
+    else:
+        ends, dts, owner = t_end, t_end - t_begin, np.arange(t_end.size)
+    return ends, dts, u[owner]
+
+
+def ackermann_motion(
+    *,
+    wheelbase: float = WHEELBASE,
+    encoder_offset: float = ENCODER_OFFSET,
+    sigma_speed: float = SIGMA_SPEED,
+    sigma_steering: float = SIGMA_STEERING,
+) -> MotionSpec:
+    """The truck's motion: :class:`~slamkit.models.Ackermann` of the rear-axle centre (the
+    state), speed from the encoder ``encoder_offset`` left of the centre line, with the
+    nominal noise ``diag(sigma_speed², sigma_steering²)`` per control."""
+    model = Ackermann(wheelbase, (0.0, 0.0), encoder_offset)
+    return MotionSpec(model, np.diag([sigma_speed**2, sigma_steering**2]))
 
 
 def _read_detections(path: Path) -> NumericTable:
     det = read_table(path, 6)
-    _check_times(det, path, strict=False)
+    check_times(det, path, strict=False, unit="ms")
     v = det.values
-    _first_bad(det, ~(v[:, 1] > 0), path, "expected a positive range, got {1:g}")
+    raise_at_first(det, ~(v[:, 1] > 0), path, "expected a positive range, got {1:g}")
     out = ~((v[:, 2] >= 0) & (v[:, 2] <= np.pi))
-    _first_bad(det, out, path, "expected a laser bearing in [0, pi], got {2:g}")
+    raise_at_first(det, out, path, "expected a laser bearing in [0, pi], got {2:g}")
     feat = v[:, 5]
-    _first_bad(
+    raise_at_first(
         det,
         (feat != np.round(feat)) | (feat < -1),
         path,
@@ -313,17 +366,20 @@ def load_victoria_park(
     opts = config_from_mapping(VictoriaParkOptions, options, "victoria-park")
     root = resolve_data_root(data_root)
     p_odo, p_gps, p_det = (_require(root, f) for f in VICTORIA_PARK_FILES)
-    odo = _read_odometry(p_odo, opts)
+    odo = read_odometry(
+        p_odo,
+        steering_offset=opts.steering_offset,
+        wheelbase=opts.wheelbase,
+        encoder_offset=opts.encoder_offset,
+    )
     gps = read_table(p_gps, 3)
-    _check_times(gps, p_gps, strict=True)
+    check_times(gps, p_gps, strict=True, unit="ms")
     det = _read_detections(p_det)
 
     # ---- odometry: sample k holds over (t_k, t_{k+1}] -------------------------------------
     t_odo = odo.values[:, 0] * _MS
     t0, t_last = float(t_odo[0]), float(t_odo[-1])
     cut = t_last if opts.max_duration_s is None else min(t_last, t0 + opts.max_duration_s)
-    u = odo.values[:-1, 1:3].copy()
-    u[:, 1] += opts.steering_offset
 
     # ---- detections: drop poor features and those outside the odometry span --------------
     d = det.values
@@ -338,11 +394,13 @@ def load_victoria_park(
     group_end = np.append(group_start[1:], t_det.size)
 
     # ---- controls, cut at detection times -------------------------------------------------
-    t_begin, t_end = t_odo[:-1], t_odo[1:]
-    if opts.split_at_readings:
-        ends, dts, owner = cut_intervals(t_begin, t_end, group_t)
-    else:
-        ends, dts, owner = t_end, t_end - t_begin, np.arange(t_end.size)
+    ends, dts, u = odometry_controls(
+        t_odo,
+        odo.values[:, 1:3],
+        group_t,
+        steering_offset=opts.steering_offset,
+        split=opts.split_at_readings,
+    )
     n_ctrl = int(np.searchsorted(ends, cut, side="right"))
 
     times = np.concatenate([ends[:n_ctrl], group_t])
@@ -353,7 +411,7 @@ def load_victoria_park(
     for j in np.lexsort((kinds, times)):
         i = int(index[j])
         if kinds[j] == 0:
-            events.append(Control(float(ends[i]), u[owner[i]].copy(), float(dts[i])))
+            events.append(Control(float(ends[i]), u[i].copy(), float(dts[i])))
         else:
             a, b = group_start[i], group_end[i]
             true_ids = truth_id[a:b].copy()
@@ -366,7 +424,7 @@ def load_victoria_park(
     n_gps = int(np.searchsorted(t_gps, cut, side="right"))
 
     a_off, b_off = opts.laser_offset
-    rows_used = int(np.searchsorted(t_end, cut, side="right"))
+    rows_used = int(np.searchsorted(t_odo[1:], cut, side="right"))
     metadata: dict[str, Any] = {
         "kind": "real",
         "source": "Victoria Park, ACFR (Guivant & Nebot 2001); detections cleaned by SLSJF",
@@ -394,7 +452,6 @@ def load_victoria_park(
         "cut_at_s": None if opts.max_duration_s is None else cut,
         "options": config_to_dict(opts),
     }
-    model = Ackermann(opts.wheelbase, (0.0, 0.0), opts.encoder_offset)
     # The laser reaches 80 m but seldom detects a trunk beyond ~40 m: its detection range,
     # measured from the readings (38 m from the laser on the whole run).
     sensor = LandmarkSensorSpec(
@@ -408,7 +465,12 @@ def load_victoria_park(
     return Dataset(
         name="victoria-park",
         events=tuple(events),
-        motion=MotionSpec(model, np.diag([opts.sigma_speed**2, opts.sigma_steering**2])),
+        motion=ackermann_motion(
+            wheelbase=opts.wheelbase,
+            encoder_offset=opts.encoder_offset,
+            sigma_speed=opts.sigma_speed,
+            sigma_steering=opts.sigma_steering,
+        ),
         landmark_sensor=replace(sensor, detection_range=measured_detection_range(events, sensor)),
         initial_pose=np.zeros(3),
         initial_cov=np.zeros((3, 3)),
