@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from slamkit.datasets.registry import load_dataset
-from slamkit.datasets.stream import LaserScan, Odometry
+from slamkit.datasets.stream import Dataset, LaserScan, Odometry
 from slamkit.models import cast_rays_segments
 from slamkit.sim.buildings import (
     BuildingConfig,
@@ -28,7 +28,7 @@ def drives() -> dict[int, tuple[np.ndarray, np.ndarray]]:
 
 
 @pytest.fixture(scope="module")
-def small() -> object:
+def small() -> Dataset:
     """The data set of building 11 (the smallest of the corpus: 33 m × 14 m, ~700 scans)."""
     return build_building_dataset(11)
 
@@ -130,14 +130,15 @@ def test_scans_see_people_glass_and_open_space() -> None:
     assert np.all(at_glass[glass_first] | beyond[glass_first])
 
 
-def test_the_dataset_carries_scans_odometry_and_truth(small: object) -> None:
+def test_the_dataset_carries_scans_odometry_and_truth(small: Dataset) -> None:
     ds = small
-    assert ds.counts()["Odometry"] == ds.counts()["LaserScan"]  # type: ignore[attr-defined]
-    truth = ds.truth  # type: ignore[attr-defined]
-    odo = np.array([ev.pose for ev in ds.events if isinstance(ev, Odometry)])  # type: ignore[attr-defined]
+    assert ds.counts()["Odometry"] == ds.counts()["LaserScan"]
+    truth = ds.truth
+    assert truth.poses is not None and truth.walls is not None and ds.laser is not None
+    odo = np.array([ev.pose for ev in ds.events if isinstance(ev, Odometry)])
     np.testing.assert_array_equal(odo, truth.poses)  # clean odometry
-    assert ds.laser.n_beams == 181 and ds.laser.max_range == 30.0  # type: ignore[attr-defined]
-    scans = [ev.t for ev in ds.events if isinstance(ev, LaserScan)]  # type: ignore[attr-defined]
+    assert ds.laser.n_beams == 181 and ds.laser.max_range == 30.0
+    scans = [ev.t for ev in ds.events if isinstance(ev, LaserScan)]
     np.testing.assert_array_equal(scans, truth.times)
     assert truth.walls.segments.shape[0] == generate_building(11).static_map.segments.shape[0]
 
