@@ -119,6 +119,14 @@ DATASETS: dict[str, DatasetEntry] = {
             "slamkit.sim.loop_world:build_long_hallway",
         ),
         DatasetEntry(
+            "building",
+            "simulated",
+            "a generated building chosen by --seed (corpus: seeds 0-19): corridors, offices, "
+            "halls, clutter, glass, walking people; a 100-500 m route of loops; 181 beams, "
+            "30 m; odometry with the typical OdometryErrorModel, glitches in metadata",
+            "slamkit.sim.buildings:build_building",
+        ),
+        DatasetEntry(
             "rooms-laser-global",
             "simulated",
             "the laser tour of four rooms with no prior pose (global localization)",

@@ -1,5 +1,19 @@
-"""Simulation: worlds, trajectories, sensors and named scenarios (rng injected)."""
+"""Simulation: worlds, trajectories, sensors, named scenarios, generated buildings and the
+odometry error model (rng injected)."""
 
+from slamkit.sim.buildings import (
+    Building,
+    BuildingConfig,
+    build_building_dataset,
+    corpus_buildings,
+    generate_building,
+)
+from slamkit.sim.odometry_errors import (
+    OdometryErrorModel,
+    OdometryGlitch,
+    OdometryGlitches,
+    corrupt_odometry,
+)
 from slamkit.sim.scans import ScanPair, corridor_world, random_scan_pairs, simulated_scan_pair
 from slamkit.sim.scenarios import (
     LandmarkScenarioConfig,
@@ -19,16 +33,25 @@ from slamkit.sim.worlds import (
 )
 
 __all__ = [
+    "Building",
+    "BuildingConfig",
     "Drive",
     "LandmarkScenarioConfig",
     "LaserScenarioConfig",
+    "OdometryErrorModel",
+    "OdometryGlitch",
+    "OdometryGlitches",
     "ScanPair",
+    "build_building_dataset",
     "build_five_features",
     "build_landmark_loop",
     "build_rooms_laser",
+    "corpus_buildings",
     "corridor_world",
+    "corrupt_odometry",
     "five_feature_world",
     "follow_waypoints",
+    "generate_building",
     "observe_landmarks",
     "observe_landmarks_labelled",
     "random_landmarks",
