@@ -263,7 +263,8 @@ def test_every_file_of_the_table_has_an_origin_and_a_name():
         assert path in fetchable, f"{path}: in no data set or group"
     carmen = [f.path.split("/")[-1] for f in get_source("corrected-carmen").files]
     assert len(carmen) == 11 and "seattle-corrected.log.gz" in carmen
-    assert len(get_source("victoria-park-laser").files) == 5
+    assert len(get_source("victoria-park-laser").files) == 4
+    assert len(get_source("victoria-park-raw").files) == 5
     assert set(GROUPS) <= set(fetchable_names()) | set(DATASETS)
     licences = {origin_of(p).licence for p in FILES}  # type: ignore[union-attr]
     assert NOT_STATED in licences

@@ -131,8 +131,8 @@ def test_scans_outside_samples_dropped_when_moving(tmp_path: Path) -> None:
     assert ds.reading is not None and ds.reading.used == 10 and ds.reading.records == 11
     assert ds.reading.dropped == {"before the first speed/steering sample, truck moving": 1}
     # More than 10% of the scans dropped is an error, not a result.
-    few = [_scan_line(t, _ranges()) for t in (0.99, 1.01)]
-    with pytest.raises(DatasetFormatError, match="1 of 2 scans"):
+    few = [_scan_line(t, _ranges()) for t in (0.97, 0.98, 0.99, 1.01)]
+    with pytest.raises(DatasetFormatError, match="3 of 4 scans"):
         load_victoria_park_laser({}, data_root=_write(tmp_path / "b", scans=few, drs=drs))
 
 

@@ -225,7 +225,7 @@ GROUPS: dict[str, tuple[tuple[str, ...], str]] = {
         "all eleven corrected CARMEN logs: acapulco, aces, belgioioso, edmonton, fhw, "
         "freiburg-079, freiburg-101, freiburg-campus, intel, orebro, seattle",
     ),
-    "victoria-park-laser": (
+    "victoria-park-raw": (
         ("landmarks/victoria_park/raw_laser/",),
         "Victoria Park's raw laser (ASCII release): 7230 scans × 361 beams, speed and "
         "steering, GPS, the sensors' order",
@@ -260,7 +260,7 @@ GROUPS: dict[str, tuple[tuple[str, ...], str]] = {
 }
 """Named groups of files that are not (or not only) one registered data set → (path
 prefixes, description). ``slamkit data fetch GROUP`` fetches all of a group's files.
-``victoria-park-laser`` is also the name its registry entry takes."""
+``victoria-park-raw`` is the registered ``victoria-park-laser`` and its documentation."""
 
 
 @dataclass(frozen=True)
