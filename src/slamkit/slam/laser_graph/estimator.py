@@ -62,6 +62,9 @@ from slamkit.slam.laser_graph.loops import (
     verify_closure,
 )
 
+OVERRIDES_SHOWN = 20
+"""Odometry glitches the laser overrode that the diagnostics list (stamp and correction)."""
+
 __all__ = ["NO_ODOMETRY", "LaserGraphSlam"]
 
 NO_ODOMETRY = "none: scan matching alone (constant-velocity prediction)"
@@ -115,6 +118,7 @@ class LaserGraphSlam(EstimatorShell):
         self._last_scan: float | None = None  # stamp of the last scan (for coasting)
         self._anchors: list[int] = [-1]
         self._offsets: list[FloatArray] = [np.zeros(3)]
+        self._overrides: list[tuple[float, FloatArray]] = []  # (stamp, T_wheels_laser)
 
     # -- the Estimator protocol ---------------------------------------------------------
 
@@ -147,6 +151,8 @@ class LaserGraphSlam(EstimatorShell):
             self._tracker.coast(event.t - last)  # only without odometry
         reference = self._local if self._local is not None else self._keys[-1].reference
         self._tracker.match(reference, points)
+        if self._tracker.last_override is not None:
+            self._overrides.append((event.t, self._tracker.last_override))
         if self._tracker.keyframe_due():
             self._add_keyframe(event, points)
 
@@ -347,6 +353,14 @@ class LaserGraphSlam(EstimatorShell):
             "matched": c["matched"],
             "unmatched": {k[len("failed:") :]: v for k, v in c.items() if k.startswith("failed:")},
             "gated": c["gated"],
+            "relocation_tried": c["relocation_tried"],
+            "relocated": c["relocated"],
+            "odometry_overridden": len(self._overrides),
+            "odometry_overrides": [
+                {"t": t, "x": float(d[0]), "y": float(d[1]), "deg": math.degrees(float(d[2]))}
+                for t, d in self._overrides[:OVERRIDES_SHOWN]
+            ],
+            "lost": c["lost"],
             "degenerate_fused": c["degenerate_fused"],
             "odometry_edges": c["odometry_edges"],
             "neighbour_edges": c["neighbour_edges"],

@@ -41,9 +41,10 @@ from slamkit.scanmatch.correlative import (
     correlative_match,
 )
 from slamkit.scanmatch.icp import PreparedScan
-from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
+from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp, surface_fit
 from slamkit.scanmatch.plicp import PlIcpConfig, plicp
 from slamkit.scanmatch.point_map import PointMap, ScanNormals
+from slamkit.scanmatch.relocate import RELOCATE_SEARCH, TRUSTED_FIT, judge, relocate
 from slamkit.scanmatch.result import MatchResult
 from slamkit.slam.laser_graph.config import FrontEndSettings
 
@@ -136,6 +137,10 @@ class Tracker:
         self.match_cov: FloatArray | None = None  # of the last match, None: it failed
         self.overlap = 1.0
         self.counts: Counter[str] = Counter()
+        self.last_override: FloatArray | None = None
+        """The correction ``T_wheels_laser`` of the last scan whose wheels were overridden
+        by the laser (a glitch), or None when the last scan's were not."""
+        self._relocation: tuple[NormalCloud, CorrelativeReference] | None = None
 
     def reset(self) -> None:
         """A new keyframe: the offset and its uncertainty start again from zero."""
@@ -181,6 +186,9 @@ class Tracker:
         last match, so a prior about it would count the map's evidence twice, and a match
         that slid along a corridor would pull every later prior along with it (ACES, one
         range noise seed: 3.3 m along a corridor in 10 s, the wheels saying otherwise)."""
+        self.last_override = None
+        if isinstance(reference, NormalCloud) and self.model is not None:
+            return self._match_map(reference, points)
         try:
             start = self.offset if self.velocity is None else self._search(reference, points)
             if isinstance(reference, NormalCloud):
@@ -189,7 +197,6 @@ class Tracker:
                 result = normal_icp(
                     reference, points, start, self.normal_icp,
                     prior_information=np.linalg.solve(prior, np.eye(3)),
-                    prior_pose=None if self.model is None else self.odometry_offset,
                 )  # fmt: skip
             else:
                 result = plicp(reference, points, start, self.plicp)
@@ -209,15 +216,74 @@ class Tracker:
         if not within_gate(self.offset, result.pose, self.settings):
             self.counts["gated"] += 1
             return self._unmatched()
+        self._accept(result)
+        if self.velocity is not None and self._coasted is not None:
+            before, dt = self._coasted
+            self.velocity.observe(between(before, self.offset), dt)
+        return True
+
+    def _match_map(self, reference: NormalCloud, points: FloatArray) -> bool:
+        """The local-map match with the wheels: point-to-normal ICP held to the wheels'
+        offset, judged by its fit to the map; where it fits poorly, fails or is gated, the
+        scan is relocated on the map without the wheels (:mod:`slamkit.scanmatch.relocate`)
+        and the better-fitting hypothesis kept. When the laser's wins against a prediction
+        outside the gate, the wheels glitched: the step is overridden (counted, and the
+        correction kept in ``last_override``) and the wheels' offset starts again from the
+        laser's pose, so the glitch does not pull later priors back."""
+        s_xy, s_t = self.settings.cov_floor_xy, math.radians(self.settings.cov_floor_deg)
+        prior = self.odometry_cov + np.diag([s_xy**2, s_xy**2, s_t**2])
+        result: MatchResult | None = None
+        try:
+            result = normal_icp(
+                reference, points, self.offset, self.normal_icp,
+                prior_information=np.linalg.solve(prior, np.eye(3)),
+                prior_pose=self.odometry_offset,
+            )  # fmt: skip
+        except MatchError as exc:
+            self.counts[f"failed:{exc.reason}"] += 1
+        if result is not None and not within_gate(self.offset, result.pose, self.settings):
+            self.counts["gated"] += 1
+            result = None
+        wheels_pose = self.offset if result is None else result.pose
+        wheels_fit = surface_fit(reference, points, wheels_pose)
+        if result is not None and wheels_fit >= TRUSTED_FIT:
+            self._accept(result)
+            return True
+        self.counts["relocation_tried"] += 1
+        if self._relocation is None or self._relocation[0] is not reference:
+            self._relocation = (
+                reference,
+                CorrelativeReference.from_points(reference.points, RELOCATE_SEARCH),
+            )
+        found = relocate(reference, points, self.offset, self.normal_icp, self._relocation[1])
+        overrides = found is not None and not within_gate(
+            self.offset, found.match.pose, self.settings
+        )
+        verdict = judge(wheels_fit, found, overrides)
+        if verdict == "laser":
+            assert found is not None
+            if overrides:
+                self.counts["odometry_overridden"] += 1
+                self.last_override = between(self.offset, found.match.pose)
+            else:
+                self.counts["relocated"] += 1
+            self._accept(found.match)
+            self.odometry_offset = found.match.pose.copy()
+            self.odometry_cov = np.asarray(found.match.cov, dtype=np.float64).copy()
+            return True
+        if verdict == "lost":
+            self.counts["lost"] += 1
+        if result is None:
+            return self._unmatched()
+        self._accept(result)
+        return True
+
+    def _accept(self, result: MatchResult) -> None:
         self.counts["matched"] += 1
         self.offset = result.pose
         self.match_cov = result.cov
         self.track_cov = np.asarray(result.cov, dtype=np.float64)
         self.overlap = result.inlier_fraction
-        if self.velocity is not None and self._coasted is not None:
-            before, dt = self._coasted
-            self.velocity.observe(between(before, self.offset), dt)
-        return True
 
     def _fuse_degenerate(self, reference: PreparedScan, points: FloatArray) -> MatchResult | None:
         """A scan that leaves a direction unconstrained (a corridor): point-to-normal ICP

@@ -1,0 +1,133 @@
+"""Finding a scan on a local map when the prediction may be wrong: the evidence against the
+wheels.
+
+A tracker predicts each scan's pose from the last match moved by the wheels, and a matcher
+started there finds the scan's pose nearby. That fails in two ways real logs show: the
+wheels glitch (an encoder or gyro fault turns the prediction 30-90° in one step; the wheels
+stall while the robot moves on) and the match, started far from the truth or held to a
+wrong prior, either fails or settles on the few walls that agree with the wrong pose. A
+gate on the correction ("no more than 0.5 m or 20° from the wheels") then keeps the wheels,
+which are what is wrong.
+
+:func:`relocate` asks the map instead: a correlative search over the whole circle of
+headings and :data:`WINDOW_XY` around the prediction (Olson's multi-resolution search,
+:mod:`slamkit.scanmatch.correlative`, at a coarse :data:`RELOCATE_SEARCH` grid that keeps
+it to tens of milliseconds), refined by point-to-normal ICP *without* the wheels' prior,
+and judged by :func:`~slamkit.scanmatch.normal_icp.surface_fit`, the share of the scan the
+pose lays on the map's surfaces, which does not trust the matcher's own residuals.
+
+:func:`judge` compares the two hypotheses. The laser's wins when its fit is at least
+:data:`TRUSTED_FIT` and beats the wheels' match by :data:`FIT_MARGIN`. Overriding the
+wheels (a pose outside the tracker's gate) asks more: the wheels' pose must also be
+refuted, laying less than :data:`REFUTED_FIT` of the scan on the map. A scan that lies on
+the map where the wheels say it cannot is evidence that the wheels glitched; a scan that
+lies a little better half a metre along a corridor, as it does where it sees new ground,
+is not (a generated building: wheels 0.49, laser 0.70, a 0.74 m slide that doubled the
+run's error; the heading jumps of 55-62° injected there gave wheels 0.0-0.13).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from slamkit._validation import FloatArray
+from slamkit.errors import MatchError
+from slamkit.scanmatch.correlative import (
+    CorrelativeConfig,
+    CorrelativeReference,
+    correlative_match,
+)
+from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp, surface_fit
+from slamkit.scanmatch.result import MatchResult
+
+__all__ = [
+    "FIT_MARGIN",
+    "REFUTED_FIT",
+    "RELOCATE_SEARCH",
+    "TRUSTED_FIT",
+    "WINDOW_XY",
+    "Relocation",
+    "Verdict",
+    "judge",
+    "relocate",
+]
+
+WINDOW_XY = 1.5
+"""Half-width of the search around the prediction [m]: one step of the sparsest logs of the
+corpus (scans a metre or more apart) with a stall's lost motion."""
+
+RELOCATE_SEARCH = CorrelativeConfig(
+    window_xy=WINDOW_XY,
+    window_theta=math.pi,
+    angular_step=math.radians(0.5),
+    resolution=0.1,
+    sigma=0.1,
+    levels=4,
+    max_flatness=None,
+)
+"""The relocation's correlative search: every heading in 0.5° steps, 10 cm cells with a
+10 cm smear (so the half-degree steps lose no point within 10 m), no degeneracy refusal
+(the ICP that follows and the fit judge the result)."""
+
+TRUSTED_FIT = 0.6
+"""A pose that lays at least this share of the scan on the map's surfaces (within 5 cm) is
+a fit the laser can stand on."""
+
+FIT_MARGIN = 0.2
+"""The laser's pose replaces the wheels' match only when its fit beats theirs by this much:
+in a corridor both fit, and then the wheels decide along it."""
+
+REFUTED_FIT = 0.3
+"""A pose that lays less than this share of the scan on the map is refuted: the laser may
+override the wheels (a correction beyond the gate) only where their pose is."""
+
+
+@dataclass(frozen=True)
+class Relocation:
+    """Where :func:`relocate` put the scan (the ICP refinement's match) and its fit."""
+
+    match: MatchResult
+    fit: float
+
+
+Verdict = Literal["wheels", "laser", "lost"]
+"""Which hypothesis :func:`judge` keeps: the wheels' match, the laser's relocation, or
+neither (no hypothesis fits)."""
+
+
+def relocate(
+    cloud: NormalCloud,
+    points: FloatArray,
+    around: FloatArray,
+    icp_config: NormalIcpConfig,
+    reference: CorrelativeReference | None = None,
+) -> Relocation | None:
+    """The scan ``points (K, 2)`` on the map ``cloud`` searched over every heading and
+    :data:`WINDOW_XY` around the pose ``around`` (module docstring), refined by ICP without
+    a prior; None when either step finds nothing. ``reference``: the map's correlative
+    reference built with :data:`RELOCATE_SEARCH`, if the caller keeps one."""
+    ref = reference or CorrelativeReference.from_points(cloud.points, RELOCATE_SEARCH)
+    try:
+        coarse = correlative_match(ref, points, around, RELOCATE_SEARCH)
+        refined = normal_icp(cloud, points, coarse.pose, icp_config)
+    except MatchError:
+        return None
+    return Relocation(refined, surface_fit(cloud, points, refined.pose))
+
+
+def judge(wheels_fit: float, relocation: Relocation | None, overrides: bool) -> Verdict:
+    """Which pose a tracker keeps (module docstring): ``"laser"`` when the relocation fits
+    at least :data:`TRUSTED_FIT` and beats the wheels' fit ``wheels_fit`` by
+    :data:`FIT_MARGIN` and, where it ``overrides`` the wheels (lies outside the tracker's
+    gate), the wheels' pose is refuted (fit below :data:`REFUTED_FIT`); else ``"wheels"``
+    when their pose is not refuted; else ``"lost"``."""
+    laser_fit = -np.inf if relocation is None else relocation.fit
+    refuted = wheels_fit < REFUTED_FIT
+    if laser_fit >= TRUSTED_FIT and laser_fit >= wheels_fit + FIT_MARGIN:
+        if refuted or not overrides:
+            return "laser"
+    return "lost" if refuted else "wheels"
