@@ -283,6 +283,9 @@ def _read_detections(path: Path) -> NumericTable:
     _check_times(det, path, strict=False)
     v = det.values
     _first_bad(det, ~(v[:, 1] > 0), path, "expected a positive range, got {1:g}")
+    # Finite is not enough: a range beyond what the laser reaches is damage, not a tree.
+    far = v[:, 1] > LASER_MAX_RANGE
+    _first_bad(det, far, path, f"range {{1:g}} m: beyond the laser's {LASER_MAX_RANGE:g} m")
     out = ~((v[:, 2] >= 0) & (v[:, 2] <= np.pi))
     _first_bad(det, out, path, "expected a laser bearing in [0, pi], got {2:g}")
     feat = v[:, 5]
