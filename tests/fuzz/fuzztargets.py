@@ -294,23 +294,36 @@ def rosbag_target(name: str = "rosbag", compression: str = "") -> Target | None:
 
     rel = "small.bag"
     # A quirk of the field: angle_max one increment off (5 beams from -1 by 0.5 end at 1.0).
-    off = _small_bag(angle_max=1.5, compression=compression)
+    off = small_bag(angle_max=1.5, compression=compression)
     return Target(
         name,
-        {rel: _small_bag(compression=compression)},
+        {rel: small_bag(compression=compression)},
         lambda root: read_rosbag(root / rel),
         binary=(rel,),
         quirks={"quirk_angle_max_one_increment_off": lambda rng, data: off},
     )
 
 
-def _small_bag(angle_max: float = 1.0, compression: str = "") -> bytes:
+def small_bag(
+    angle_max: float = 1.0,
+    compression: str = "",
+    mounting: tuple[float, float, float] | None = None,
+) -> bytes:
     """Four scans (5 beams from -1 rad by 0.5 rad) and four odometry messages; ``angle_max``
-    as written; ``compression`` ``""`` or ``"lz4"`` (the chunks)."""
+    as written; ``compression`` ``""`` or ``"lz4"`` (the chunks); ``mounting``: a
+    ``/tf_static`` transform ``base_link → laser`` (x, y, yaw)."""
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS1_NOETIC)
+    if "tf2_msgs/msg/TFMessage" not in ts.types:  # not in rosbags' ROS 1 store
+        from rosbags.typesys import get_types_from_msg
+
+        ts.register(
+            get_types_from_msg(
+                "geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"
+            )
+        )
     T = ts.types
     msgs = []
     for k, (x, y, th) in enumerate(_path(4)):
@@ -339,6 +352,10 @@ def _small_bag(angle_max: float = 1.0, compression: str = "") -> bytes:
             ),
         )  # fmt: skip
         msgs.append(("/odom", "nav_msgs/msg/Odometry", ns - 1000, odom))
+        if mounting is not None and k == 0:
+            msgs.append(
+                ("/tf_static", "tf2_msgs/msg/TFMessage", ns - 2000, _tf(T, stamp, mounting))
+            )
         msgs.append(("/scan", "sensor_msgs/msg/LaserScan", ns, scan))
     import tempfile
 
@@ -356,6 +373,21 @@ def _small_bag(angle_max: float = 1.0, compression: str = "") -> bytes:
             w.write(conns[topic], stamp_ns, ts.serialize_ros1(msg, msgtype))
         w.close()
         return path.read_bytes()
+
+
+def _tf(T: Any, stamp: Any, pose: tuple[float, float, float]) -> Any:
+    """A ``TFMessage`` with one transform ``base_link → laser`` at ``pose``."""
+    x, y, yaw = pose
+    Vec, Quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+    tr = T["geometry_msgs/msg/TransformStamped"](
+        header=T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id="base_link"),
+        child_frame_id="laser",
+        transform=T["geometry_msgs/msg/Transform"](
+            translation=Vec(x=x, y=y, z=0.0),
+            rotation=Quat(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)),
+        ),
+    )
+    return T["tf2_msgs/msg/TFMessage"](transforms=[tr])
 
 
 def all_targets() -> list[Target]:
