@@ -3,8 +3,10 @@
     PYTHONPATH=src python tests/fuzz/count.py --n 1000 [--seed 0] [--only carmen,g2o] [--show 5]
 
 Prints one row per reader: mutations, typed errors with a line, typed errors without one
-(whole-file problems), then the defects: typed errors not naming the file, other exceptions,
-accepted-but-wrong (NaN/inf in the result); and the first few defects in full.
+(whole-file problems), accepted results (physically plausible), and of those the quirks
+(real logs' oddities, read and repaired); then the defects: typed errors not naming the
+file, other exceptions, accepted-but-implausible, quirks refused or not reported; and the
+first few defects in full.
 """
 
 from __future__ import annotations
@@ -30,7 +32,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     only = {s for s in args.only.split(",") if s}
     cols = ("mutations", "typed+line", "typed, no line", "typed, file not named",
-            "other exception", "accepted", "accepted-but-wrong")  # fmt: skip
+            "other exception", "accepted", "accepted-but-implausible", "quirk refused",
+            "quirks repaired")  # fmt: skip
     print("| reader | " + " | ".join(cols) + " | seconds |")
     print("|---" * (len(cols) + 2) + "|")
     total: Counter[str] = Counter()
@@ -43,16 +46,17 @@ def main(argv: list[str] | None = None) -> int:
         n_shown = 0
         for outcome in cases(target, args.n, args.seed):
             counts[outcome.kind] += 1
+            counts["quirks"] += outcome.kind == "accepted" and outcome.mutation.startswith("quirk")
             if outcome.kind in DEFECTS and n_shown < args.show:
                 n_shown += 1
                 shown.append(f"{target.name} [{outcome.mutation} of {outcome.file}] "
                              f"{outcome.kind}: {outcome.detail}")  # fmt: skip
         total += counts
-        row = [str(args.n)] + [str(counts[k]) for k in OUTCOMES]
+        row = [str(args.n)] + [str(counts[k]) for k in (*OUTCOMES, "quirks")]
         print(f"| {target.name} | " + " | ".join(row) + f" | {time.perf_counter() - t0:.1f} |")
         sys.stdout.flush()
-    print(f"| **all** | {sum(total.values())} | " + " | ".join(str(total[k]) for k in OUTCOMES)
-          + " | |")  # fmt: skip
+    all_counts = [str(total[k]) for k in (*OUTCOMES, "quirks")]
+    print(f"| **all** | {sum(total[k] for k in OUTCOMES)} | " + " | ".join(all_counts) + " | |")
     for line in shown:
         print(line)
     return 1 if any(total[k] for k in DEFECTS) else 0

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from fuzzcases import Target
+from fuzzcases import QUIRKS, Target
 
 from slamkit.datasets.carmen import read_carmen_log, read_dpslam_log
 from slamkit.datasets.carmen_raw import read_carmen_raw_log
@@ -43,6 +43,9 @@ def _gz(lines: list[str]) -> bytes:
 
 
 RNG_SEED = 2026
+UNIX_T0 = 1018936000.25
+"""The first stamp of the laser logs: a Unix time, as real logs have (so that six
+significant digits lose the timing, as they do in the field)."""
 
 
 def _path(n: int = 12) -> np.ndarray:
@@ -63,11 +66,13 @@ def carmen_target() -> Target:
     ]
     for k, (x, y, th) in enumerate(poses):
         r = " ".join(f"{1.0 + 0.01 * i + 0.1 * k:.3f}" for i in range(180))
-        t = 1.0 + 0.5 * k
-        lines.append(f"ODOM {x:.4f} {y:.4f} {th:.4f} 0 0 0 {t - 0.1} host {t - 0.1}")
-        lines.append(f"FLASER 180 {r} {x} {y} {th} {x} {y} {th} {t} host {t}")
+        t = UNIX_T0 + 0.5 * k
+        lines.append(f"ODOM {x:.4f} {y:.4f} {th:.4f} 0 0 0 {t - 0.1:.6f} host {t - 0.1:.6f}")
+        lines.append(f"FLASER 180 {r} {x} {y} {th} {x} {y} {th} {t:.6f} host {t:.6f}")
     rel = "log.log.gz"
-    return Target("carmen", {rel: _gz(lines)}, lambda root: read_carmen_log(root / rel))
+    return Target(
+        "carmen", {rel: _gz(lines)}, lambda root: read_carmen_log(root / rel), quirks=QUIRKS
+    )
 
 
 def dpslam_target() -> Target:
@@ -87,7 +92,7 @@ def carmen_raw_target() -> Target:
         "PARAM robot_front_laser_max 20",
     ]
     for k, (x, y, th) in enumerate(_path(5).tolist()):
-        t = 100.0 + 0.25 * k
+        t = UNIX_T0 + 0.25 * k
         r = " ".join(repr(1.0 + 0.5 * i + 0.1 * k) for i in range(5))
         lx, ly = x + 0.1 * math.cos(th), y + 0.1 * math.sin(th)
         lines.append(f"ODOM {x!r} {y!r} {th!r} 0.1 0.0 0.0 {t - 0.1!r} myhost {t - 0.09!r}")
@@ -95,7 +100,12 @@ def carmen_raw_target() -> Target:
             f"FLASER 5 {r} {lx!r} {ly!r} {th!r} {x!r} {y!r} {th!r} {t!r} myhost {t + 0.01!r}"
         )
     rel = "log.clf"
-    return Target("carmen_raw", {rel: _text(lines)}, lambda root: read_carmen_raw_log(root / rel))
+    return Target(
+        "carmen_raw",
+        {rel: _text(lines)},
+        lambda root: read_carmen_raw_log(root / rel),
+        quirks=QUIRKS,
+    )
 
 
 # ------------------------------------------------------------------------------------ MRCLAM
@@ -226,7 +236,12 @@ def tum_target() -> Target:
             f"{math.sin(th / 2):.8f} {math.cos(th / 2):.8f}"
         )
     rel = "traj.tum"
-    return Target("tum", {rel: _text(lines)}, lambda root: read_tum(root / rel))
+    return Target("tum", {rel: _text(lines)}, lambda root: read_tum(root / rel), check=_tum_check)
+
+
+def _tum_check(result: tuple[np.ndarray, np.ndarray]) -> list[str]:
+    """A trajectory's stamps must increase strictly (poses are paired by stamp)."""
+    return [] if np.all(np.diff(result[0]) > 0) else ["TUM stamps not strictly increasing"]
 
 
 # --------------------------------------------------------------------------------- pose graphs
@@ -268,24 +283,47 @@ def gtsam_target() -> Target:
 
 
 # ------------------------------------------------------------------------------------- rosbag
-def rosbag_target() -> Target | None:
-    """A small ROS 1 bag written with rosbags' writer; None when rosbags is absent."""
+def rosbag_target(name: str = "rosbag", compression: str = "") -> Target | None:
+    """A small ROS 1 bag written with rosbags' writer (its chunks compressed with
+    ``compression``); None when rosbags is absent."""
     try:
         import rosbags  # noqa: F401
     except ImportError:
         return None
     from slamkit.datasets.rosbag import read_rosbag
 
-    data = _small_bag()
     rel = "small.bag"
-    return Target("rosbag", {rel: data}, lambda root: read_rosbag(root / rel), binary=(rel,))
+    # A quirk of the field: angle_max one increment off (5 beams from -1 by 0.5 end at 1.0).
+    off = small_bag(angle_max=1.5, compression=compression)
+    return Target(
+        name,
+        {rel: small_bag(compression=compression)},
+        lambda root: read_rosbag(root / rel),
+        binary=(rel,),
+        quirks={"quirk_angle_max_one_increment_off": lambda rng, data: off},
+    )
 
 
-def _small_bag() -> bytes:
+def small_bag(
+    angle_max: float = 1.0,
+    compression: str = "",
+    mounting: tuple[float, float, float] | None = None,
+) -> bytes:
+    """Four scans (5 beams from -1 rad by 0.5 rad) and four odometry messages; ``angle_max``
+    as written; ``compression`` ``""`` or ``"lz4"`` (the chunks); ``mounting``: a
+    ``/tf_static`` transform ``base_link → laser`` (x, y, yaw)."""
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS1_NOETIC)
+    if "tf2_msgs/msg/TFMessage" not in ts.types:  # not in rosbags' ROS 1 store
+        from rosbags.typesys import get_types_from_msg
+
+        ts.register(
+            get_types_from_msg(
+                "geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"
+            )
+        )
     T = ts.types
     msgs = []
     for k, (x, y, th) in enumerate(_path(4)):
@@ -293,7 +331,7 @@ def _small_bag() -> bytes:
         stamp = T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
         scan = T["sensor_msgs/msg/LaserScan"](
             header=T["std_msgs/msg/Header"](seq=k, stamp=stamp, frame_id="laser"),
-            angle_min=-1.0, angle_max=1.0, angle_increment=0.5, time_increment=0.0,
+            angle_min=-1.0, angle_max=angle_max, angle_increment=0.5, time_increment=0.0,
             scan_time=0.0, range_min=0.1, range_max=10.0,
             ranges=np.array([1.0, 2.0, 3.0, 4.0, 5.0], dtype=np.float32) + k,
             intensities=np.zeros(0, dtype=np.float32),
@@ -314,12 +352,18 @@ def _small_bag() -> bytes:
             ),
         )  # fmt: skip
         msgs.append(("/odom", "nav_msgs/msg/Odometry", ns - 1000, odom))
+        if mounting is not None and k == 0:
+            msgs.append(
+                ("/tf_static", "tf2_msgs/msg/TFMessage", ns - 2000, _tf(T, stamp, mounting))
+            )
         msgs.append(("/scan", "sensor_msgs/msg/LaserScan", ns, scan))
     import tempfile
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "b.bag"
         w = Writer(path)
+        if compression:
+            w.set_compression(Writer.CompressionFormat[compression.upper()])
         w.open()
         conns: dict[str, Any] = {}
         for topic, msgtype, _, _ in msgs:
@@ -329,6 +373,21 @@ def _small_bag() -> bytes:
             w.write(conns[topic], stamp_ns, ts.serialize_ros1(msg, msgtype))
         w.close()
         return path.read_bytes()
+
+
+def _tf(T: Any, stamp: Any, pose: tuple[float, float, float]) -> Any:
+    """A ``TFMessage`` with one transform ``base_link → laser`` at ``pose``."""
+    x, y, yaw = pose
+    Vec, Quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+    tr = T["geometry_msgs/msg/TransformStamped"](
+        header=T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id="base_link"),
+        child_frame_id="laser",
+        transform=T["geometry_msgs/msg/Transform"](
+            translation=Vec(x=x, y=y, z=0.0),
+            rotation=Quat(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)),
+        ),
+    )
+    return T["tf2_msgs/msg/TFMessage"](transforms=[tr])
 
 
 def all_targets() -> list[Target]:
@@ -348,7 +407,7 @@ def all_targets() -> list[Target]:
         gtsam_target(),
         tum_target(),
     ]
-    bag = rosbag_target()
-    if bag is not None:
-        out.append(bag)
+    for bag in (rosbag_target(), rosbag_target("rosbag_lz4", "lz4")):
+        if bag is not None:
+            out.append(bag)
     return out

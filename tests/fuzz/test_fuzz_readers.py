@@ -1,6 +1,7 @@
 """The fuzz suite of every reader: seeded mutations of small generated inputs must end in a
-typed slamkit error naming the file (and the line where there is one) or in a result whose
-arrays are all finite (graphs: positive-definite information). See docs/fuzzing.md.
+typed slamkit error naming the file (and the line where there is one) or in a physically
+plausible result (fuzzcases.plausibility_problems); the quirks of real logs must be read,
+repaired and counted. See docs/fuzzing.md.
 
 CI runs ``SLAMKIT_FUZZ_N`` (default 150) mutations per reader; ``pytest -m long tests/fuzz``
 runs 2,000 per reader; ``tests/fuzz/count.py`` prints the table of the long mode.
@@ -13,7 +14,17 @@ from collections import Counter
 
 import numpy as np
 import pytest
-from fuzzcases import DEFECTS, OUTCOMES, cases, check_valid, mutate, non_finite_paths
+from fuzzcases import (
+    DEFECTS,
+    OUTCOMES,
+    cases,
+    check_valid,
+    judge,
+    mutate,
+    non_finite_paths,
+    plausibility_problems,
+    write_files,
+)
 from fuzztargets import all_targets
 
 from slamkit.datasets.stream import Dataset
@@ -76,3 +87,31 @@ def test_the_mutator_is_seeded_and_covers_its_kinds() -> None:
 
 def test_outcome_kinds_are_the_documented_ones() -> None:
     assert set(DEFECTS) <= set(OUTCOMES)
+
+
+QUIRKY = sorted(name for name, t in TARGETS.items() if t.quirks)
+
+
+@pytest.mark.parametrize("name", QUIRKY)
+def test_every_quirk_is_read_repaired_and_counted(name: str, tmp_path) -> None:
+    import gzip
+
+    target = TARGETS[name]
+    rel = next(iter(target.files))
+    write_files(tmp_path, target.files)
+    gz = rel.endswith(".gz")
+    text = gzip.decompress(target.files[rel]) if gz else target.files[rel]
+    for quirk, mutation in target.quirks.items():
+        data = mutation(np.random.default_rng(0), text)
+        assert data != text, quirk
+        (tmp_path / rel).write_bytes(gzip.compress(data) if gz else data)
+        outcome = judge(lambda: target.run(tmp_path), tmp_path / rel, quirk, target.check, True)
+        assert outcome.kind == "accepted", f"{quirk}: {outcome.detail}"
+
+
+@pytest.mark.parametrize("name", sorted(TARGETS))
+def test_the_unmutated_input_is_plausible(name: str) -> None:
+    result = check_valid(TARGETS[name])
+    assert plausibility_problems(result) == []
+    check = TARGETS[name].check
+    assert check is None or check(result) == []

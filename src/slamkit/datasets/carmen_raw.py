@@ -98,6 +98,10 @@ DEFAULT_MAX_RANGE = 80.0
 
 GEOMETRY_TOLERANCE = 1e-6
 """Start angles and resolutions [rad] of two scans that agree to this are the same."""
+TWO_PI = 2.0 * math.pi
+ANGLE_SLACK = 1e-3
+"""[rad] a laser line's start angle, field of view and beam span may exceed 2π by (the
+printed values of a 360° laser round up)."""
 
 
 @dataclass(frozen=True)
@@ -245,6 +249,12 @@ def _parse_laser_block(tokens: list[str], kind: str, n_after: int) -> tuple[Any,
     start, fov, res, max_range = head[1], head[2], head[3], head[4]
     if not all(math.isfinite(v) for v in (start, fov, res)) or res <= 0:
         return f"{kind}: start angle, field of view and resolution must be finite, res > 0"
+    # Finite is not enough: a start angle of 1e308 puts every beam on one float, and beams
+    # that span more than a turn are not a 2D laser's.
+    if not (abs(start) <= TWO_PI + ANGLE_SLACK and 0.0 < fov <= TWO_PI + ANGLE_SLACK):
+        return f"{kind}: start angle {start!r} and field of view {fov!r} rad: not angles of a scan"
+    if (n - 1) * res > TWO_PI + ANGLE_SLACK or start + res == start:  # > a turn, or one angle
+        return f"{kind}: {n} beams at {res!r} rad: not the beams of one scan"
     if min(abs(n * res - fov), abs((n - 1) * res - fov)) > res / 2:
         return f"{kind}: {n} beams at {res!r} rad do not span the field of view {fov!r} rad"
     if not (math.isfinite(max_range) and max_range > 0):

@@ -107,6 +107,7 @@ import numpy as np
 from slamkit._validation import check_unique_ids
 from slamkit.config import config_from_mapping, config_to_dict
 from slamkit.datasets.paths import data_root as resolve_data_root
+from slamkit.datasets.stamps import MAX_PLAUSIBLE_STAMP
 from slamkit.datasets.stream import (
     Control,
     Dataset,
@@ -231,6 +232,21 @@ def _landmark_map(table: NumericTable, path: Path) -> LandmarkMap:
     return LandmarkMap(table.values[:, 1:3].copy(), ids)
 
 
+def _check_stamps(table: NumericTable, path: Path) -> None:
+    """Stamps must be Unix times (0 to :data:`MAX_PLAUSIBLE_STAMP`): a finite 1e308 would
+    overflow the differences and the times relative to the start, and reach the data set
+    as an infinite time that no longer names this file."""
+    t = table.values[:, 0]
+    bad = np.flatnonzero(~((t >= 0.0) & (t <= MAX_PLAUSIBLE_STAMP)))
+    if bad.size:
+        r = int(bad[0])
+        raise DatasetFormatError(
+            f"time {t[r]!r} s: not a Unix time (expected 0 to {MAX_PLAUSIBLE_STAMP:g} s)",
+            path,
+            int(table.line_numbers[r]),
+        )
+
+
 def load_mrclam(
     options: Mapping[str, Any] | None = None,
     *,
@@ -265,6 +281,8 @@ def load_mrclam(
             f"expected at least 2 odometry samples, got {len(odo)}", p_odometry
         )
     t_abs = odo.values[:, 0]
+    _check_stamps(odo, p_odometry)
+    _check_stamps(meas, p_readings)
     back = np.flatnonzero(np.diff(t_abs) < 0)
     if back.size:
         line = int(odo.line_numbers[back[0] + 1])

@@ -461,6 +461,12 @@ def _mounting(
     if chain is None:
         return (0.0, 0.0, 0.0), f"no tf from {base!r} to {laser!r}: laser at the robot origin"
     (x, y, yaw), tilt, source = chain
+    if not all(math.isfinite(v) for v in (x, y, yaw, tilt)):
+        raise DatasetFormatError(
+            f"the transform {base} → {laser} on {source} is not finite "
+            f"(x, y, yaw = {x!r}, {y!r}, {yaw!r}); give mounting",
+            path,
+        )
     if tilt > 1e-3:
         raise DatasetFormatError(
             f"the laser frame {laser!r} is tilted {math.degrees(tilt):.2f}° (roll/pitch) "

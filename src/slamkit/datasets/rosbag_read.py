@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
+from slamkit.datasets.rosbag_records import check_bag1_records
 from slamkit.errors import DataNotFoundError, DatasetFormatError, InputError
 from slamkit.geometry.angles import wrap_angle_float
 from slamkit.geometry.pose2 import compose
@@ -420,8 +421,13 @@ def read_bag(path: Path, scan_topic: str, odometry: OdometryRequest) -> BagConte
         KeyError,
         IndexError,
         AssertionError,
+        # lz4 reports a damaged compressed chunk as a bare RuntimeError ("LZ4F_decompress
+        # failed"); in this block nothing else raises one.
+        RuntimeError,
     )
     try:
+        if path.is_file():
+            check_bag1_records(path)  # before rosbags trusts a damaged length
         reader = AnyReader([path], default_typestore=get_typestore(Stores.LATEST))
         with reader:
             return _read_messages(reader, path, scan_topic, odometry)

@@ -132,10 +132,7 @@ def repair_stamps(times: FloatArray, nominal_period: float = 1.0) -> tuple[Float
     if anchors.size < 2 or not (consistent or anchors.size >= 0.5 * n):
         if n == 1 and anchors.size == 1:
             return t.copy(), StampRepair()
-        start = float(t[anchors[0]]) if anchors.size else 0.0
-        first = start - nominal_period * float(anchors[0]) if anchors.size else 0.0
-        out = max(first, 0.0) + nominal_period * np.arange(n, dtype=np.float64)
-        return out, StampRepair({RESTAMP_REASON: n}, restamped=True, period=nominal_period)
+        return _restamp(t, anchors, nominal_period)
     if consistent:
         # A run of equal stamps is one rounded time: its middle line is where the printed
         # value is best, and the lines of the run spread around it.
@@ -151,4 +148,20 @@ def repair_stamps(times: FloatArray, nominal_period: float = 1.0) -> tuple[Float
     before, after = line < index[0], line > index[-1]
     out[before] = anchor_t[0] - period * (index[0] - line[before])
     out[after] = anchor_t[-1] + period * (line[after] - index[-1])
+    if not np.all(np.diff(out) > 0):
+        # Anchors closer than the float spacing at their size (56 lines within 6 µs of a
+        # Unix time): the interpolated stamps would repeat, so the stamps carry no timing.
+        return _restamp(t, anchors, nominal_period)
     return out, StampRepair(counts, period=period)
+
+
+def _restamp(
+    t: FloatArray, anchors: NDArray[np.int64], nominal_period: float
+) -> tuple[FloatArray, StampRepair]:
+    """Every line re-stamped at ``nominal_period`` from the line order, placed so that the
+    first anchor (if any) keeps its time (never before 0)."""
+    n = t.size
+    start = float(t[anchors[0]]) if anchors.size else 0.0
+    first = start - nominal_period * float(anchors[0]) if anchors.size else 0.0
+    out = max(first, 0.0) + nominal_period * np.arange(n, dtype=np.float64)
+    return out, StampRepair({RESTAMP_REASON: n}, restamped=True, period=nominal_period)

@@ -336,6 +336,9 @@ def _read_detections(path: Path) -> NumericTable:
     check_times(det, path, strict=False, unit="ms")
     v = det.values
     raise_at_first(det, ~(v[:, 1] > 0), path, "expected a positive range, got {1:g}")
+    # Finite is not enough: a range beyond what the laser reaches is damage, not a tree.
+    far = v[:, 1] > LASER_MAX_RANGE
+    raise_at_first(det, far, path, f"range {{1:g}} m: beyond the laser's {LASER_MAX_RANGE:g} m")
     out = ~((v[:, 2] >= 0) & (v[:, 2] <= np.pi))
     raise_at_first(det, out, path, "expected a laser bearing in [0, pi], got {2:g}")
     feat = v[:, 5]

@@ -17,7 +17,7 @@ from slamkit.datasets.text import ascii_fields, read_text, text_lines
 from slamkit.errors import DatasetFormatError
 from slamkit.geometry import wrap_angle
 
-__all__ = ["format_tum", "read_tum", "read_tum_matrices", "write_tum"]
+__all__ = ["format_tum", "read_tum", "read_tum_matrices", "read_tum_rows", "write_tum"]
 
 
 def format_tum(times: ArrayLike, poses: ArrayLike) -> str:
@@ -41,8 +41,15 @@ def write_tum(path: str | Path, times: ArrayLike, poses: ArrayLike) -> None:
     Path(path).write_text(format_tum(times, poses), encoding="utf-8")
 
 
-def read_tum(path: str | Path) -> tuple[FloatArray, FloatArray]:
-    """Read a TUM file into ``times (N,)`` and SE(2) poses ``(N, 3)`` (x, y, yaw)."""
+def read_tum_rows(path: str | Path) -> tuple[FloatArray, list[int]]:
+    """The rows ``(N, 8)`` of a TUM file and their 1-based line numbers, checked: eight
+    ASCII numbers per line, finite, and stamps strictly increasing. Any fault is a
+    :class:`DatasetFormatError` naming the file and the line.
+
+    Stamps out of order are refused here rather than sorted: the TUM tools (and evo) keep
+    the file's order too, and a trajectory whose stamps go back or repeat was written wrong
+    (two writers interleaved, a clock reset) in a way no reader can undo; everything that
+    pairs poses by stamp downstream needs them strictly increasing."""
     p = Path(path)
     rows: list[list[float]] = []
     lines: list[int] = []
@@ -61,11 +68,25 @@ def read_tum(path: str | Path) -> tuple[FloatArray, FloatArray]:
             raise DatasetFormatError(f"not a number: {exc}", p, lineno) from None
         if not all(math.isfinite(v) for v in row):
             raise DatasetFormatError("expected finite numbers, got NaN or infinity", p, lineno)
+        if rows and not row[0] > rows[-1][0]:
+            raise DatasetFormatError(
+                f"expected strictly increasing stamps, got {parts[0]} after "
+                f"{rows[-1][0]!r} (line {lines[-1]})",
+                p,
+                lineno,
+            )
         rows.append(row)
         lines.append(lineno)
     if not rows:
         raise DatasetFormatError("no poses in the file", p)
-    a = np.asarray(rows)
+    return np.asarray(rows), lines
+
+
+def read_tum(path: str | Path) -> tuple[FloatArray, FloatArray]:
+    """Read a TUM file into ``times (N,)`` and SE(2) poses ``(N, 3)`` (x, y, yaw); the rows
+    are checked by :func:`read_tum_rows`."""
+    p = Path(path)
+    a, lines = read_tum_rows(p)
     # The yaw is that of the quaternion's direction: divide by its largest component first
     # so that no product overflows (arctan2 does not see the scale); a zero one has none.
     scale = np.max(np.abs(a[:, 4:8]), axis=1)
@@ -81,28 +102,18 @@ def read_tum(path: str | Path) -> tuple[FloatArray, FloatArray]:
 
 def read_tum_matrices(path: str | Path) -> tuple[FloatArray, FloatArray]:
     """Read a TUM file into ``times (N,)`` and SE(3) pose matrices ``(N, 4, 4)`` (the full
-    3D poses; :func:`read_tum` projects onto the plane)."""
+    3D poses; :func:`read_tum` projects onto the plane); the rows are checked by
+    :func:`read_tum_rows`."""
     p = Path(path)
-    rows: list[list[float]] = []
-    for lineno, line in enumerate(text_lines(p.read_text(encoding="utf-8")), start=1):
-        text = line.strip()
-        if not text or text.startswith("#"):
-            continue
-        parts = text.replace(",", " ").split()
-        if len(parts) != 8:
-            raise DatasetFormatError(f"expected 8 numbers, got {len(parts)}", p, lineno)
-        try:
-            rows.append([float(v) for v in parts])
-        except ValueError as exc:
-            raise DatasetFormatError(f"not a number: {exc}", p, lineno) from None
-    if not rows:
-        raise DatasetFormatError("no poses in the file", p)
-    a = np.asarray(rows)
+    a, lines = read_tum_rows(p)
     q = a[:, [7, 4, 5, 6]]  # w, x, y, z
-    norms = np.linalg.norm(q, axis=1)
-    if np.any(norms < 1e-9):
-        raise DatasetFormatError("a quaternion of zero length", p)
-    w, x, y, z = (q / norms[:, None]).T
+    # Divided by the largest component first, so that the norm of 1e300s does not overflow.
+    scale = np.max(np.abs(q), axis=1)
+    if not np.all(scale > 0):
+        i = int(np.flatnonzero(~(scale > 0))[0])
+        raise DatasetFormatError("expected a rotation quaternion, got (0, 0, 0, 0)", p, lines[i])
+    q = q / scale[:, None]
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
     m = np.zeros((a.shape[0], 4, 4))
     m[:, 0, 0] = 1 - 2 * (y * y + z * z)
     m[:, 0, 1] = 2 * (x * y - z * w)

@@ -194,8 +194,10 @@ def _fix_ids(tag: str, g: _Group, problems: _Problems) -> tuple[IntArray, IntArr
         if not fields:
             problems.add(line, f"{tag}: expected at least one vertex id after the tag")
         for f in fields:
-            # ASCII digits only, and an id that the other tags' ids can equal (int64, exact).
-            value = int(f) if f.isascii() and f.isdigit() else -1
+            # ASCII digits only, and an id that the other tags' ids can equal (int64, exact);
+            # the length first, as int() refuses more than 4,300 digits with a ValueError.
+            digits = f.isascii() and f.isdigit() and len(f) <= len(str(MAX_EXACT_INTEGER))
+            value = int(f) if digits else -1
             if not 0 <= value <= MAX_EXACT_INTEGER:
                 problems.add(
                     line,
