@@ -127,7 +127,7 @@ def judge(wheels_fit: float, relocation: Relocation | None, overrides: bool) -> 
     when their pose is not refuted; else ``"lost"``."""
     laser_fit = -np.inf if relocation is None else relocation.fit
     refuted = wheels_fit < REFUTED_FIT
-    if laser_fit >= TRUSTED_FIT and laser_fit >= wheels_fit + FIT_MARGIN:
-        if refuted or not overrides:
-            return "laser"
+    better = laser_fit >= TRUSTED_FIT and laser_fit >= wheels_fit + FIT_MARGIN
+    if better and (refuted or not overrides):
+        return "laser"
     return "lost" if refuted else "wheels"
