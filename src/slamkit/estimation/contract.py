@@ -34,6 +34,7 @@ __all__ = [
     "ParticleSnapshot",
     "ParticleView",
     "PoseEstimate",
+    "RunWarning",
     "SmoothedTrajectory",
     "SnapshotSchedule",
     "StepClock",
@@ -210,6 +211,22 @@ class EstimatorOutput:
     graph: GraphData | None = None
     """The pose graph an estimator built and optimised (written as ``graph.g2o`` by
     :func:`slamkit.app.run_job`)."""
+    warnings: tuple[RunWarning, ...] = ()
+    """What the estimator found that makes its result suspect (printed by ``slamkit run``,
+    listed under ``warnings`` in ``metrics.json`` and on the report page)."""
+
+
+@dataclass(frozen=True)
+class RunWarning:
+    """One reason to doubt a run's result, found by the estimator itself: ``kind`` a short
+    code (``"odometry_glitches"``, ``"track_lost"``, …), ``message`` one line for a person
+    saying what, where and how much."""
+
+    kind: str
+    message: str
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "message": self.message}
 
 
 @dataclass(frozen=True)

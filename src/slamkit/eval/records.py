@@ -7,14 +7,13 @@ common landmarks). JSON only at the io boundary: :meth:`RunScores.as_dict` gives
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
-from typing import Any, Literal
+from typing import Any, Literal, Protocol
 
 from slamkit.eval.association import AssociationScores
 from slamkit.eval.convergence import ConvergenceReport
 from slamkit.eval.gps import GpsError
 from slamkit.eval.innovations import NisSummary
 from slamkit.eval.landmarks import LandmarkError
-from slamkit.eval.monitor import ConsistencyWarning
 from slamkit.eval.relations import RelationError
 from slamkit.eval.trajectory import RelativeError, TrajectoryError
 
@@ -73,6 +72,21 @@ class RunTime:
         }
 
 
+class Finding(Protocol):
+    """A warning about a run: the consistency monitor's
+    (:class:`~slamkit.eval.monitor.ConsistencyWarning`) or an
+    estimator's own (:class:`slamkit.estimation.contract.RunWarning`)."""
+
+    @property
+    def message(self) -> str:
+        """One line for a person."""
+        ...
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values for ``metrics.json``, ``message`` among them."""
+        ...
+
+
 @dataclass(frozen=True)
 class RunScores:
     """Every score of one run. ``None``: the data set has nothing to score it against (no
@@ -102,7 +116,7 @@ class RunScores:
     relations: RelationError | Skipped | None = None
     """The relation metric against the data set's reference relations
     (:func:`slamkit.eval.relation_errors`); skipped when the run covers none of them."""
-    warnings: tuple[ConsistencyWarning, ...] = ()
+    warnings: tuple[Finding, ...] = ()
     """The consistency monitor's findings (:mod:`slamkit.eval.monitor`): NEES or NIS far
     outside its χ² band over a window; empty for a run that looks consistent (or has
     neither statistic). ``metrics.json`` always holds the list."""

@@ -128,7 +128,7 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
             scores,
             relations=_scored(lambda: relation_errors(result.times, result.poses, relations)),
         )
-    scores = replace(scores, warnings=_monitor(arrays, log))
+    scores = replace(scores, warnings=(*_monitor(arrays, log), *result.output.warnings))
     return Evaluation(scores, **arrays)
 
 

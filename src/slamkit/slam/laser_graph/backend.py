@@ -158,6 +158,14 @@ class PoseGraph:
         loops = np.flatnonzero(np.array([kind == "loop" for kind in self._kind], dtype=bool))
         return list(zip(self._i_buf[loops].tolist(), self._j_buf[loops].tolist(), strict=True))
 
+    def loop_chi2(self) -> FloatArray:
+        """``eᵀ Ω e`` of every loop-closure edge at the current estimate ``(L,)``."""
+        loops = np.flatnonzero(np.array([kind == "loop" for kind in self._kind], dtype=bool))
+        return edge_chi2(
+            self.poses, self._i_buf[loops], self._j_buf[loops], self._z_buf[loops],
+            self._info_buf[loops],
+        )  # fmt: skip
+
     def edges(self) -> tuple[np.ndarray, np.ndarray, FloatArray, FloatArray]:
         """``i (E,)``, ``j (E,)``, measurements ``(E, 3)``, information ``(E, 3, 3)`` (copies)."""
         n = self._n_edges

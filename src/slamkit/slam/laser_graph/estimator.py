@@ -52,6 +52,7 @@ from slamkit.slam.laser_graph.frontend import (
     local_map,
     match_neighbours,
 )
+from slamkit.slam.laser_graph.health import UnmatchedStretch, run_warnings
 from slamkit.slam.laser_graph.loops import (
     LoopMatch,
     SubmapCache,
@@ -119,6 +120,8 @@ class LaserGraphSlam(EstimatorShell):
         self._anchors: list[int] = [-1]
         self._offsets: list[FloatArray] = [np.zeros(3)]
         self._overrides: list[tuple[float, FloatArray]] = []  # (stamp, T_wheels_laser)
+        self._stretch = UnmatchedStretch()  # the longest run of unmatched scans
+        self._last_offset = np.zeros(3)  # the wheels' offset at the last scan
 
     # -- the Estimator protocol ---------------------------------------------------------
 
@@ -150,11 +153,15 @@ class LaserGraphSlam(EstimatorShell):
         if last is not None:
             self._tracker.coast(event.t - last)  # only without odometry
         reference = self._local if self._local is not None else self._keys[-1].reference
-        self._tracker.match(reference, points)
+        before = self._last_offset
+        matched = self._tracker.match(reference, points)
+        moved = between(before, self._tracker.odometry_offset)
+        self._stretch.add(event.t, matched, math.hypot(moved[0], moved[1]))
         if self._tracker.last_override is not None:
             self._overrides.append((event.t, self._tracker.last_override))
         if self._tracker.keyframe_due():
             self._add_keyframe(event, points)
+        self._last_offset = self._tracker.odometry_offset.copy()  # (reset at a keyframe)
 
     def estimate(self) -> PoseEstimate:
         return PoseEstimate(compose(self._base(), self._tracker.offset))
@@ -184,11 +191,18 @@ class LaserGraphSlam(EstimatorShell):
             mapper.integrate_many(compose(poses, self._mounting), np.asarray(self._ranges))
             grid = mapper.occupancy_grid()
             diagnostics["mapping"] = mapper.stats.as_dict()
+        warnings = run_warnings(
+            {**diagnostics, "loops_refused": self._counts["loop_rejected:chi2"]},
+            self._overrides,
+            self._stretch,
+            self._graph.loop_chi2(),
+        )
         return EstimatorOutput(
             grid=grid,
             diagnostics=diagnostics,
             trajectory=path,
             graph=self._graph.graph_data() if len(self._graph) else None,
+            warnings=warnings,
         )
 
     # -- views for tests and plots --------------------------------------------------------

@@ -1,0 +1,124 @@
+"""The front end weighs the laser against the wheels: an odometry glitch is found, overridden
+and reported, and a scan that fits a little better elsewhere does not override good wheels."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from slamkit.datasets import load_dataset
+from slamkit.datasets.stream import Control, Dataset
+from slamkit.geometry.pose2 import between
+from slamkit.pipeline import run
+from slamkit.pipeline.evaluate import evaluate
+from slamkit.scanmatch.normal_icp import NormalCloud
+from slamkit.scanmatch.relocate import (
+    FIT_MARGIN,
+    REFUTED_FIT,
+    TRUSTED_FIT,
+    Relocation,
+    judge,
+)
+from slamkit.scanmatch.result import MatchResult
+
+JUMP_DEG = 60.0
+JUMP_AT = 0.4  # of the drive
+
+
+def _with_heading_jump(data: Dataset, jump: float, at: float) -> tuple[Dataset, float]:
+    """``data`` whose wheels report a turn of ``jump`` [rad] too much in one control at the
+    fraction ``at`` of the drive (a gyro or encoder spike: ``ω += jump / dt``), so the
+    prediction carries the wrong heading from then on, and the stamp of the glitch."""
+    controls = [k for k, e in enumerate(data.events) if isinstance(e, Control)]
+    k = controls[int(at * len(controls))]
+    e = data.events[k]
+    assert isinstance(e, Control) and e.dt > 0
+    u = np.array(e.u, dtype=np.float64)
+    u[1] += jump / e.dt
+    events = list(data.events)
+    events[k] = dataclasses.replace(e, u=u)
+    return dataclasses.replace(data, events=tuple(events)), e.t
+
+
+@pytest.fixture(scope="module")
+def loop_world() -> Dataset:
+    return load_dataset("corridor-loop-laser", seed=0)
+
+
+def test_a_heading_jump_is_overridden_and_the_loop_still_closes(loop_world: Dataset) -> None:
+    clean = run("graph-slam", loop_world, seed=0)
+    clean_ate = evaluate(clean, loop_world).scores.ate
+    glitched, t_jump = _with_heading_jump(loop_world, math.radians(JUMP_DEG), JUMP_AT)
+    dr = evaluate(run("dead-reckoning", glitched, seed=0), glitched).scores.ate
+    result = run("graph-slam", glitched, seed=0)
+    ate = evaluate(result, glitched).scores.ate
+    d = result.output.diagnostics
+    assert clean.output.diagnostics["odometry_overridden"] == 0
+    assert d["odometry_overridden"] == 1
+    override = d["odometry_overrides"][0]
+    # found at the first scan after the glitch, and the correction undoes the jump (to 3°)
+    assert 0.0 <= override["t"] - t_jump < 0.25
+    assert abs(override["deg"] + JUMP_DEG) < 3.0
+    assert hasattr(ate, "rmse") and hasattr(clean_ate, "rmse") and hasattr(dr, "rmse")
+    assert dr.rmse > 3.0  # the wheels alone are lost after the jump ...
+    assert ate.rmse < clean_ate.rmse + 0.05  # ... graph SLAM is as good as without it
+
+
+def _relocation(fit: float) -> Relocation:
+    match = MatchResult(np.zeros(3), np.eye(3) * 1e-4, 1.0, 1.0, 5, "normal-icp")
+    return Relocation(match, fit)
+
+
+@pytest.mark.parametrize(
+    ("wheels", "laser", "overrides", "verdict"),
+    [
+        (0.05, 0.9, True, "laser"),  # a glitch: the wheels' pose lies off the map
+        (0.49, 0.70, True, "wheels"),  # a slide along a corridor: the wheels are not refuted
+        (0.40, 0.70, False, "laser"),  # within the gate: the better fit is taken
+        (0.55, 0.70, False, "wheels"),  # ... by the margin only
+        (0.31, 0.98, True, "laser"),  # Intel's return from a one-message glitch of 40°
+        (0.10, 0.50, True, "lost"),  # nothing fits
+        (0.10, None, True, "lost"),
+        (0.45, None, True, "wheels"),
+    ],
+)
+def test_judge_weighs_the_fits(wheels, laser, overrides, verdict) -> None:
+    found = None if laser is None else _relocation(laser)
+    assert judge(wheels, found, overrides) == verdict
+
+
+def test_the_thresholds_are_ordered() -> None:
+    assert 0.0 < REFUTED_FIT < TRUSTED_FIT - FIT_MARGIN < TRUSTED_FIT < 1.0
+
+
+def test_relocate_finds_a_scan_turned_half_a_circle_away() -> None:
+    from slamkit.scanmatch.normal_icp import NormalIcpConfig, surface_fit
+    from slamkit.scanmatch.relocate import relocate
+
+    # An L-shaped room corner with a pillar: unambiguous in every heading.
+    rng = np.random.default_rng(0)
+    walls = [((-4.0, -3.0), (6.0, -3.0)), ((6.0, -3.0), (6.0, 5.0)), ((-4.0, 5.0), (6.0, 5.0))]
+    walls += [((-4.0, -3.0), (-4.0, 1.0)), ((1.0, 1.0), (1.5, 1.0)), ((1.5, 1.0), (1.5, 1.8))]
+    pts, normals = [], []
+    for (ax, ay), (bx, by) in walls:
+        s = np.linspace(0.0, 1.0, int(math.hypot(bx - ax, by - ay) / 0.05))
+        p = np.stack([ax + s * (bx - ax), ay + s * (by - ay)], axis=1)
+        n = np.array([-(by - ay), bx - ax]) / math.hypot(bx - ax, by - ay)
+        pts.append(p)
+        normals.append(np.broadcast_to(n, p.shape))
+    cloud = NormalCloud.build(np.concatenate(pts), np.concatenate(normals))
+    true = np.array([0.4, -0.3, math.radians(35.0)])
+    world = np.concatenate(pts)[::3]
+    c, s_ = math.cos(true[2]), math.sin(true[2])
+    # p_scan = R(θ)ᵀ (p_world − t): the rows times R(θ)
+    scan = (world - true[:2]) @ np.array([[c, -s_], [s_, c]])
+    scan += rng.normal(0.0, 0.005, scan.shape)
+    wrong = np.array([0.9, 0.2, true[2] + math.radians(150.0)])
+    assert surface_fit(cloud, scan, wrong) < REFUTED_FIT
+    found = relocate(cloud, scan, wrong, NormalIcpConfig())
+    assert found is not None and found.fit > 0.9
+    err = between(true, found.match.pose)
+    assert math.hypot(err[0], err[1]) < 0.02 and abs(math.degrees(err[2])) < 0.5
