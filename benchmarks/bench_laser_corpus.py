@@ -163,6 +163,11 @@ def run_case(part: str, name: str, estimator: str, seed: int, root: Path | None)
     ate = scores.ate
     if ate is not None and hasattr(ate, "rmse"):
         row["ate_m"] = ate.rmse
+    row["warnings"] = sorted({getattr(w, "kind", "consistency") for w in scores.warnings})
+    d = result.output.diagnostics
+    for key in ("odometry_overridden", "lost"):
+        if key in d:
+            row[key] = d[key]
     if estimator == "graph-slam" and data.truth.poses is not None:
         row["closures"], row["wrong_closures"] = wrong_closures(result, data)
     return row
@@ -175,8 +180,8 @@ def _cell(row: dict[str, Any], key: str, fmt: str) -> str:
 def _table(rows: list[dict[str, Any]]) -> str:
     lines = [
         "| part | log | estimator | relations, mean ± std [m] | median [m] | rot [deg] | ATE [m] "
-        "| closures (wrong) | glitches | CPU [s] |",
-        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| closures (wrong) | glitches (overridden) | warnings | CPU [s] |",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---|---:|",
     ]
     for r in rows:
         if "error" in r:
@@ -184,10 +189,14 @@ def _table(rows: list[dict[str, Any]]) -> str:
             continue
         rel = f"{r['rel_mean_m']:.3f} ± {r['rel_std_m']:.3f}" if "rel_mean_m" in r else "—"
         closures = f"{r['closures']} ({r['wrong_closures']})" if "closures" in r else "—"
+        glitches = f"{r['glitches']}" + (
+            f" ({r['odometry_overridden']})" if "odometry_overridden" in r else ""
+        )
         lines.append(
             f"| {r['part']} | {r['log']} | {r['estimator']} | {rel} | "
             f"{_cell(r, 'rel_median_m', '.3f')} | {_cell(r, 'rel_rot_deg', '.2f')} | "
-            f"{_cell(r, 'ate_m', '.3f')} | {closures} | {r['glitches']} | {r['cpu_s']:.0f} |"
+            f"{_cell(r, 'ate_m', '.3f')} | {closures} | {glitches} | "
+            f"{', '.join(r['warnings']) or '—'} | {r['cpu_s']:.0f} |"
         )
     return "\n".join(lines)
 
