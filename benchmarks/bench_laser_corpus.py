@@ -27,6 +27,7 @@ parallel on the two cores each count only their own work. Needs the real data
 
     python benchmarks/bench_laser_corpus.py [--parts raw corrected buildings]
         [--estimators graph-slam laser-odometry grid-rbpf] [--buildings 20] [--jobs 2]
+        [--merge]   # re-run some cases, keep the recorded rows of the others
 """
 
 from __future__ import annotations
@@ -238,6 +239,11 @@ def main() -> str:
     parser.add_argument("--buildings", type=int, default=20)
     parser.add_argument("--seed", type=int, default=1, help="the odometry errors' seed")
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument(
+        "--merge",
+        action="store_true",
+        help="keep the recorded rows of the cases not run now (results/laser_corpus.json)",
+    )
     args = parser.parse_args()
     root = find_data_root()
     cases: list[tuple[str, str]] = []
@@ -258,6 +264,10 @@ def main() -> str:
             rows.append(f.result())
             print(_table([rows[-1]]).splitlines()[-1], flush=True)
     wall = time.perf_counter() - wall
+    if args.merge:
+        done = {(r["part"], r["log"], r["estimator"]) for r in rows}
+        recorded = json.loads((RESULTS_DIR / "laser_corpus.json").read_text(encoding="utf-8"))
+        rows += [r for r in recorded["rows"] if (r["part"], r["log"], r["estimator"]) not in done]
     order = {p: k for k, p in enumerate(("raw", "corrected", "buildings"))}
     rows.sort(key=lambda r: (order[r["part"]], r["estimator"], r["log"]))
     total_cpu = sum(r.get("cpu_s", 0.0) for r in rows)
