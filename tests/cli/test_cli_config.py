@@ -221,24 +221,12 @@ def test_map_occupancy_takes_set_overrides(tmp_path):
 # ------------------------------------------------------------------------------------------
 
 
-def _carmen_log(path, *, corrected: bool, scans: int = 6):
-    """A small CARMEN log of ``scans`` FLASER lines driving along x (with the NEFF lines a
-    corrected log has after each scan when ``corrected``)."""
-    lines = []
-    for k in range(scans):
-        ranges = " ".join(f"{1.0 + 0.01 * i:g}" for i in range(180))
-        x, t = 0.1 * k, 1.0 + k
-        lines.append(f"FLASER 180 {ranges} {x} 0 0 {x} 0 0 {t} host {t}")
-        if corrected:
-            lines.append("NEFF 30")
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
-def test_config_show_with_a_path_documents_the_chosen_readers_options_and_runs(tmp_path):
+def test_config_show_with_a_path_documents_the_chosen_readers_options_and_runs(
+    tmp_path, carmen_log
+):
     from slamkit.datasets.carmen import CarmenOptions
 
-    log = _carmen_log(tmp_path / "run.log", corrected=True)
+    log = carmen_log()
     text = _run("config", "show", "dead-reckoning", "--data", str(log))
     parsed = tomllib.loads(text)
     table = parsed["dataset"]
@@ -264,11 +252,11 @@ def test_config_show_with_a_path_documents_the_chosen_readers_options_and_runs(t
     assert json.loads((a / "config.json").read_text())["dataset"]["path"] == str(log.resolve())
 
 
-def test_config_show_names_each_readers_options(tmp_path):
+def test_config_show_names_each_readers_options(tmp_path, carmen_log):
     from slamkit.datasets.carmen_raw import CarmenRawOptions
     from slamkit.datasets.landmark_csv import LandmarkCsvOptions
 
-    raw = _carmen_log(tmp_path / "raw.log", corrected=False)
+    raw = carmen_log("raw.log", corrected=False)
     csv = tmp_path / "lm.csv"
     csv.write_text("kind,t,a,b,c\ncontrol,0.1,1.0,0.0,0.1\nreading,0.1,2.0,0.1,1\n")
     for path, cls, reader in ((raw, CarmenRawOptions, "carmen-raw"),

@@ -28,7 +28,7 @@ import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from slamkit.config import (
     SettingDoc,
@@ -39,11 +39,15 @@ from slamkit.config import (
 )
 from slamkit.errors import ConfigError
 
+if TYPE_CHECKING:
+    from slamkit.datasets.stream import Dataset
+
 __all__ = [
     "DEFAULT_DATA",
     "RunConfig",
     "apply_overrides",
     "config_toml",
+    "dataset_table",
     "dataset_toml",
     "defaults_toml",
     "parse_value",
@@ -141,6 +145,20 @@ def resolve_data(cli_data: str | None, config: RunConfig, default: str = DEFAULT
     if cli_data is not None:
         return cli_data
     return config.data if config.data is not None else default
+
+
+def dataset_table(dataset: Dataset, options: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The ``[dataset]`` table ``config.json`` writes of a loaded data set: its ``name``; the
+    ``path`` and ``reader`` of the file it was read from (so that the file re-runs the run,
+    read by the same reader even when the run named another than the content calls for);
+    and its resolved options (the loader's record, else ``options``)."""
+    table: dict[str, Any] = {"name": dataset.name}
+    if "path" in dataset.metadata:
+        table["path"] = dataset.metadata["path"]
+        if "reader" in dataset.metadata:
+            table["reader"] = dataset.metadata["reader"]
+    table.update(dataset.metadata.get("config", dict(options or {})))
+    return table
 
 
 def parse_value(text: str) -> Any:
