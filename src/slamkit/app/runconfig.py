@@ -302,12 +302,8 @@ def dataset_toml(
             if isinstance(options, options_type)
             else config_from_mapping(options_type, options, "dataset")
         )
-        return (
-            "\n".join(
-                _documented(describe_settings(options_type, instance=instance), "dataset", first)
-            )
-            + "\n"
-        )
+        docs = describe_settings(options_type, instance=instance)
+        return "\n".join(_documented(docs, "dataset", first)) + "\n"
     lines = ["[dataset]", *first]
     nested = []
     for name, value in config_to_dict(options).items():
