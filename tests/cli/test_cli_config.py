@@ -214,3 +214,66 @@ def test_map_occupancy_takes_set_overrides(tmp_path):
          "--set", "dataset.sigma_v=0.2")  # fmt: skip
     text = (out / "config.json").read_text()
     assert '"max_range": 12.0' in text and '"sigma_v": 0.2' in text
+
+
+# ------------------------------------------------------------------------------------------
+# a data file's options: the reader chosen for it, documented, and the file runs as printed
+# ------------------------------------------------------------------------------------------
+
+
+def test_config_show_with_a_path_documents_the_chosen_readers_options_and_runs(
+    tmp_path, carmen_log
+):
+    from slamkit.datasets.carmen import CarmenOptions
+
+    log = carmen_log()
+    text = _run("config", "show", "dead-reckoning", "--data", str(log))
+    parsed = tomllib.loads(text)
+    table = parsed["dataset"]
+    assert table["path"] == str(log.resolve())
+    # The corrected log's reader's options, each under its attribute docstring.
+    for doc in describe_settings(CarmenOptions):
+        if doc.default is None:
+            assert f"# {doc.key} =   (unset)" in text
+        else:
+            assert table[doc.key] == doc.default
+    assert "# Standard deviation of the noise added to each step's translation [m]." in text
+    # The reader key: documented with its allowed values, commented out (chosen by content).
+    assert "reader" not in table
+    assert '# (one of "rosbag", "carmen-raw", "carmen-corrected", "dpslam", "landmark-csv")' in text
+    assert '# reader = "carmen-corrected"' in text
+    # The printed file runs as it is, as --data FILE does.
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text)
+    a, b = tmp_path / "a", tmp_path / "b"
+    _run("run", "dead-reckoning", "--config", str(cfg), "--out", str(a), "--no-plots")
+    _run("run", "dead-reckoning", "--data", str(log), "--out", str(b), "--no-plots")
+    assert (a / "trajectory.tum").read_bytes() == (b / "trajectory.tum").read_bytes()
+    assert json.loads((a / "config.json").read_text())["dataset"]["path"] == str(log.resolve())
+
+
+def test_config_show_names_each_readers_options(tmp_path, carmen_log):
+    from slamkit.datasets.carmen_raw import CarmenRawOptions
+    from slamkit.datasets.landmark_csv import LandmarkCsvOptions
+
+    raw = carmen_log("raw.log", corrected=False)
+    csv = tmp_path / "lm.csv"
+    csv.write_text("kind,t,a,b,c\ncontrol,0.1,1.0,0.0,0.1\nreading,0.1,2.0,0.1,1\n")
+    for path, cls, reader in ((raw, CarmenRawOptions, "carmen-raw"),
+                              (csv, LandmarkCsvOptions, "landmark-csv")):  # fmt: skip
+        text = _run("config", "show", "dead-reckoning", "--data", str(path))
+        table = tomllib.loads(text)["dataset"]
+        keys = {d.key for d in describe_settings(cls) if d.default is not None}
+        assert keys <= set(table) and f'# reader = "{reader}"' in text, reader
+    res = runner.invoke(app, ["config", "show", "dead-reckoning", "--data", "intle"])
+    assert res.exit_code == 1 and "intel" in res.output  # a misspelt name lists the names
+
+
+def test_every_registered_data_set_names_the_class_of_its_options():
+    from slamkit.datasets import list_datasets
+
+    for entry in list_datasets():
+        cls = entry.options_type()
+        assert cls is not None, entry.name
+        config_from_mapping(cls, entry.defaults, entry.name)  # its variant's defaults fit
+        assert any(d.doc for d in describe_settings(cls)), entry.name

@@ -108,3 +108,56 @@ def test_consistency_warnings_are_listed_on_the_page(tmp_path: Path) -> None:
         '<ul id="warnings"><li>NEES inconsistent (over-confident): mean 7.2e+06 over steps' in text
     )
     assert "&lt;b&gt;</li>" in text  # escaped
+
+
+def test_run_page_says_what_reading_the_data_did_and_lists_every_warning(tmp_path: Path) -> None:
+    run = _folder(tmp_path, "r", 0.5)
+    metrics = json.loads((run / "metrics.json").read_text())
+    metrics["reading"] = {
+        "file": "intel.log",
+        "what": "scans",
+        "records": 912,
+        "used": 910,
+        "dropped": {"FLASER: a field is not a number": 2},
+        "repaired": {"stamps out of order": 4},
+        "notes": ["PARAM laser_front_laser_fov 3.14159 read as radians (180° at 1°)"],
+    }
+    metrics["warnings"] = [
+        {"kind": "odometry_glitches", "message": "3 odometry glitches overridden at 12.5 s"},
+        {"message": "NEES above its band over 40 s"},
+    ]
+    (run / "metrics.json").write_text(json.dumps(metrics))
+    text = run_html(read_run_folder(run))
+    section = text[text.index("<h2>Reading the data</h2>") : text.index("<h2>Figures</h2>")]
+    assert (
+        '<p id="reading">read intel.log: 910 of 912 scans; dropped 2 FLASER: a field is not a '
+        "number<br>repaired 4 stamps out of order; PARAM laser_front_laser_fov 3.14159 read as "
+        "radians (180° at 1°)</p>"
+    ) in section
+    assert "<th>dropped</th><td>FLASER: a field is not a number</td>" in section
+    assert "<th>repaired</th><td>stamps out of order</td>" in section
+    assert '<ul id="reading-notes"><li>PARAM laser_front_laser_fov' in section
+    assert "more than 10% of a file" in section
+    # Not also in the metrics table as dotted keys.
+    assert "reading.dropped" not in text and "reading.repaired" not in text
+    table = text[text.index('<table id="metrics">') :].split("</table>", 1)[0]
+    assert "reading" not in table and "warnings" not in table
+    # Both kinds of warning are listed, the estimator's kind as the tooltip.
+    assert '<li title="odometry_glitches">3 odometry glitches overridden at 12.5 s</li>' in text
+    assert "<li>NEES above its band over 40 s</li>" in text
+    # The comparison page has the reading as one row in words.
+    assert flatten_metrics(metrics)["reading"] == "910 of 912 scans, 2 dropped, 4 repaired, 1 note"
+
+
+def test_a_clean_reading_is_one_line_and_a_malformed_one_is_refused(tmp_path: Path) -> None:
+    run = _folder(tmp_path, "r", 0.5)
+    metrics = json.loads((run / "metrics.json").read_text())
+    metrics["reading"] = {"file": "a.bag", "records": 5, "used": 5}
+    (run / "metrics.json").write_text(json.dumps(metrics))
+    text = run_html(read_run_folder(run))
+    assert '<p id="reading">read a.bag: 5 of 5 scans</p>' in text
+    assert "reading-counts" not in text
+    metrics["reading"] = {"file": "a.bag", "records": "five", "used": 5}
+    (run / "metrics.json").write_text(json.dumps(metrics))
+    with pytest.raises(InputError, match=r"reading\.records"):
+        read_run_folder(run)

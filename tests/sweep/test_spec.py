@@ -234,3 +234,35 @@ def test_the_sweep_package_imports_neither_matplotlib_nor_dask():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_a_file_is_a_data_set_by_its_path_and_its_readers_options_are_checked(
+    tmp_path, carmen_log, monkeypatch
+):
+    carmen_log("run.log")
+    monkeypatch.chdir(tmp_path)
+    raw = _spec(
+        sweep={"estimators": ["dead-reckoning"], "datasets": ["run.log"]},
+        dataset={"odometry_sigma_trans": [0.02, 0.05]},
+    )
+    spec = parse_spec(raw)
+    # A relative path is the file in the current folder, named absolutely from then on.
+    assert spec.datasets == (str((tmp_path / "run.log").resolve()),)
+    assert [p.dataset_options for p in spec.points()] == [
+        {"odometry_sigma_trans": 0.02},
+        {"odometry_sigma_trans": 0.05},
+    ]
+    # The [dataset] options go to every data set: five-features (a simulated world) has no
+    # odometry noise of a log's reader.
+    raw["sweep"]["datasets"] = ["run.log", "five-features"]
+    with pytest.raises(ConfigError, match=r"\[dataset\] for five-features: unknown option"):
+        parse_spec(raw)
+    with pytest.raises(ConfigError, match=r"run\.log: unknown option\(s\) scan_topic; known: "):
+        parse_spec(_spec(sweep={"datasets": ["run.log"]}, dataset={"scan_topic": "/scan"}))
+    # A named reader's options: the raw reader has `laser`, the corrected one has not.
+    named = _spec(
+        sweep={"datasets": ["run.log"]}, dataset={"reader": "carmen-raw", "laser": "FLASER"}
+    )
+    assert parse_spec(named).dataset_fixed == {"reader": "carmen-raw", "laser": "FLASER"}
+    with pytest.raises(ConfigError, match="laser"):
+        parse_spec(_spec(sweep={"datasets": ["run.log"]}, dataset={"laser": "FLASER"}))

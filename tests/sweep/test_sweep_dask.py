@@ -173,3 +173,19 @@ def test_a_finished_run_whose_result_was_lost_is_not_run_again(tmp_path):
     assert again.ok, again.error
     assert again.metrics == first.metrics
     assert first.metrics["ate"]["rmse"] > 0
+
+
+def test_a_sweep_over_a_log_file_given_by_its_path(client, tmp_path, carmen_log):
+    log = carmen_log("run.log")  # a corrected CARMEN log: odometry = poses + seeded noise
+    spec = {
+        "sweep": {"estimators": ["dead-reckoning"], "datasets": [str(log)], "seeds": [0, 1]},
+        "dataset": {"odometry_sigma_trans": [0.0, 0.05]},
+    }
+    result = run_sweep(spec, tmp_path / "out", client=client)
+    assert (result.total, result.executed, result.failed) == (4, 4, 0), result.rows
+    rows = read_table(tmp_path / "out")
+    assert {r["dataset"] for r in rows} == {str(log.resolve())}
+    assert all(r["reading.used"] == 6 for r in rows)
+    # The option reached the reader: the same seed draws other odometry at each value.
+    by_point = {(r["seed"], r["dataset.odometry_sigma_trans"]): r["ate.rmse"] for r in rows}
+    assert len(by_point) == 4 and all(by_point[s, 0.0] != by_point[s, 0.05] for s in (0, 1))

@@ -12,6 +12,7 @@ from typing import Any
 from slamkit.app.mapping import USABLE_RANGE_ESTIMATORS, with_usable_range
 from slamkit.app.outputs import check_formats, write_result_files
 from slamkit.app.presets import resolve_preset
+from slamkit.app.runconfig import dataset_table
 from slamkit.datasets.files import load_data
 from slamkit.datasets.reading import ReadingSummary
 from slamkit.datasets.stream import Dataset
@@ -155,11 +156,7 @@ def run_job(
         figures = run_figures(result, dataset, evaluation)
     resolved = {
         "estimator": {"name": entry.name, **result.config},
-        "dataset": {
-            "name": dataset.name,
-            **({"path": dataset.metadata["path"]} if "path" in dataset.metadata else {}),
-            **dataset.metadata.get("config", {}),
-        },
+        "dataset": dataset_table(dataset),
         "seed": request.seed,
         "preset": None if preset is None else preset.name,
     }

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from slamkit.app.runconfig import dataset_table
 from slamkit.config import config_from_mapping, config_to_dict
 from slamkit.datasets import Dataset
 from slamkit.datasets.files import load_data
@@ -142,7 +143,7 @@ def occupancy_map_job(
     stats["bounds"] = None if result.bounds is None else list(result.bounds)
     resolved = {
         "mapping": config_to_dict(cfg),
-        "dataset": {"name": data.name, **data.metadata.get("config", ds_options)},
+        "dataset": dataset_table(data, ds_options),
         "seed": seed,
     }
     from slamkit.viz.maps import save_map_image  # plotting only in the app layer

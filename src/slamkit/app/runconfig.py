@@ -28,15 +28,26 @@ import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from slamkit.config import describe_settings, load_config_file
+from slamkit.config import (
+    SettingDoc,
+    config_from_mapping,
+    config_to_dict,
+    describe_settings,
+    load_config_file,
+)
 from slamkit.errors import ConfigError
+
+if TYPE_CHECKING:
+    from slamkit.datasets.stream import Dataset
 
 __all__ = [
     "DEFAULT_DATA",
     "RunConfig",
     "apply_overrides",
+    "config_toml",
+    "dataset_table",
     "dataset_toml",
     "defaults_toml",
     "parse_value",
@@ -136,6 +147,20 @@ def resolve_data(cli_data: str | None, config: RunConfig, default: str = DEFAULT
     return config.data if config.data is not None else default
 
 
+def dataset_table(dataset: Dataset, options: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The ``[dataset]`` table ``config.json`` writes of a loaded data set: its ``name``; the
+    ``path`` and ``reader`` of the file it was read from (so that the file re-runs the run,
+    read by the same reader even when the run named another than the content calls for);
+    and its resolved options (the loader's record, else ``options``)."""
+    table: dict[str, Any] = {"name": dataset.name}
+    if "path" in dataset.metadata:
+        table["path"] = dataset.metadata["path"]
+        if "reader" in dataset.metadata:
+            table["reader"] = dataset.metadata["reader"]
+    table.update(dataset.metadata.get("config", dict(options or {})))
+    return table
+
+
 def parse_value(text: str) -> Any:
     """A ``--set`` value read as a TOML value (``2``, ``0.5``, ``true``, ``[1, 2]``,
     ``"nn"``, ``inf``); anything TOML does not read is taken as a string (``nn``)."""
@@ -211,43 +236,77 @@ def _toml_value(value: Any) -> str:
     return json.dumps(str(value))
 
 
+def _documented(docs: Iterable[SettingDoc], table: str, first: Iterable[str] = ()) -> list[str]:
+    """The ``[table]`` of TOML lines: ``first`` (lines written right under the header), then
+    each setting under its documentation (comments), sections as ``[table.section]``
+    tables, a setting whose value is ``None`` (unset) commented out."""
+    lines = [f"[{table}]", *first]
+    current = table
+    for doc in docs:
+        *sections, name = doc.key.split(".")
+        header = ".".join([table, *sections])
+        if header != current:
+            lines += ["", f"[{header}]"]
+            current = header
+        lines.append("")
+        lines += [f"# {paragraph}" for paragraph in doc.doc.splitlines() if paragraph]
+        lines.append(f"# ({doc.type}" + (f"; {doc.expected})" if doc.expected else ")"))
+        if doc.default is None:
+            lines.append(f"# {name} =   (unset)")
+        else:
+            lines.append(f"{name} = {_toml_value(doc.default)}")
+    return lines
+
+
 def defaults_toml(config_type: type, table: str, title: str = "") -> str:
     """The defaults of ``config_type`` as a TOML file, each setting under its documentation
     (comments), sections as ``[table.section]`` tables. A setting whose default is ``None``
     (unset: the estimator chooses) is written commented out. The text reads back with
     :func:`read_run_config` to the defaults."""
     lines = [f"# {title}", ""] if title else []
-    current = None
-    for doc in describe_settings(config_type):
-        *sections, name = doc.key.split(".")
-        header = ".".join([table, *sections])
-        if header != current:
-            if current is not None:
-                lines.append("")
-            lines.append(f"[{header}]")
-            current = header
-        lines.append("")
-        for paragraph in doc.doc.splitlines() or [""]:
-            if paragraph:
-                lines.append(f"# {paragraph}")
-        allowed = f"{doc.type}" + (f"; {doc.expected}" if doc.expected else "")
-        lines.append(f"# ({allowed})")
-        if doc.default is None:
-            lines.append(f"# {name} =   (unset)")
-        else:
-            lines.append(f"{name} = {_toml_value(doc.default)}")
+    lines += _documented(describe_settings(config_type), table)
     return "\n".join(lines) + "\n"
 
 
-def dataset_toml(data: str, options: Mapping[str, Any]) -> str:
-    """A ``[dataset]`` table naming ``data`` (a registered name, else ``path``) with the
-    data set's resolved ``options`` (as ``config.json`` writes them)."""
+def dataset_toml(
+    data: str,
+    options: Mapping[str, Any] | Any,
+    options_type: type | None = None,
+    reader: str | None = None,
+) -> str:
+    """A ``[dataset]`` table naming ``data`` (a registered name, else ``path``) with the data
+    set's resolved ``options`` (as ``config.json`` writes them, or the options object).
+
+    With ``options_type`` (the class the data set reads its options into), each option is
+    written under its documentation, as :func:`defaults_toml` writes an estimator's. With
+    ``reader`` (the reader chosen for a path), the ``reader`` key is documented with its
+    allowed values and written commented out, so that the file keeps choosing by content."""
     from slamkit.datasets import DATASETS
 
     key = "name" if data in DATASETS else "path"
-    lines = ["[dataset]", f"{key} = {_toml_value(data)}"]
+    first = [f"{key} = {_toml_value(data)}"]
+    if reader is not None:
+        from slamkit.datasets.files import READERS
+
+        first += [
+            "",
+            f"# The reader of the file, chosen by its content ({reader} for this one); name "
+            "one to override the choice.",
+            f"# Each reader has options of its own: those below are {reader}'s.",
+            "# (one of " + ", ".join(_toml_value(r) for r in READERS) + ")",
+            f"# reader = {_toml_value(reader)}",
+        ]
+    if options_type is not None:
+        instance = (
+            options
+            if isinstance(options, options_type)
+            else config_from_mapping(options_type, options, "dataset")
+        )
+        docs = describe_settings(options_type, instance=instance)
+        return "\n".join(_documented(docs, "dataset", first)) + "\n"
+    lines = ["[dataset]", *first]
     nested = []
-    for name, value in options.items():
+    for name, value in config_to_dict(options).items():
         if value is None:
             lines.append(f"# {name} =   (unset)")
         elif isinstance(value, Mapping):
@@ -257,3 +316,43 @@ def dataset_toml(data: str, options: Mapping[str, Any]) -> str:
     for name, value in nested:
         lines.append(f"{name} = {_toml_value(value)}")
     return "\n".join(lines) + "\n"
+
+
+def config_toml(
+    estimator: str, data: str | None = None, *, data_root: str | Path | None = None
+) -> str:
+    """``slamkit config show``: ``estimator``'s settings with their defaults and
+    documentation as a TOML file; with ``data`` (a registered name or a path) the data set's
+    ``[dataset]`` table first, its options documented (:func:`dataset_toml`), so that the
+    file runs as it is with ``slamkit run ESTIMATOR --config FILE``.
+
+    A registered data set is loaded for its resolved options (a loader may set its own
+    defaults); a path is not read beyond the head its reader is chosen by
+    (:func:`slamkit.datasets.files.file_options`), so that a file that does not read yet
+    still shows the options that may make it read."""
+    from slamkit.pipeline import get_estimator_entry
+
+    entry = get_estimator_entry(estimator)
+    title = (
+        f"slamkit run {entry.name} --config FILE: the defaults of {entry.name} "
+        f"({entry.description}).\n# A preset (slamkit/app/presets.py) may change some of them "
+        "on its data set; a setting written here wins over the preset."
+    )
+    text = defaults_toml(entry.config_type(), "estimator", title)
+    if data is None:
+        return text
+    from slamkit.datasets import DATASETS
+
+    if data in DATASETS:
+        from slamkit.datasets.files import load_data
+
+        resolved = load_data(data, data_root=data_root).metadata.get("config", {})
+        table = dataset_toml(data, resolved, DATASETS[data].options_type())
+    else:
+        from slamkit.datasets.files import file_options
+
+        reader, options, _ = file_options(data, data_root=data_root)
+        path = str(Path(data).expanduser().resolve())  # as config.json names it
+        table = dataset_toml(path, options, type(options), reader)
+    head, _, rest = text.partition("\n[estimator]")
+    return f"{head}\n{table}\n[estimator]{rest}"

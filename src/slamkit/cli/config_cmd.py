@@ -1,9 +1,10 @@
 """``slamkit config …``: configuration files. The main app adds :data:`config_app` as
 ``config``.
 
-``slamkit config show ESTIMATOR`` prints the estimator's settings with their defaults and
-documentation as a TOML file (:func:`slamkit.app.runconfig.defaults_toml`): redirect it into
-a file, edit it and pass it to ``slamkit run ESTIMATOR --config FILE``.
+``slamkit config show ESTIMATOR [--data NAME|PATH]`` prints the estimator's settings (and the
+data set's options) with their defaults and documentation as a TOML file
+(:func:`slamkit.app.runconfig.config_toml`): redirect it into a file, edit it and pass it to
+``slamkit run ESTIMATOR --config FILE``.
 """
 
 from __future__ import annotations
@@ -31,29 +32,16 @@ def show_command(
             "--data",
             "-d",
             metavar="NAME|PATH",
-            help="Also write the [dataset] table of this data set with its options.",
+            help=r"Also write the \[dataset] table of this data set (a name, or a file: the "
+            "options of the reader chosen for it) with its options documented.",
             show_default=False,
         ),
     ] = None,
     data_root: DataRootOption = None,
 ) -> None:
     """Print ESTIMATOR's settings, their defaults and documentation, as a TOML config file
-    (with --data, the data set's table first, so the file runs as it is)."""
-    from slamkit.app.runconfig import dataset_toml, defaults_toml
-    from slamkit.pipeline import get_estimator_entry
+    (with --data, the data set's table first, its options documented, so the file runs as
+    it is)."""
+    from slamkit.app.runconfig import config_toml
 
-    entry = get_estimator_entry(estimator)
-    title = (
-        f"slamkit run {entry.name} --config FILE: the defaults of {entry.name} "
-        f"({entry.description}).\n# A preset (slamkit/app/presets.py) may change some of them "
-        "on its data set; a setting written here wins over the preset."
-    )
-    text = defaults_toml(entry.config_type(), "estimator", title)
-    if data is not None:
-        from slamkit.datasets.files import load_data
-
-        dataset = load_data(data, data_root=data_root)
-        table = dataset_toml(data, dataset.metadata.get("config", {}))
-        head, _, rest = text.partition("\n[estimator]")
-        text = f"{head}\n{table}\n[estimator]{rest}"
-    typer.echo(text, nl=False)
+    typer.echo(config_toml(estimator, data, data_root=data_root), nl=False)

@@ -185,6 +185,7 @@ def _occupancy(
 ) -> None:
     from slamkit.app.mapping import occupancy_map_job
     from slamkit.app.runconfig import apply_overrides, read_run_config, resolve_data
+    from slamkit.datasets.files import data_label
     from slamkit.errors import ConfigError
 
     cfg = apply_overrides(read_run_config(config, "mapping"), overrides or [], "mapping")
@@ -202,7 +203,7 @@ def _occupancy(
     if max_range is not None or "max_range" not in model:
         model["max_range"] = _usable_range(max_range)
         mapping["model"] = model
-    target = out if out is not None else Path("results") / f"map-{data}"
+    target = out if out is not None else Path("results") / f"map-{data_label(data)}"
     with progress_bar(f"mapping {data}", unit="scans") as progress:
         report = occupancy_map_job(
             data,

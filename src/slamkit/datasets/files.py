@@ -27,6 +27,7 @@ reads, without its relations. ``metadata["path"]`` holds the absolute path read.
 
 from __future__ import annotations
 
+import importlib
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -40,12 +41,17 @@ from slamkit.errors import ConfigError, DataNotFoundError, DatasetFormatError, U
 
 __all__ = [
     "READERS",
+    "READER_OPTIONS",
     "SUPPORTED_FORMATS",
     "data_label",
+    "dataset_options_type",
     "file_format",
+    "file_options",
     "laser_log_format",
     "load_data",
     "load_file",
+    "reader_for",
+    "reader_options_type",
 ]
 
 SUPPORTED_FORMATS = (
@@ -68,6 +74,15 @@ READERS: tuple[FileFormat, ...] = (
     "landmark-csv",
 )
 """The readers a path can go to; the ``reader`` option names one to bypass the choice."""
+
+READER_OPTIONS: dict[FileFormat, str] = {
+    "rosbag": "slamkit.datasets.rosbag:RosbagOptions",
+    "carmen-raw": "slamkit.datasets.carmen_raw:CarmenRawOptions",
+    "carmen-corrected": "slamkit.datasets.carmen:CarmenOptions",
+    "dpslam": "slamkit.datasets.carmen:DpSlamOptions",
+    "landmark-csv": "slamkit.datasets.landmark_csv:LandmarkCsvOptions",
+}
+"""``"module:Class"`` of each reader's options (the ``[dataset]`` keys besides ``reader``)."""
 
 SNIFF_LINES = 2000
 """Lines of a CARMEN-family log read to tell its kind (a corrected log's first ``NEFF``
@@ -114,6 +129,33 @@ def file_format(path: str | Path) -> FileFormat:
     raise DatasetFormatError(
         f"unknown kind of file {suffix or '(no suffix)'!r} (supported: {SUPPORTED_FORMATS})", p
     )
+
+
+def reader_for(path: str | Path, options: Mapping[str, Any] | None = None) -> FileFormat:
+    """The reader :func:`load_file` reads ``path`` with: ``options["reader"]`` when given
+    (checked), else the one its kind calls for (:func:`file_format`)."""
+    named = _reader_option((options or {}).get("reader"))
+    return named if named is not None else file_format(Path(path).expanduser())
+
+
+def reader_options_type(reader: str) -> type:
+    """The options class of ``reader`` (one of :data:`READERS`): the keys its ``[dataset]``
+    table takes besides ``reader``."""
+    kind = _reader_option(reader)
+    assert kind is not None  # a string: a reader's name, or ConfigError above
+    module, _, name = READER_OPTIONS[kind].partition(":")
+    cls: type = getattr(importlib.import_module(module), name)
+    return cls
+
+
+def dataset_options_type(spec: str, options: Mapping[str, Any] | None = None) -> type | None:
+    """The class a data set reads its ``[dataset]`` options into: a registered name's
+    (:meth:`~slamkit.datasets.registry.DatasetEntry.options_type`; None when it takes
+    none), else that of the reader of the path ``spec`` (:func:`reader_for`; a missing path
+    raises :class:`~slamkit.errors.DataNotFoundError`)."""
+    if spec in DATASETS:
+        return DATASETS[spec].options_type()
+    return reader_options_type(reader_for(spec, options))
 
 
 def load_file(
@@ -166,6 +208,50 @@ def _reader_option(value: Any) -> FileFormat | None:
     raise ConfigError(f"reader: expected one of {', '.join(READERS)}, got {value!r}")
 
 
+def file_options(
+    path: str | Path,
+    options: Mapping[str, Any] | None = None,
+    *,
+    data_root: str | Path | None = None,
+) -> tuple[FileFormat, Any, str | None]:
+    """How :func:`load_data` would read the file at ``path``, without reading it: the reader
+    (:func:`reader_for`), its options object built from ``options`` (over a registered
+    bag's defaults; unknown keys or bad values: :class:`~slamkit.errors.ConfigError`), and
+    the registered name of the file (None when it is not one of the registered bags)."""
+    from slamkit.config import config_from_mapping
+
+    p = _as_path(str(path))
+    merged, registered = _registered_options(p, options, data_root)
+    reader = reader_for(p, merged)
+    merged.pop("reader", None)
+    return reader, config_from_mapping(reader_options_type(reader), merged, "dataset"), registered
+
+
+def _as_path(spec: str) -> Path:
+    """``spec``, not a registered name, as a path; a name that neither exists nor looks like
+    a path (no folder, no log suffix) raises :class:`~slamkit.errors.UnknownNameError`
+    listing the names (a misspelt name is not a missing file)."""
+    p = Path(spec).expanduser()
+    looks_like_path = os.sep in spec or "/" in spec or p.suffix.lower() in _LABEL_SUFFIXES
+    if not (looks_like_path or p.exists()):
+        raise UnknownNameError("dataset", spec, sorted(DATASETS))
+    return p
+
+
+def _registered_options(
+    p: Path, options: Mapping[str, Any] | None, data_root: str | Path | None
+) -> tuple[dict[str, Any], str | None]:
+    """``options`` over the defaults of the registered bag ``p`` is (if it is one), and its
+    registered name."""
+    from slamkit.datasets.rosbag import registered_bag_defaults
+
+    merged = dict(options or {})
+    registered = registered_bag_defaults(p, find_data_root(data_root)) if p.exists() else None
+    if registered is None:
+        return merged, None
+    return {**registered[1], **merged}, registered[0]
+
+
 def load_data(
     spec: str,
     *,
@@ -179,19 +265,11 @@ def load_data(
     :class:`~slamkit.errors.UnknownNameError` listing the names."""
     if spec in DATASETS:
         return load_dataset(spec, seed=seed, options=options, data_root=data_root)
-    p = Path(spec).expanduser()
-    looks_like_path = os.sep in spec or "/" in spec or p.suffix.lower() in _LABEL_SUFFIXES
-    if not (looks_like_path or p.exists()):
-        raise UnknownNameError("dataset", spec, sorted(DATASETS))
-    from slamkit.datasets.rosbag import registered_bag_defaults
-
-    merged = dict(options or {})
-    registered = registered_bag_defaults(p, find_data_root(data_root)) if p.exists() else None
-    if registered is not None:
-        merged = {**registered[1], **merged}
+    p = _as_path(spec)
+    merged, registered = _registered_options(p, options, data_root)
     dataset = load_file(p, merged, seed=seed)
     if registered is not None:
-        dataset.metadata["registered_as"] = registered[0]
+        dataset.metadata["registered_as"] = registered
     return dataset
 
 

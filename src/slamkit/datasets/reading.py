@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from slamkit.errors import DatasetFormatError
+from slamkit.errors import DatasetFormatError, InputError
 
 __all__ = ["FEW_DROPPED", "MAX_DROPPED_SHARE", "ReadingSummary", "check_dropped_share"]
 
@@ -82,6 +82,39 @@ class ReadingSummary:
             "repaired": dict(self.repaired),
             "notes": list(self.notes),
         }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> ReadingSummary:
+        """The summary :meth:`to_dict` wrote (``metrics.json``'s ``"reading"``, read back for
+        the report page). A value of the wrong kind raises :class:`~slamkit.errors.InputError`
+        naming the key; ``what``, ``dropped``, ``repaired`` and ``notes`` may be missing."""
+
+        def count(key: str) -> int:
+            value = data.get(key)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise InputError(f"reading.{key}: expected a count, got {value!r}")
+            return value
+
+        def by_reason(key: str) -> dict[str, int]:
+            value = data.get(key, {})
+            if not isinstance(value, Mapping) or not all(
+                isinstance(n, int) and not isinstance(n, bool) for n in value.values()
+            ):
+                raise InputError(f"reading.{key}: expected counts by reason, got {value!r}")
+            return {str(reason): n for reason, n in value.items()}
+
+        notes = data.get("notes", [])
+        if not isinstance(notes, list | tuple) or not all(isinstance(n, str) for n in notes):
+            raise InputError(f"reading.notes: expected a list of remarks, got {notes!r}")
+        return cls(
+            file=str(data.get("file", "?")),
+            records=count("records"),
+            used=count("used"),
+            what=str(data.get("what", "scans")),
+            dropped=by_reason("dropped"),
+            repaired=by_reason("repaired"),
+            notes=tuple(notes),
+        )
 
 
 def _counts(counts: Mapping[str, int]) -> str:

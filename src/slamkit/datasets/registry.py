@@ -1,8 +1,9 @@
 """The one list of every data set slamkit can load, simulated or real, by name.
 
 To add a data set, write its builder or loader (a function
-``(options, *, seed, data_root) -> Dataset``) and add one :class:`DatasetEntry` to
-:data:`DATASETS` below. The CLI's ``slamkit data list`` and ``--data NAME`` read this table.
+``(options, *, seed, data_root) -> Dataset`` reading ``options`` into a frozen dataclass)
+and add one :class:`DatasetEntry` naming both to :data:`DATASETS` below. The CLI's
+``slamkit data list`` and ``--data NAME`` read this table.
 """
 
 from __future__ import annotations
@@ -43,11 +44,23 @@ class DatasetEntry:
     files: tuple[str, ...] = ()
     defaults: Mapping[str, Any] = field(default_factory=dict)
     """Options preset for this entry (a scenario variant); the caller's options win."""
+    options: str = ""
+    """``"module:Class"`` of the frozen dataclass the loader reads its options into (the
+    ``[dataset]`` table's keys; ``slamkit config show --data`` documents them from it);
+    ``""``: the data set takes no options."""
 
     def loader(self) -> Loader:
         module, _, func = self.target.partition(":")
         fn: Loader = getattr(importlib.import_module(module), func)
         return fn
+
+    def options_type(self) -> type | None:
+        """The class named by :attr:`options` (imported on use), None when there is none."""
+        if not self.options:
+            return None
+        module, _, name = self.options.partition(":")
+        cls: type = getattr(importlib.import_module(module), name)
+        return cls
 
 
 DATASETS: dict[str, DatasetEntry] = {
@@ -58,12 +71,14 @@ DATASETS: dict[str, DatasetEntry] = {
             "simulated",
             "five point landmarks of the course notes, a loop, range-bearing readings",
             "slamkit.sim.scenarios:build_five_features",
+            options="slamkit.sim.scenarios:LandmarkScenarioConfig",
         ),
         DatasetEntry(
             "five-features-range",
             "simulated",
             "the five-feature world, range-only readings in a 120° view (elongated ellipse)",
             "slamkit.sim.scenarios:build_five_features",
+            options="slamkit.sim.scenarios:LandmarkScenarioConfig",
             defaults={"sensor": "range", "fov_deg": 120.0},
         ),
         DatasetEntry(
@@ -71,6 +86,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "simulated",
             "the five-feature world, bearing-only readings in a 120° view (no sense of depth)",
             "slamkit.sim.scenarios:build_five_features",
+            options="slamkit.sim.scenarios:LandmarkScenarioConfig",
             defaults={"sensor": "bearing", "fov_deg": 120.0},
         ),
         DatasetEntry(
@@ -78,6 +94,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "simulated",
             "the five-feature world with a wrong prior: 3 m and 60 deg off (kidnapped start)",
             "slamkit.sim.scenarios:build_five_features",
+            options="slamkit.sim.scenarios:LandmarkScenarioConfig",
             defaults={"prior_error_xy": (3.0, -2.0), "prior_error_theta_deg": 60.0},
         ),
         DatasetEntry(
@@ -85,24 +102,28 @@ DATASETS: dict[str, DatasetEntry] = {
             "simulated",
             "60 random landmarks along a 180 m loop that closes",
             "slamkit.sim.scenarios:build_landmark_loop",
+            options="slamkit.sim.scenarios:LandmarkScenarioConfig",
         ),
         DatasetEntry(
             "landmark-clutter",
             "simulated",
             "150 landmarks 1.2 m apart, readings without ids (data association)",
             "slamkit.sim.scenarios:build_landmark_clutter",
+            options="slamkit.sim.scenarios:LandmarkScenarioConfig",
         ),
         DatasetEntry(
             "landmark-loop-closure",
             "simulated",
             "100 landmarks along a 180 m loop driven round and on: first landmarks re-seen",
             "slamkit.sim.scenarios:build_landmark_loop_closure",
+            options="slamkit.sim.scenarios:LandmarkScenarioConfig",
         ),
         DatasetEntry(
             "rooms-laser",
             "simulated",
             "laser tour of four rooms off a corridor, walls as ground truth",
             "slamkit.sim.scenarios:build_rooms_laser",
+            options="slamkit.sim.scenarios:LaserScenarioConfig",
         ),
         DatasetEntry(
             "corridor-loop-laser",
@@ -110,6 +131,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "laser drive round a 30 m x 20 m ring of corridors and on past the start (loop "
             "closure), walls as ground truth",
             "slamkit.sim.loop_world:build_corridor_loop",
+            options="slamkit.sim.scenarios:LaserScenarioConfig",
         ),
         DatasetEntry(
             "long-hallway-laser",
@@ -117,6 +139,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "laser drive down a bare 50 m hallway between two rooms and back (degenerate "
             "matching along it, loop closure on return), walls as ground truth",
             "slamkit.sim.loop_world:build_long_hallway",
+            options="slamkit.sim.scenarios:LaserScenarioConfig",
         ),
         DatasetEntry(
             "building",
@@ -125,12 +148,14 @@ DATASETS: dict[str, DatasetEntry] = {
             "halls, clutter, glass, walking people; a 100-500 m route of loops; 181 beams, "
             "30 m; odometry with the typical OdometryErrorModel, glitches in metadata",
             "slamkit.sim.buildings:build_building",
+            options="slamkit.sim.buildings.dataset:BuildingConfig",
         ),
         DatasetEntry(
             "rooms-laser-global",
             "simulated",
             "the laser tour of four rooms with no prior pose (global localization)",
             "slamkit.sim.scenarios:build_rooms_laser",
+            options="slamkit.sim.scenarios:LaserScenarioConfig",
             defaults={"known_start": False},
         ),
         DatasetEntry(
@@ -138,6 +163,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "simulated",
             "the laser tour of four rooms; at 30 s the robot is carried 40 s along its route",
             "slamkit.sim.scenarios:build_rooms_laser",
+            options="slamkit.sim.scenarios:LaserScenarioConfig",
             defaults={"kidnap_time": 30.0, "kidnap_skip": 40.0},
         ),
         DatasetEntry(
@@ -146,6 +172,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "UTIAS MRCLAM 1 cut into 9782 stationary range-bearing snapshots, 15 known "
             "landmarks, true poses",
             "slamkit.datasets.mrclam_snapshots:load_mrclam_snapshots",
+            options="slamkit.datasets.mrclam_snapshots:MrclamSnapshotOptions",
             files=(
                 "landmarks/utias_mrclam/triangulation_toolbox/mrclam1_groundtruth.csv",
                 "landmarks/utias_mrclam/triangulation_toolbox/mrclam1_landmark.csv",
@@ -158,6 +185,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "UTIAS MRCLAM data set 1, robot 1: 100 Hz commanded velocities, range-bearing "
             "readings of 15 landmarks, Vicon landmark map; no prior, no true path",
             "slamkit.datasets.mrclam:load_mrclam",
+            options="slamkit.datasets.mrclam:MrclamOptions",
             files=(
                 "landmarks/utias_mrclam/MRCLAM_Dataset1/Barcodes.dat",
                 "landmarks/utias_mrclam/MRCLAM_Dataset1/Landmark_Groundtruth.dat",
@@ -171,6 +199,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "CMU Plaza 1: 5 Hz odometry increments, range-only readings of 4 radio beacons "
             "(ranges calibrated by 1/1.070), true path, known start",
             "slamkit.datasets.plaza:load_plaza1",
+            options="slamkit.datasets.plaza:Plaza1Options",
             files=(
                 "landmarks/plaza/Plaza1_DR.txt",
                 "landmarks/plaza/Plaza1_TD.txt",
@@ -184,6 +213,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "iSAM cityTrees10000 (simulated): 10000 poses, 100 landmarks, 4443 robot-frame "
             "position readings, true poses",
             "slamkit.datasets.isam_landmarks:load_citytrees10000",
+            options="slamkit.datasets.isam_landmarks:CityTreesOptions",
             files=("isam/cityTrees10000.txt", "isam/groundtruth/cityTrees10000_groundtruth.txt"),
         ),
         DatasetEntry(
@@ -192,6 +222,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "Victoria Park truck: 40 Hz Ackermann odometry, laser range-bearing readings of "
             "299 trees (ids unknown), GPS positions as reference; start at the origin",
             "slamkit.datasets.victoria_park:load_victoria_park",
+            options="slamkit.datasets.victoria_park:VictoriaParkOptions",
             files=(
                 "landmarks/victoria_park/original_acfr/aa3_dr.csv.gz",
                 "landmarks/victoria_park/original_acfr/aa3_gpsx.csv",
@@ -204,6 +235,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "Victoria Park truck, raw laser: 7230 scans × 361 beams (0.5°, laser 3.78 m ahead "
             "of the rear axle), 40 Hz Ackermann speed/steering, GPS positions as reference",
             "slamkit.datasets.victoria_park_laser:load_victoria_park_laser",
+            options="slamkit.datasets.victoria_park_laser:VictoriaParkLaserOptions",
             files=(
                 "landmarks/victoria_park/raw_laser/laser.txt.gz",
                 "landmarks/victoria_park/raw_laser/drs.txt.gz",
@@ -217,6 +249,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "Intel Research Lab, corrected CARMEN log: 910 scans × 180 beams, corrected poses "
             "as truth, odometry = truth + known noise",
             "slamkit.datasets.carmen:load_intel",
+            options="slamkit.datasets.carmen:CarmenOptions",
             files=("laser/corrected_carmen/intel-corrected.log.gz",),
         ),
         DatasetEntry(
@@ -225,6 +258,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "Intel Research Lab in the 5 cm occupancy map slamkit builds from the corrected "
             "poses (known_grid); odometry = truth + known noise; no prior (global localization)",
             "slamkit.mapping.built_maps:load_intel_mcl",
+            options="slamkit.mapping.built_maps:BuiltMapOptions",
             files=("laser/corrected_carmen/intel-corrected.log.gz",),
         ),
         DatasetEntry(
@@ -233,6 +267,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "ACES building, corrected CARMEN log: 440 scans × 180 beams (50 m clip), corrected "
             "poses as truth, odometry = truth + known noise",
             "slamkit.datasets.carmen:load_aces",
+            options="slamkit.datasets.carmen:CarmenOptions",
             files=("laser/corrected_carmen/aces-corrected.log.gz",),
         ),
         DatasetEntry(
@@ -241,6 +276,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "Freiburg building 079, corrected CARMEN log: 4791 scans × 360 beams (0.5°), "
             "corrected poses as truth, odometry = truth + known noise",
             "slamkit.datasets.carmen:load_freiburg079",
+            options="slamkit.datasets.carmen:CarmenOptions",
             files=("laser/corrected_carmen/freiburg-079-corrected.log.gz",),
         ),
         DatasetEntry(
@@ -249,6 +285,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "Intel Research Lab, raw log (ROS 1 bag): 13,631 scans × 180 beams, raw wheel "
             "odometry at the scan stamps, 2984 reference relations as ground truth",
             "slamkit.datasets.rosbag:load_intel_raw",
+            options="slamkit.datasets.rosbag:RosbagOptions",
             files=("laser/rosbags/intel.bag", "laser/relations/intel.relations"),
         ),
         DatasetEntry(
@@ -257,6 +294,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "ACES building, raw log (ROS 1 bag): 7374 scans × 180 beams (50 m), raw wheel "
             "odometry at the scan stamps, 1279 reference relations as ground truth",
             "slamkit.datasets.rosbag:load_aces_raw",
+            options="slamkit.datasets.rosbag:RosbagOptions",
             files=("laser/rosbags/aces.bag", "laser/relations/aces.relations"),
         ),
         DatasetEntry(
@@ -266,6 +304,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "4 cm behind the centre, raw wheel odometry at the scan stamps, 1685 reference "
             "relations",
             "slamkit.datasets.rosbag:load_fr079_raw",
+            options="slamkit.datasets.rosbag:RosbagOptions",
             files=("laser/rosbags/fr079.bag", "laser/relations/fr079.relations"),
         ),
         DatasetEntry(
@@ -273,6 +312,7 @@ DATASETS: dict[str, DatasetEntry] = {
             "real",
             "DP-SLAM loop5: 551 scans × 181 beams with raw odometry, no ground truth",
             "slamkit.datasets.carmen:load_loop5",
+            options="slamkit.datasets.carmen:DpSlamOptions",
             files=("laser/dpslam/loop5.log.gz",),
         ),
     )

@@ -8,8 +8,11 @@ page a third larger than the images; a folder moved or copied as a whole keeps i
 working. Every text that comes from data (names, descriptions, config values, metric keys)
 goes through :func:`html.escape`.
 
-Nothing here imports matplotlib or numpy: the pages are built from what a run folder holds
-(``metrics.json``, ``config.json``, the images) and a few strings.
+Nothing here imports matplotlib: the pages are built from what a run folder holds
+(``metrics.json``, ``config.json``, the images) and a few strings. What reading the data
+file did (``metrics.json``'s ``"reading"``) is rebuilt as the
+:class:`~slamkit.datasets.reading.ReadingSummary` the run printed, so the page says it in the
+same words.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from slamkit.datasets.reading import FEW_DROPPED, MAX_DROPPED_SHARE, ReadingSummary
 from slamkit.errors import InputError
 
 __all__ = [
@@ -96,6 +100,9 @@ class RunPage:
     estimator_description: str = ""
     dataset_description: str = ""
     timings: Mapping[str, float] = field(default_factory=dict)
+    reading: ReadingSummary | None = None
+    """What reading the data file dropped and repaired (``metrics.json``'s ``"reading"``;
+    None: simulated data)."""
 
     @property
     def title(self) -> str:
@@ -147,6 +154,9 @@ def read_run_folder(
     )
     est = config.get("estimator", {})
     ds = config.get("dataset", {})
+    reading = metrics.get("reading")
+    if reading is not None and not isinstance(reading, Mapping):
+        raise InputError(f"{root / 'metrics.json'}: reading: expected a record, got {reading!r}")
     return RunPage(
         folder=root,
         estimator=str(metrics.get("estimator") or est.get("name", "?")),
@@ -158,6 +168,7 @@ def read_run_folder(
         estimator_description=estimator_description,
         dataset_description=dataset_description,
         timings=dict(timings or {}),
+        reading=None if reading is None else ReadingSummary.from_dict(reading),
     )
 
 
@@ -189,14 +200,17 @@ def _format_value(value: Any) -> str:
 def flatten_metrics(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, str]:
     """``metrics.json`` as ``{dotted key: formatted value}`` in the file's order: nested
     records flattened (``ate.rmse``), a metric that does not apply as ``skipped: reason``,
-    long lists as their length. ``estimator``, ``dataset`` and ``seed`` are left out (they
-    head the page)."""
+    long lists as their length, what reading the data did (``"reading"``) as one row of
+    words (its reasons are phrases, not keys). ``estimator`` and ``dataset`` are left out
+    (they head the page)."""
     rows: dict[str, str] = {}
     for key, value in metrics.items():
         if not prefix and key in ("estimator", "dataset"):
             continue
         name = f"{prefix}{key}"
-        if isinstance(value, Mapping):
+        if not prefix and key == "reading" and isinstance(value, Mapping):
+            rows[name] = _reading_row(value)
+        elif isinstance(value, Mapping):
             if set(value) == {"skipped"}:
                 rows[name] = f"skipped: {value['skipped']}"
             else:
@@ -204,6 +218,21 @@ def flatten_metrics(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, s
         else:
             rows[name] = _format_value(value)
     return rows
+
+
+def _reading_row(reading: Mapping[str, Any]) -> str:
+    """``"used of records scans, N dropped, M repaired"`` of a ``"reading"`` record."""
+    try:
+        summary = ReadingSummary.from_dict(reading)
+    except InputError:
+        return "malformed"
+    text = f"{summary.used} of {summary.records} {summary.what}"
+    for verb, counts in (("dropped", summary.dropped), ("repaired", summary.repaired)):
+        if counts:
+            text += f", {sum(counts.values())} {verb}"
+    if summary.notes:
+        text += f", {len(summary.notes)} note{'s' if len(summary.notes) > 1 else ''}"
+    return text
 
 
 # --------------------------------------------------------------------------------------------
@@ -282,6 +311,45 @@ def _timing_rows(page: RunPage) -> list[tuple[str, str]]:
     return rows
 
 
+def _warning_item(warning: Any) -> str:
+    """One warning as a list item: a record's ``message`` (its ``kind`` as the tooltip), or
+    the text as it is."""
+    if isinstance(warning, Mapping):
+        kind = warning.get("kind")
+        title = f' title="{_e(kind)}"' if kind else ""
+        return f"<li{title}>{_e(warning.get('message', json.dumps(warning)))}</li>"
+    return f"<li>{_e(warning)}</li>"
+
+
+def _reading_section(reading: ReadingSummary) -> list[str]:
+    """ "Reading the data": the lines the run printed, then the records dropped and repaired
+    by reason, the notes, and what the two words mean."""
+    out = ["<h2>Reading the data</h2>"]
+    out.append('<p id="reading">' + "<br>".join(_e(line.strip()) for line in reading.lines()))
+    out[-1] += "</p>"
+    if reading.clean:
+        out.append(f'<p class="muted">every one of the {_e(reading.what)} read as it was</p>')
+        return out
+    rows = [
+        (verb, reason, str(n))
+        for verb, counts in (("dropped", reading.dropped), ("repaired", reading.repaired))
+        for reason, n in counts.items()
+    ]
+    if rows:
+        out.append(_table(("", "reason", reading.what), rows, "reading-counts"))
+    if reading.notes:
+        out.append("<p>notes on the whole file:</p>")
+        items = "".join(f"<li>{_e(n)}</li>" for n in reading.notes)
+        out.append(f'<ul id="reading-notes">{items}</ul>')
+    out.append(
+        f'<p class="muted">Repaired: kept, after a fix the reason names (a stamp re-made, '
+        f"a geometry read from the beam increment). Dropped: left out, the reader could not "
+        f"use it; more than {MAX_DROPPED_SHARE:.0%} of a file's {_e(reading.what)} (and more "
+        f"than {FEW_DROPPED}) dropped is an error, never a result.</p>"
+    )
+    return out
+
+
 def run_html(page: RunPage) -> str:
     """The HTML of one run's page (figures linked relative to the run folder)."""
     body = [f"<h1>{_e(page.title)}</h1>"]
@@ -296,21 +364,23 @@ def run_html(page: RunPage) -> str:
     facts += [(label, flat[key]) for key, label in HEADLINE if key in flat]
     body.append(_table(None, facts, "summary"))
     warnings = page.metrics.get("warnings") or []
-    if warnings:  # the consistency monitor's findings (slamkit.eval.monitor)
+    if warnings:  # the consistency monitor's and the estimator's findings
         body.append("<h2>Warnings</h2>")
-        items = (w.get("message", w) if isinstance(w, Mapping) else w for w in warnings)
-        body.append('<ul id="warnings">' + "".join(f"<li>{_e(t)}</li>" for t in items) + "</ul>")
+        body.append('<ul id="warnings">' + "".join(_warning_item(w) for w in warnings) + "</ul>")
     body.append("<h2>Estimator</h2>")
     body.append(f"<p>{_e(page.estimator_description or page.estimator)}</p>")
     body.append("<h2>Data set</h2>")
     body.append(f"<p>{_e(page.dataset_description or page.dataset)}</p>")
+    if page.reading is not None:
+        body.extend(_reading_section(page.reading))
     body.append("<h2>Figures</h2>")
     if page.figures:
         body.extend(_figure(name, name) for name in page.figures)
     else:
         body.append('<p class="muted">no figures (run without --no-plots to get them)</p>')
     body.append("<h2>Metrics</h2>")
-    body.append(_table(("metric", "value"), flatten_metrics(page.metrics).items(), "metrics"))
+    shown = {k: v for k, v in flat.items() if k not in ("reading", "warnings")}  # shown above
+    body.append(_table(("metric", "value"), shown.items(), "metrics"))
     body.append("<h2>Timings [s]</h2>")
     body.append(_table(("phase", "seconds"), _timing_rows(page), "timings"))
     body.append("<h2>Configuration (config.json)</h2>")

@@ -5,7 +5,7 @@ The spec file::
     [sweep]
     name = "five-features-consistency"   # optional label
     estimators = ["ekf-localization", "ukf-localization"]
-    datasets = ["five-features"]          # registered names or data file paths
+    datasets = ["five-features"]          # registered names or data file paths (a log, a bag)
     seeds = {start = 0, count = 1000}     # or a list [0, 1, 2], or a count: seeds = 10
     samples = 20        # random draws of the ranged settings (needed when there are ranges)
     sample_seed = 0     # the generator of those draws
@@ -27,8 +27,9 @@ forms, named ``lm.key``. ``{values = [...]}`` is the way to give a list-valued s
 choices. Points are the full grid of the list axes × ``samples`` joint draws of the ranged
 axes × seeds × data sets × estimators.
 
-:func:`parse_spec` validates everything before any run: unknown estimators and data sets,
-settings an estimator does not have (its registry entry's ``make_config``, with the preset it
+:func:`parse_spec` validates everything before any run: unknown estimators and data sets
+(a file is named by its absolute path from then on), options a data set's reader does not
+have, settings an estimator does not have (its registry entry's ``make_config``, with the preset it
 would run under), empty lists and ranges, missing ``samples``. Each error is a
 :class:`~slamkit.errors.ConfigError` naming the key.
 """
@@ -341,15 +342,58 @@ def _check_estimator_settings(spec: SweepSpec) -> None:
                         raise ConfigError(f"estimator.{a.name} for {name}: {exc}") from None
 
 
-def _check_datasets(names: Sequence[str]) -> None:
+def _datasets(names: Sequence[str]) -> tuple[str, ...]:
+    """The spec's data sets: registered names as they are, files by their absolute path
+    (``~`` expanded; a relative path is relative to the current folder, as ``--data`` is),
+    so that the table names the file and workers on a shared file system find it."""
     from slamkit.datasets.registry import DATASETS
 
+    out = []
     for name in names:
-        if name not in DATASETS and not Path(name).exists():
+        if name in DATASETS:
+            out.append(name)
+            continue
+        path = Path(name).expanduser()
+        if not path.exists():
             known = ", ".join(sorted(DATASETS))
             raise ConfigError(
                 f"sweep.datasets: unknown data set {name!r} (not registered and no such file); "
                 f"known: {known}"
+            )
+        out.append(str(path.resolve()))
+    if len(set(out)) != len(out):
+        raise ConfigError(f"sweep.datasets: the same data set twice in {list(names)!r}")
+    return tuple(out)
+
+
+def _check_dataset_options(spec: SweepSpec) -> None:
+    """Every data set takes every ``[dataset]`` option: a key its options class (a
+    registered data set's, or the reader's of a file: :func:`slamkit.datasets.files.
+    dataset_options_type`) does not have is an error before any run. Values are checked
+    by each run (a failed run is a result of the sweep)."""
+    import dataclasses
+
+    from slamkit.datasets.files import dataset_options_type
+    from slamkit.datasets.registry import DATASETS
+
+    given = {name.split(".")[0] for name in spec.dataset_fixed}
+    given |= {a.name.split(".")[0] for a in spec.dataset_axes}
+    reader = spec.dataset_fixed.get("reader")
+    if any(a.name == "reader" for a in spec.dataset_axes):
+        return  # the options class depends on the point
+    for name in spec.datasets:
+        try:
+            cls = dataset_options_type(name, None if reader is None else {"reader": reader})
+        except SlamkitError as exc:
+            raise ConfigError(f"[dataset] for {name}: {exc}") from None
+        known = {f.name for f in dataclasses.fields(cls)} if cls is not None else set()
+        if name not in DATASETS:
+            known.add("reader")  # a file's reader, named
+        unknown = sorted(given - known)
+        if unknown:
+            raise ConfigError(
+                f"[dataset] for {name}: unknown option(s) {', '.join(unknown)}; known: "
+                f"{', '.join(sorted(known)) or 'none'}"
             )
 
 
@@ -392,7 +436,7 @@ def parse_spec(raw: Mapping[str, Any]) -> SweepSpec:
         raise ConfigError(f"sweep.name: expected a string, got {name!r}")
     spec = SweepSpec(
         estimators=_names(sweep, "estimators"),
-        datasets=_names(sweep, "datasets"),
+        datasets=_datasets(_names(sweep, "datasets")),
         seeds=_seeds(sweep.get("seeds")),
         estimator_axes=tuple(est_axes),
         dataset_axes=tuple(ds_axes),
@@ -404,7 +448,7 @@ def parse_spec(raw: Mapping[str, Any]) -> SweepSpec:
         preset=None if preset == "none" else preset,
         name=name,
     )
-    _check_datasets(spec.datasets)
+    _check_dataset_options(spec)
     _check_estimator_settings(spec)
     return spec
 
