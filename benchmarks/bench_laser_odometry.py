@@ -74,7 +74,8 @@ def main() -> str:
     )
     notes = (
         "Default LaserOdometryConfig (scan-to-map normal ICP with the odometry prior; a match "
-        "that lays under half the scan on the map's surfaces searched again over headings). "
+        "that fits the map poorly, fails or is gated relocated over every heading and judged "
+        "against the wheels by surface fit, scanmatch.relocate). "
         "Relation errors: mean ± std, translation [m] and rotation [deg], and the share of "
         "relations covered. Published scan-matching figures and Cartographer's wall time are "
         f"quoted, not run here. Load average before the run: {load_before:.1f}.\n\n" + table

@@ -232,8 +232,12 @@ RENAMED: dict[str, str] = {
     "laser_offset": "MCL: now laser.offset (a [estimator.laser] table)",
     "snapshot_every": "MCL: now snapshots.every (a [estimator.snapshots] table)",
     "snapshot_times": "MCL: now snapshots.times (a [estimator.snapshots] table)",
+    "recovery_fit": "laser odometry: removed; a match that fits the map poorly is now "
+    "relocated over every heading and judged against the wheels (scanmatch.relocate)",
+    "recovery_span_deg": "laser odometry: removed; the relocation searches every heading",
+    "recovery_step_deg": "laser odometry: removed; the relocation searches every heading",
 }
-"""Settings that were renamed, with what to write instead (named in the error)."""
+"""Settings that were renamed or removed, with what to write instead (named in the error)."""
 
 
 def config_from_mapping(cls: type[C], values: Mapping[str, Any] | None, where: str = "") -> C:

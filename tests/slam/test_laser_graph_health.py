@@ -6,13 +6,11 @@ import math
 
 import numpy as np
 
+from slamkit.estimation.health import LOST_SHARE, UNMATCHED_TRAVEL, UnmatchedStretch
 from slamkit.slam.laser_graph.health import (
-    LOST_SHARE,
     REFUSED_AT_LEAST,
     STRAINED_AT_LEAST,
     STRAINED_CHI2,
-    UNMATCHED_TRAVEL,
-    UnmatchedStretch,
     run_warnings,
 )
 

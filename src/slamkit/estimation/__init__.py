@@ -9,6 +9,9 @@
 * :mod:`~slamkit.estimation.gaussian` — the Gaussian-filter kernels shared by every
   Kalman-type estimator: covariance checks, the gain with the Joseph update, angle wrapping of
   innovations, model evaluation on validated arrays (the fast path).
+* :mod:`~slamkit.estimation.health` — the run warnings of every laser tracker that weighs
+  the laser against the wheels (odometry glitches overridden, scans lost, unmatched
+  stretches), shared by laser odometry and graph SLAM's front end.
 
 Layers: this package imports ``models``, ``maps``, ``datasets``, ``prob`` and ``geometry``;
 ``localization``, ``mapping``, ``slam`` and ``pipeline`` import it.

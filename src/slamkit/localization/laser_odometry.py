@@ -20,14 +20,22 @@ mounting (:attr:`~slamkit.datasets.LaserSpec.mounting` where the data set gives 
 A scan that cannot be matched (:class:`~slamkit.errors.MatchError`: too few points or
 correspondences, degenerate geometry) or whose match disagrees with the odometry by more
 than the gate (``max_correction_xy``, ``max_correction_deg``) keeps the odometry prior for
-that scan; both are counted in the diagnostics. Against the map, a match is also checked
-by how much of the scan it lays on the map's surfaces
-(:func:`~slamkit.scanmatch.normal_icp.surface_fit`): one below ``recovery_fit`` is searched
-again from headings around the prediction and the best fit kept (counted as ``recovered``,
-and as ``poor_fit`` when even that stays below), because wheel odometry can be wrong by far
-more than its stated noise for a scan or two. The map is the occupancy grid of the
-keyframes at their estimated poses (:class:`~slamkit.mapping.occupancy.OccupancyMapper`),
-built as they are taken.
+that scan; both are counted in the diagnostics.
+
+Against the map the laser is weighed against the wheels, as graph SLAM's front end does
+(:mod:`slamkit.scanmatch.relocate`): a match held to the prior that lays less than
+:data:`~slamkit.scanmatch.relocate.TRUSTED_FIT` of the scan on the map's surfaces
+(:func:`~slamkit.scanmatch.normal_icp.surface_fit`), fails or is gated is relocated over
+every heading and ±1.5 m without the prior, and :func:`~slamkit.scanmatch.relocate.judge`
+keeps the better-fitting pose. Where the laser's pose lies outside the gate and the wheels'
+is refuted, the wheels glitched (an encoder or gyro spike, a message out of order): the
+laser's pose is kept and the glitch counted and listed (``odometry_overrides``) with a
+run warning (:mod:`slamkit.estimation.health`). Nothing else needs re-basing: the prior of
+the next scan is this scan's pose moved by the wheels' motion since, with this match's
+covariance, so the glitch's step is not carried on. Scans that fit nowhere are ``lost``
+(their pose the wheels'). The map is the occupancy grid of the keyframes at their
+estimated poses (:class:`~slamkit.mapping.occupancy.OccupancyMapper`), built as they are
+taken.
 """
 
 from __future__ import annotations
@@ -50,16 +58,19 @@ from slamkit.config import (
 from slamkit.datasets.stream import Dataset, LaserScan
 from slamkit.errors import ConvergenceError, InputError, MatchError
 from slamkit.estimation.contract import EstimatorOutput, PoseEstimate
+from slamkit.estimation.health import UnmatchedStretch, override_rows, tracking_warnings
 from slamkit.estimation.shell import EstimatorShell
 from slamkit.geometry.angles import wrap_angle_float
 from slamkit.geometry.pose2 import between, compose, transform_points
 from slamkit.mapping.inverse_model import InverseSensorModel
 from slamkit.mapping.occupancy.config import OccupancyMappingConfig
 from slamkit.mapping.occupancy.mapper import OccupancyMapper
+from slamkit.scanmatch.correlative import CorrelativeReference
 from slamkit.scanmatch.icp import MIN_REFERENCE_POINTS, IcpConfig, PreparedScan, icp, prepare_scan
 from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp, surface_fit
 from slamkit.scanmatch.plicp import PlIcpConfig, plicp
 from slamkit.scanmatch.point_map import PointMap
+from slamkit.scanmatch.relocate import RELOCATE_SEARCH, TRUSTED_FIT, judge, relocate
 from slamkit.scanmatch.result import MatchResult, require_points, scan_points
 
 __all__ = ["PRIOR_FLOOR", "LaserOdometry", "LaserOdometryConfig", "MapSettings"]
@@ -105,7 +116,8 @@ class LaserOdometryConfig(Section):
     """... or a match paired less than this fraction of the scan's points with the keyframe."""
     max_correction_xy: float = setting(0.5, finite_above(0.0), "a finite number > 0")
     """Gate: a match that moves the pose farther than this from the odometry prior [m] is
-    refused (the prior is kept)."""
+    refused (the prior is kept); against the map, a relocation beyond it overrides the
+    wheels only where their pose is refuted (:func:`~slamkit.scanmatch.relocate.judge`)."""
     max_correction_deg: float = setting(20.0, finite_above(0.0), "a finite number > 0")
     """Gate: ... or turns it more than this [deg]."""
     min_range: float = setting(0.05, finite_at_least(0.0), "a finite number >= 0")
@@ -117,15 +129,6 @@ class LaserOdometryConfig(Section):
     propagated from the data set's control noise since the last match), so that where the
     map leaves a direction unconstrained (a corridor) the prediction holds it; False: the
     match alone, and degenerate matches are refused (the prediction is kept)."""
-    recovery_fit: float = setting(0.5, fraction(), "a fraction in [0, 1]")
-    """Map reference: a match that puts fewer than this fraction of the scan's points on the
-    map's surfaces (:func:`~slamkit.scanmatch.normal_icp.surface_fit`, within 5 cm) is
-    searched again from headings around the prediction (``recovery_span_deg``), held to the
-    prior's position only, and the best fit kept; 0: never."""
-    recovery_span_deg: float = setting(30.0, finite_at_least(0.0), "a finite number >= 0")
-    """... the headings tried: the prediction's ± this, in steps of ``recovery_step_deg``."""
-    recovery_step_deg: float = setting(5.0, finite_above(0.0), "a finite number > 0")
-    """... the step between them [deg]."""
     motion_cov_scale: float = setting(1.0, finite_above(0.0), "a finite number > 0")
     """Multiplies the data set's control-noise covariance in that prior."""
     mounting: tuple[float, float, float] | None = None
@@ -177,6 +180,11 @@ class LaserOdometry(EstimatorShell):
         self._local: NormalCloud | None = None  # the map around the last keyframe
         self._counts: Counter[str] = Counter()
         self._iterations = 0
+        self._overrides: list[tuple[float, FloatArray]] = []  # (stamp, T_wheels_laser)
+        self._override: FloatArray | None = None  # the current scan's, if it was overridden
+        self._stretch = UnmatchedStretch()  # the longest run of unmatched scans
+        self._last_pose: FloatArray | None = None  # the pose after the last scan
+        self._relocation: tuple[NormalCloud, CorrelativeReference] | None = None
         self._mapper: OccupancyMapper | None = None
         if config.map.enabled:
             map_cfg = OccupancyMappingConfig(
@@ -205,9 +213,15 @@ class LaserOdometry(EstimatorShell):
         points = scan_points(event.ranges, self._angles, self._max_range, min_range=cfg.min_range)
         if any(self._mounting):
             points = transform_points(self._mounting, points)
+        # How far the wheels moved the robot since the last scan (the unmatched stretch's).
+        moved = 0.0
+        if self._last_pose is not None:
+            d = between(self._last_pose, self._pose)
+            moved = math.hypot(d[0], d[1])
         key = self._key
         if key is None:
-            self._new_keyframe(points, event.ranges)
+            self._stretch.add(event.t, self._new_keyframe(points, event.ranges), moved)
+            self._last_pose = self._pose.copy()
             return
         # The reference's frame: the keyframe's pose, or the world for the local map. The
         # prior: the last match and the wheels' motion since, in that frame.
@@ -215,7 +229,11 @@ class LaserOdometry(EstimatorShell):
         reference = key.reference if self._local is None else self._local
         assert reference is not None  # a keyframe without a scan comes with the local map
         prior = between(frame, self._pose)
+        self._override = None
         result = self._match(reference, points, prior)
+        self._stretch.add(event.t, result is not None, moved)
+        if self._override is not None:
+            self._overrides.append((float(event.t), self._override))
         overlap = 0.0
         if result is not None:
             self._pose = compose(frame, result.pose)
@@ -229,6 +247,7 @@ class LaserOdometry(EstimatorShell):
             or overlap < cfg.min_overlap
         ):
             self._new_keyframe(points, event.ranges)
+        self._last_pose = self._pose.copy()
 
     def estimate(self) -> PoseEstimate:
         return PoseEstimate(self._pose.copy())
@@ -242,9 +261,11 @@ class LaserOdometry(EstimatorShell):
             "matched": matched,
             "unmatched": {k[len("failed:") :]: v for k, v in c.items() if k.startswith("failed:")},
             "gated": c["gated"],
-            "recovery_tried": c["recovery_tried"],
-            "recovered": c["recovered"],
-            "poor_fit": c["poor_fit"],
+            "relocation_tried": c["relocation_tried"],
+            "relocated": c["relocated"],
+            "odometry_overridden": len(self._overrides),
+            "odometry_overrides": override_rows(self._overrides),
+            "lost": c["lost"],
             "mean_iterations": self._iterations / matched if matched else None,
             "reference": self._cfg.reference,
             "matcher": "normal-icp" if self._local is not None else self._cfg.matcher,
@@ -253,16 +274,17 @@ class LaserOdometry(EstimatorShell):
         if self._mapper is not None and self._mapper.grid is not None:
             grid = self._mapper.occupancy_grid()
             diagnostics["mapping"] = self._mapper.stats.as_dict()
-        return EstimatorOutput(grid=grid, diagnostics=diagnostics)
+        warnings = tracking_warnings(c["scans"], c["lost"], self._overrides, self._stretch)
+        return EstimatorOutput(grid=grid, diagnostics=diagnostics, warnings=tuple(warnings))
 
     # -- steps ----------------------------------------------------------------------------
 
     def _match(
         self, reference: PreparedScan | NormalCloud, points: FloatArray, prior: FloatArray
     ) -> MatchResult | None:
-        """The match of ``points`` to the reference from ``prior`` (against the map, searched
-        again when it fits poorly: :meth:`_recover`), or None (counted) when the matcher
-        fails or the gate refuses it and no recovery gives one."""
+        """The match of ``points`` to the reference from ``prior`` (against the map, weighed
+        against a relocation where it fits poorly: :meth:`_weigh`), or None (counted) when
+        the matcher fails or the gate refuses it and no relocation replaces it."""
         cfg = self._cfg
         result: MatchResult | None = None
         try:
@@ -282,8 +304,8 @@ class LaserOdometry(EstimatorShell):
         if result is not None and not self._within_gate(prior, result.pose):
             self._counts["gated"] += 1
             result = None
-        if isinstance(reference, NormalCloud) and cfg.recovery_fit > 0.0:
-            result = self._recover(reference, points, prior, result)
+        if isinstance(reference, NormalCloud):
+            result = self._weigh(reference, points, prior, result)
         if result is not None:
             self._counts["matched"] += 1
             self._iterations += result.iterations
@@ -296,56 +318,51 @@ class LaserOdometry(EstimatorShell):
             wrap_angle_float(correction[2])
         ) <= math.radians(cfg.max_correction_deg)
 
-    def _recover(
+    def _weigh(
         self,
         reference: NormalCloud,
         points: FloatArray,
         prior: FloatArray,
         found: MatchResult | None,
     ) -> MatchResult | None:
-        """``found`` (the match held to the prior, or None), unless it leaves the scan off
-        the map's surfaces: then the best fit among the matches started from the prediction
-        turned by each heading of the recovery's span, held to the prior's position only.
+        """``found`` (the match held to the prior, or None when it failed or was gated)
+        where it lays at least :data:`~slamkit.scanmatch.relocate.TRUSTED_FIT` of the scan
+        on the map; else the scan relocated on the map without the prior
+        (:func:`~slamkit.scanmatch.relocate.relocate`) where
+        :func:`~slamkit.scanmatch.relocate.judge` prefers it to the wheels' pose (``found``,
+        or the prior itself). A relocation beyond the gate overrides the wheels: its
+        correction ``T_prior_laser`` is kept for the caller's list of glitches.
 
-        Wheel odometry can be wrong by far more than its stated noise for a scan or two: a
-        log whose messages arrive late and out of order (Intel's are stamped on arrival, in
-        bursts) predicts a spinning robot's heading 15-20° off, and a match held to that
-        prior settles on the few walls that agree with it. The surface fit sees it: in half
-        of Intel's matches over 94 % of the points lie within 5 cm of the map's surfaces, in
-        such a one 10-20 %. The position is still held to the prior (its heading is what is
-        in doubt), which keeps a restart in a corridor from sliding along it."""
-        cfg = self._cfg
-        fit = surface_fit(reference, points, prior if found is None else found.pose)
-        if fit >= cfg.recovery_fit:
+        Wheel odometry can be wrong by far more than its stated noise: Intel's messages,
+        stamped on arrival and sometimes out of order, predict a spinning robot's heading
+        15-40° off for a scan, and a generated odometry glitch turns it 30-90° for good. A
+        match held to such a prior settles on the few walls that agree with it (10-20 % of
+        the scan on the map's surfaces, where half of Intel's matches lay over 94 %), and
+        the gate then keeps the wheels, which are what is wrong."""
+        wheels_fit = surface_fit(reference, points, prior if found is None else found.pose)
+        if found is not None and wheels_fit >= TRUSTED_FIT:
             return found
-        self._counts["recovery_tried"] += 1
-        best, best_fit = found, fit
-        info = None
-        if cfg.odometry_prior:  # the prior on the position alone: the heading is in doubt
-            info = np.zeros((3, 3))
-            info[:2, :2] = np.linalg.inv((self._cov + PRIOR_FLOOR)[:2, :2])
-        span = cfg.recovery_span_deg
-        for turn in np.arange(-span, span + 0.5 * cfg.recovery_step_deg, cfg.recovery_step_deg):
-            start = np.array([prior[0], prior[1], prior[2] + math.radians(float(turn))])
-            try:
-                candidate = normal_icp(
-                    reference, points, start, cfg.normal_icp, prior_information=info
-                )
-            except MatchError:
-                continue
-            correction = between(prior, candidate.pose)
-            if math.hypot(correction[0], correction[1]) > cfg.max_correction_xy:
-                continue
-            candidate_fit = surface_fit(reference, points, candidate.pose)
-            if candidate_fit > best_fit:
-                best, best_fit = candidate, candidate_fit
-        if best is not found:
-            self._counts["recovered"] += 1
-        if best_fit < cfg.recovery_fit:
-            self._counts["poor_fit"] += 1
-        return best
+        self._counts["relocation_tried"] += 1
+        if self._relocation is None or self._relocation[0] is not reference:
+            search = CorrelativeReference.from_points(reference.points, RELOCATE_SEARCH)
+            self._relocation = (reference, search)
+        laser = relocate(reference, points, prior, self._cfg.normal_icp, self._relocation[1])
+        overrides = laser is not None and not self._within_gate(prior, laser.match.pose)
+        verdict = judge(wheels_fit, laser, overrides)
+        if verdict == "laser":
+            assert laser is not None
+            if overrides:
+                self._override = between(prior, laser.match.pose)
+            else:
+                self._counts["relocated"] += 1
+            return laser.match
+        if verdict == "lost":
+            self._counts["lost"] += 1
+        return found
 
-    def _new_keyframe(self, points: FloatArray, ranges: FloatArray) -> None:
+    def _new_keyframe(self, points: FloatArray, ranges: FloatArray) -> bool:
+        """Make the scan ``points`` (robot frame) at the current pose the keyframe, its
+        points part of the map; False (counted) when it has too few points to be one."""
         reference = None
         try:  # the map reference matches against the point map, not the keyframe's scan
             if self._points is None:
@@ -354,7 +371,7 @@ class LaserOdometry(EstimatorShell):
                 require_points(points, MIN_REFERENCE_POINTS, "reference")
         except MatchError as exc:  # too few points to be a reference: keep the old one
             self._counts[f"failed:{exc.reason}"] += 1
-            return
+            return False
         self._key = _Keyframe(self._pose.copy(), reference)
         self._counts["keyframes"] += 1
         if self._points is not None:
@@ -362,3 +379,4 @@ class LaserOdometry(EstimatorShell):
             self._local = self._points.near(self._pose[:2], self._cfg.map_radius)
         if self._mapper is not None:
             self._mapper.integrate(compose(self._pose, self._mounting), ranges)
+        return True

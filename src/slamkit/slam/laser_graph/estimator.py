@@ -29,6 +29,7 @@ from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset, Event, LaserScan
 from slamkit.errors import InputError, MatchError
 from slamkit.estimation.contract import EstimatorOutput, PoseEstimate, SmoothedTrajectory
+from slamkit.estimation.health import UnmatchedStretch, override_rows
 from slamkit.estimation.shell import EstimatorShell
 from slamkit.geometry.pose2 import between, compose, transform_points
 from slamkit.mapping.inverse_model import InverseSensorModel
@@ -52,7 +53,7 @@ from slamkit.slam.laser_graph.frontend import (
     local_map,
     match_neighbours,
 )
-from slamkit.slam.laser_graph.health import UnmatchedStretch, run_warnings
+from slamkit.slam.laser_graph.health import run_warnings
 from slamkit.slam.laser_graph.loops import (
     LoopMatch,
     SubmapCache,
@@ -62,9 +63,6 @@ from slamkit.slam.laser_graph.loops import (
     search_window,
     verify_closure,
 )
-
-OVERRIDES_SHOWN = 20
-"""Odometry glitches the laser overrode that the diagnostics list (stamp and correction)."""
 
 __all__ = ["NO_ODOMETRY", "LaserGraphSlam"]
 
@@ -370,10 +368,7 @@ class LaserGraphSlam(EstimatorShell):
             "relocation_tried": c["relocation_tried"],
             "relocated": c["relocated"],
             "odometry_overridden": len(self._overrides),
-            "odometry_overrides": [
-                {"t": t, "x": float(d[0]), "y": float(d[1]), "deg": math.degrees(float(d[2]))}
-                for t, d in self._overrides[:OVERRIDES_SHOWN]
-            ],
+            "odometry_overrides": override_rows(self._overrides),
             "lost": c["lost"],
             "degenerate_fused": c["degenerate_fused"],
             "odometry_edges": c["odometry_edges"],
