@@ -98,11 +98,7 @@ def loop_figure(result: Result, dataset: Dataset) -> Figure:
         ms=3,
         zorder=3,
     )
-    # graph-slam also joins each keyframe to its `neighbour_edges` predecessors: those are
-    # front-end edges, not closures
-    frontend = result.config.get("frontend", {})
-    neighbours = frontend.get("neighbour_edges", 0) if isinstance(frontend, dict) else 0
-    loops = loop_closures(graph, min_gap=int(neighbours) + 2)
+    loops = loop_closures(graph)
     if loops.shape[0]:
         segs = np.stack([kf[loops[:, 0]], kf[loops[:, 1]]], axis=1)
         ax.add_collection(

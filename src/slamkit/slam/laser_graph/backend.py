@@ -33,7 +33,7 @@ __all__ = [
     "rejudge",
 ]
 
-EdgeKind = Literal["odometry", "neighbour", "loop"]
+EdgeKind = Literal["odometry", "loop"]
 """Where an edge came from: the scan match to the previous keyframe (or the wheels when it
 failed), a match to an earlier neighbour, or a verified loop closure."""
 

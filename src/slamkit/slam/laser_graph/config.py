@@ -14,7 +14,6 @@ from slamkit.config import (
     finite_at_least,
     fraction,
     int_at_least,
-    optional,
     setting,
 )
 from slamkit.localization.laser_odometry import MapSettings
@@ -51,20 +50,6 @@ class FrontEndSettings(Section):
     """... or has turned this much from it [deg]."""
     min_overlap: float = setting(0.6, fraction(), "a fraction in [0, 1]")
     """... or its match paired less than this fraction of its points with the keyframe."""
-    neighbour_edges: int = setting(0, int_at_least(0), "an integer >= 0")
-    """Besides the edge to the previous keyframe, a new keyframe may be matched
-    (point-to-line ICP from the current estimate) to this many keyframes before that one;
-    each match that succeeds is one more edge. Off by default: the matches share their
-    scans with the chain's, so their errors are not independent, and counted as if they
-    were they made the chain 5× surer than it is — on the raw logs (2026-12-03) 4 of them
-    gave Intel 0.319 m and Freiburg 079 0.084 m against 0.053 m and 0.068 m without
-    (``docs/estimators/laser_graph.md``)."""
-    fuse_degenerate: bool = False
-    """A scan PLICP calls degenerate is matched again by point-to-normal ICP against the
-    keyframe with the prediction as a prior, and that posterior is the edge, instead of the
-    wheels' increment alone. Off by default: on Intel (2026-12-03) 1,023 scans were fused
-    and the run lost the log (3.71 m against 0.053 m without); on the simulated hallway it
-    helps (``docs/estimators/laser_graph.md``)."""
     max_correction_xy: float = setting(0.5, finite_above(0.0), "a finite number > 0")
     """Gate: a scan match that moves the pose farther than this from the odometry's
     prediction is refused (the prediction is kept, the scan counted as unmatched) [m]."""
@@ -95,15 +80,6 @@ class LoopSettings(Section):
     radius_per_metre: float = setting(0.03, finite_at_least(0.0), "a finite number >= 0")
     """... grown by this much per metre travelled since the candidate [m/m] (the drift a
     front end accumulates: radius = radius + radius_per_metre · travel) ..."""
-    closure_travel: float | None = setting(
-        None, optional(finite_at_least(0.0)), "a finite number >= 0 or nothing"
-    )
-    """None (default): the drift distance that grows the search region is the path
-    travelled since the candidate. A number: the shortest path through the chain and the
-    accepted closures, each closure counting as this much path [m]
-    (:func:`~slamkit.slam.laser_graph.loops.drift_distances`) — smaller regions once a loop
-    is closed, and 5.7× faster on Intel, but the linear drift bound is then too tight for
-    Intel's front end (3.1 m against 0.053 m with the default; measured 2026-12-03)."""
     max_radius: float = setting(8.0, finite_above(0.0), "a finite number > 0")
     """... up to this [m]; also the largest translation window of the correlative search."""
     angle_deg: float = setting(10.0, finite_above(0.0), "a finite number > 0")

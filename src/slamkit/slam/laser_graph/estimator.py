@@ -51,14 +51,12 @@ from slamkit.slam.laser_graph.frontend import (
     Tracker,
     floored_information,
     local_map,
-    match_neighbours,
 )
 from slamkit.slam.laser_graph.health import run_warnings
 from slamkit.slam.laser_graph.loops import (
     LoopMatch,
     SubmapCache,
     consistent_partners,
-    drift_distances,
     loop_candidates,
     search_window,
     verify_closure,
@@ -243,13 +241,6 @@ class LaserGraphSlam(EstimatorShell):
             self._graph.add_edge(k - 1, k, z, info, "odometry")
             self._counts["odometry_edges" if not matched else "matched_edges"] += 1
             travelled = self._keys[-1].travelled + math.hypot(z[0], z[1])
-            n = self._cfg.frontend.neighbour_edges
-            for i, T_i_k, info_i in match_neighbours(
-                self._keys, self._graph.poses, points, pose, k - 1 - n,
-                self._cfg.frontend, self._cfg.plicp,
-            ):  # fmt: skip
-                self._graph.add_edge(i, k, T_i_k, info_i, "neighbour")
-                self._counts["neighbour_edges"] += 1
         self._keys.append(Keyframe(event.t, points, reference, travelled))
         self._ranges.append(np.asarray(event.ranges, dtype=np.float64))
         self._tracker.reset()
@@ -268,13 +259,10 @@ class LaserGraphSlam(EstimatorShell):
         s = self._cfg.loops
         poses = self._graph.poses
         travelled = np.array([kf.travelled for kf in self._keys])
-        drift = None if s.closure_travel is None else self._drift(travelled, k)
         points = [kf.points for kf in self._keys]
-        for j in loop_candidates(poses[:, :2], travelled, k, s, drift):
+        for j in loop_candidates(poses[:, :2], travelled, k, s):
             self._counts["loop_candidates"] += 1
-            window = search_window(
-                float(travelled[k] - travelled[j] if drift is None else drift[j]), s
-            )
+            window = search_window(float(travelled[k] - travelled[j]), s)
             ref_points, cloud, reference = self._submaps.get(poses, points, j)
             found = verify_closure(
                 ref_points, cloud, self._keys[k].points, between(poses[j], poses[k]),
@@ -292,9 +280,6 @@ class LaserGraphSlam(EstimatorShell):
         if i not in self._normals:
             self._normals[i] = scan_normals(self._keys[i].points)
         return self._normals[i]
-
-    def _drift(self, travelled: FloatArray, k: int) -> FloatArray:
-        return drift_distances(travelled, self.loop_closures(), k, self._cfg.loops)
 
     def _confirm(self, poses: FloatArray, new: tuple[int, int, LoopMatch]) -> None:
         """Add ``new`` and its waiting partners once one agrees with it (pairwise
@@ -370,9 +355,7 @@ class LaserGraphSlam(EstimatorShell):
             "odometry_overridden": len(self._overrides),
             "odometry_overrides": override_rows(self._overrides),
             "lost": c["lost"],
-            "degenerate_fused": c["degenerate_fused"],
             "odometry_edges": c["odometry_edges"],
-            "neighbour_edges": c["neighbour_edges"],
             "loop_candidates": c["loop_candidates"],
             "loops_verified": c["loops_verified"],
             "loops_added": c["loops_added"],

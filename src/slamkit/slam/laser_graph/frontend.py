@@ -54,7 +54,6 @@ __all__ = [
     "Tracker",
     "floored_information",
     "local_map",
-    "match_neighbours",
 ]
 
 
@@ -123,7 +122,6 @@ class Tracker:
         self.velocity = ConstantVelocity() if model is None else None
         self._coasted: tuple[FloatArray, float] | None = None  # offset before, dt
         self._coarse: tuple[PreparedScan | NormalCloud, CorrelativeReference] | None = None
-        self._cloud: tuple[PreparedScan, NormalCloud] | None = None  # the keyframe's
         self.track_cov: FloatArray = np.zeros((3, 3))
         """Covariance of the current offset: the last match's, propagated by the motion
         since (the prior of a degenerate scan's fused match)."""
@@ -201,18 +199,8 @@ class Tracker:
             else:
                 result = plicp(reference, points, start, self.plicp)
         except MatchError as exc:
-            fused = None
-            if (
-                exc.reason == "degenerate"
-                and self.settings.fuse_degenerate
-                and isinstance(reference, PreparedScan)
-            ):
-                fused = self._fuse_degenerate(reference, points)
-            if fused is None:
-                self.counts[f"failed:{exc.reason}"] += 1
-                return self._unmatched()
-            self.counts["degenerate_fused"] += 1
-            result = fused
+            self.counts[f"failed:{exc.reason}"] += 1
+            return self._unmatched()
         if not within_gate(self.offset, result.pose, self.settings):
             self.counts["gated"] += 1
             return self._unmatched()
@@ -285,28 +273,6 @@ class Tracker:
         self.track_cov = np.asarray(result.cov, dtype=np.float64)
         self.overlap = result.inlier_fraction
 
-    def _fuse_degenerate(self, reference: PreparedScan, points: FloatArray) -> MatchResult | None:
-        """A scan that leaves a direction unconstrained (a corridor): point-to-normal ICP
-        against the keyframe with the prediction as a prior (its covariance ``track_cov``:
-        the last match's and the motion's since, plus the floor), so the match fixes what the
-        scan sees and the prediction the rest; the covariance is the posterior's. None when
-        that fails too, or there is no prediction to lean on (no odometry)."""
-        if self.model is None:
-            return None
-        if self._cloud is None or self._cloud[0] is not reference:
-            keep = reference.has_normal
-            cloud = NormalCloud.build(reference.points[keep], reference.normals[keep])
-            self._cloud = (reference, cloud)
-        s_xy, s_t = self.settings.cov_floor_xy, math.radians(self.settings.cov_floor_deg)
-        prior = self.track_cov + np.diag([s_xy**2, s_xy**2, s_t**2])
-        try:
-            return normal_icp(
-                self._cloud[1], points, self.offset, self.normal_icp,
-                prior_information=np.linalg.solve(prior, np.eye(3)),
-            )  # fmt: skip
-        except MatchError:
-            return None
-
     def _search(self, reference: PreparedScan | NormalCloud, points: FloatArray) -> FloatArray:
         """Without odometry: the correlative optimum (:data:`COAST_SEARCH`) of ``points``
         against the keyframe (or the local map) around the coasted prediction, where ICP
@@ -339,30 +305,6 @@ class Tracker:
         if self.match_cov is not None:
             return self.offset.copy(), floored_information(self.match_cov, self.settings), True
         return self.offset.copy(), floored_information(self.odometry_cov, self.settings), False
-
-
-def match_neighbours(
-    keyframes: list[Keyframe],
-    poses: FloatArray,
-    points: FloatArray,
-    pose: FloatArray,
-    first: int,
-    settings: FrontEndSettings,
-    plicp_config: PlIcpConfig,
-) -> list[tuple[int, FloatArray, FloatArray]]:
-    """Edges ``(i, T_i_new, Ω)`` from the keyframes ``first, ..., first + n - 1`` (those that
-    exist, ``n = settings.neighbour_edges``) to a new keyframe at ``pose`` with ``points``:
-    point-to-line ICP from the current estimate; failed or gated matches give no edge."""
-    edges = []
-    for i in range(max(first, 0), min(first + settings.neighbour_edges, len(keyframes))):
-        prior = between(poses[i], pose)
-        try:
-            result = plicp(keyframes[i].reference, points, prior, plicp_config)
-        except MatchError:
-            continue
-        if within_gate(prior, result.pose, settings):
-            edges.append((i, result.pose, floored_information(result.cov, settings)))
-    return edges
 
 
 def local_map(

@@ -54,7 +54,6 @@ __all__ = [
     "LoopMatch",
     "SubmapCache",
     "consistent_partners",
-    "drift_distances",
     "loop_candidates",
     "loop_reference",
     "pair_consistent",
@@ -82,54 +81,23 @@ def search_window(travel: float, settings: LoopSettings) -> tuple[float, float]:
     return r, math.radians(a)
 
 
-def drift_distances(
-    travelled: FloatArray, loops: list[tuple[int, int]], k: int, settings: LoopSettings
-) -> FloatArray:
-    """The drift distance ``s(j)`` from keyframe ``k`` to every keyframe ``j ≤ k`` ``(k + 1,)``
-    [m]: the shortest path in the graph whose edges are the chain between consecutive
-    keyframes (weighted by the path length between them, ``travelled (K,)``) and the
-    accepted closures ``loops`` (pairs of keyframe indices, weighted by ``closure_travel``).
-    A closure ties its two ends as firmly as that much path would, so after a loop has been
-    closed the old side of it is near in drift again, and its search region small."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import dijkstra
-
-    n = k + 1
-    chain = np.diff(travelled[:n])
-    i = np.arange(n - 1)
-    rows, cols, w = [i], [i + 1], [np.maximum(chain, 1e-9)]
-    if loops:
-        a = np.array(loops, dtype=np.int64).reshape(-1, 2)
-        a = a[(a < n).all(axis=1)]
-        rows.append(a[:, 0])
-        cols.append(a[:, 1])
-        w.append(np.full(a.shape[0], max(float(settings.closure_travel or 0.0), 1e-9)))
-    graph = coo_matrix(
-        (np.concatenate(w), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
-    ).tocsr()
-    limit = (settings.max_radius - settings.radius) / max(settings.radius_per_metre, 1e-12)
-    d = dijkstra(graph, directed=False, indices=k, limit=limit)
-    return np.asarray(np.minimum(d, travelled[k] - travelled[:n]), dtype=np.float64)
-
-
 def loop_candidates(
     positions: FloatArray,
     travelled: FloatArray,
     k: int,
     settings: LoopSettings,
-    drift: FloatArray | None = None,
 ) -> list[int]:
     """The candidates for keyframe ``k``: keyframes ``j < k`` with ``travelled[k] -
     travelled[j] ≥ min_travel`` within the search radius of ``positions[k]`` (``(K, 2)``
     estimated positions, ``(K,)`` path lengths), nearest first, at most ``max_candidates``,
-    at least ``submap_keyframes`` apart in index. The radius grows with the drift distance
-    ``drift (≥ k,)`` (:func:`drift_distances`; None: the path travelled since ``j``)."""
+    at least ``submap_keyframes`` apart in index. The radius grows with the path travelled
+    since ``j``, the distance a front end drifts over."""
     travel = travelled[k] - travelled[:k]
     eligible = np.flatnonzero(travel >= settings.min_travel)
     if eligible.size == 0:
         return []
     d = np.hypot(*(positions[eligible] - positions[k]).T)
-    s = travel[eligible] if drift is None else drift[eligible]
+    s = travel[eligible]
     radius = np.minimum(settings.radius + settings.radius_per_metre * s, settings.max_radius)
     inside = d <= radius
     order = eligible[inside][np.argsort(d[inside], kind="stable")]
