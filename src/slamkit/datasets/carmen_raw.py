@@ -45,7 +45,6 @@ before) raises :class:`~slamkit.errors.DatasetFormatError` naming the file and t
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -528,7 +527,7 @@ def read_carmen_raw_log(
         "message_counts": dict(log.counts),
         "skipped_lines": log.skipped,
     }
-    dataset = raw_laser_dataset(
+    return raw_laser_dataset(
         name=name or p.name,
         times=log.times[keep],
         odometry=odometry,
@@ -538,8 +537,8 @@ def read_carmen_raw_log(
         description=f"raw CARMEN log {p.name}: {n} {log.laser} scans × "
         f"{log.beam_angles.size} beams, raw odometry ({odometry_from})",
         metadata=metadata,
+        reading=reading,
     )
-    return dataclasses.replace(dataset, reading=reading)
 
 
 def _reading_summary(log: CarmenRawLog, used: int, dropped: Mapping[str, int]) -> ReadingSummary:
