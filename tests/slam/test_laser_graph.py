@@ -205,6 +205,33 @@ def test_the_backend_removes_an_injected_inconsistent_closure(slam) -> None:
             assert np.abs(graph.poses[:, :2] - before[:, :2]).max() < 0.01
 
 
+@pytest.mark.parametrize(("offset", "count"), [(0.5, 2), (1.5, 2), (1.0, 3)])
+def test_the_backend_removes_consistent_wrong_closures(slam, offset: float, count: int) -> None:
+    """Two or three wrong closures that agree with each other (consecutive keyframes, all
+    ``offset`` metres off the truth along x, as an aliased corridor gives them), weighted
+    like the real ones and offered together: both are removed and the poses stay where
+    they were (within 1 cm)."""
+    est, _, truth = slam
+    i, j, z, info = est.graph.edges()
+    loops = [e for e, kind in enumerate(est.graph.edge_kinds()) if kind == "loop"]
+    a, b = int(i[loops[0]]), int(j[loops[0]])
+    graph = PoseGraph(default_optimizer())
+    for p in est.graph.poses:
+        graph.add_pose(p)
+    for e, kind in enumerate(est.graph.edge_kinds()):
+        graph.add_edge(int(i[e]), int(j[e]), z[e], info[e], kind)
+    graph.optimize()
+    before = graph.poses
+    shift = np.array([offset, 0.0, 0.0])
+    pair = []
+    for d in range(count):
+        wrong = between(truth[a + d], truth[b + d]) + shift
+        pair.append(graph.add_edge(a + d, b + d, wrong, info[loops[0]], "loop"))
+    out = optimize_consistent(graph, pair, LoopSettings().max_chi2, LoopSettings().max_edge_chi2)
+    assert sorted(out) == pair
+    assert np.abs(graph.poses[:, :2] - before[:, :2]).max() < 0.01
+
+
 def test_the_tear_check_counts_the_change_of_an_edge_not_its_value() -> None:
     """``max_edge_chi2`` bounds how far the new closures move an earlier edge's residual
     (``Δeᵀ Ω Δe``). Two 1 m edges (1 cm, 1 mrad) already stretched to χ² ≈ 89 each by an

@@ -244,6 +244,7 @@ def depth_first(
     bounds: np.ndarray,
     starts: np.ndarray,
     best: np.ndarray,
+    box: np.ndarray,
 ) -> None:
     """Branch and bound of correlative matching, depth first, from the rotation groups of
     :func:`group_bounds` (``bounds``, in quanta, at the top-level offsets ``starts ×
@@ -261,8 +262,13 @@ def depth_first(
     entry is scored against the best leaf reached *by then*, not the best of an earlier
     level, and the search's order, best bounds first, finds the optimum early. An entry is
     dropped only when its bound is below a leaf's score, so the optimum and its tie rule
-    are those of the exhaustive search."""
+    are those of the exhaustive search.
+
+    ``box = [i0, i1, j0, j1]`` (``int64``, inclusive): translations left out of the search
+    (at every rotation); a node wholly inside is dropped, and so is a leaf inside. An empty
+    box (``i0 > i1``) leaves nothing out."""
     levels = len(tables)
+    i0, i1, j0, j1 = box[0], box[1], box[2], box[3]
     n_k = rows.shape[0]
     size = 2 * spread + 1
     n_s = starts.shape[0]
@@ -295,6 +301,8 @@ def depth_first(
         if bound < best[0]:
             continue
         if level == 0:  # a leaf: its bound is its score
+            if i0 <= i <= i1 and j0 <= j <= j1:
+                continue
             if bound > best[0] or (k, i, j) < (best[1], best[2], best[3]):
                 best[0], best[1], best[2], best[3] = bound, k, i, j
             continue
@@ -303,14 +311,16 @@ def depth_first(
         flat = table.reshape(-1)
         found = 0
         count = min(k * size + size, n_k) - k * size if level == levels else 4
+        side = 1 << (levels - 1 if level == levels else level - 1)  # a child's side
         for a in range(count):
             if level == levels:
                 ck, ci, cj = k * size + a, i, j
             else:
-                half = 1 << (level - 1)
-                ck, ci, cj = k, i + (half if a >= 2 else 0), j + (half if a % 2 else 0)
+                ck, ci, cj = k, i + (side if a >= 2 else 0), j + (side if a % 2 else 0)
                 if ci > n or cj > n:
                     continue
+            if i0 <= ci and ci + side - 1 <= i1 and j0 <= cj and cj + side - 1 <= j1:
+                continue
             total = _bounded_total(flat, n_rows, n_cols, rows, cols, ck, ci, cj, best[0])
             if total < best[0]:
                 continue

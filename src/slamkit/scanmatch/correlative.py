@@ -79,7 +79,7 @@ from slamkit.scanmatch.lookup import (
 )
 from slamkit.scanmatch.result import MatchResult, require_points
 
-__all__ = ["CorrelativeConfig", "CorrelativeReference", "correlative_match"]
+__all__ = ["CorrelativeConfig", "CorrelativeReference", "correlative_match", "correlative_rival"]
 
 IntArray = NDArray[np.int64]
 
@@ -398,12 +398,25 @@ class _Optimum:
     levels: int
 
 
-def _exhaustive(lookup: LookupGrid, cells: Cells, n: int) -> _Optimum:
+Box = tuple[int, int, int, int]
+"""Translations ``[i0, i1] × [j0, j1]`` (cell offsets, inclusive) left out of a search."""
+
+_NO_BOX: Box = (1, 0, 1, 0)
+
+
+def _outside(i: IntArray, j: IntArray, side: int, box: Box) -> NDArray[np.bool_]:
+    """Whether each node of side ``side`` at ``(i, j)`` has a translation outside ``box``."""
+    i0, i1, j0, j1 = box
+    out: NDArray[np.bool_] = ~((i >= i0) & (i + side - 1 <= i1) & (j >= j0) & (j + side - 1 <= j1))
+    return out
+
+
+def _exhaustive(lookup: LookupGrid, cells: Cells, n: int, box: Box = _NO_BOX) -> _Optimum:
     ks, ii, jj = np.meshgrid(
         np.arange(cells[0].shape[0]), np.arange(-n, n + 1), np.arange(-n, n + 1), indexing="ij"
     )
     k, i, j = ks.ravel(), ii.ravel(), jj.ravel()
-    s = _score(lookup, 0, cells, k, i, j)
+    s = np.where(_outside(i, j, 1, box), _score(lookup, 0, cells, k, i, j), -np.inf)
     u = _first_best(s, k, i, j)
     return _Optimum(int(k[u]), int(i[u]), int(j[u]), float(s[u]), 1)
 
@@ -421,20 +434,30 @@ def _children(
     return ck[ok], ci[ok], cj[ok]
 
 
-def _descend(lookup: LookupGrid, cells: Cells, k: int, i: int, j: int, level: int, n: int) -> float:
-    """Score of the leaf reached by always taking the child with the best bound."""
-    ka, ia, ja = np.array([k]), np.array([i]), np.array([j])
+def _descend(
+    lookup: LookupGrid, cells: Cells, node: tuple[int, int, int], level: int, n: int, box: Box
+) -> float:
+    """Score of the leaf reached by always taking the child with the best bound (``-inf``
+    when every way down ends in ``box``)."""
+    ka, ia, ja = np.array([node[0]]), np.array([node[1]]), np.array([node[2]])
     score = -np.inf
     while level > 0:
         ka, ia, ja = _children(ka, ia, ja, 1 << (level - 1), n)
         level -= 1
         s = _score(lookup, level, cells, ka, ia, ja)
+        s[~_outside(ia, ja, 1 << level, box)] = -np.inf
         u = int(np.argmax(s))
+        if s[u] == -np.inf:
+            return -np.inf
         ka, ia, ja, score = ka[u : u + 1], ia[u : u + 1], ja[u : u + 1], float(s[u])
     return score
 
 
-def _branch_and_bound(lookup: LookupGrid, cells: Cells, n: int) -> _Optimum:
+def _branch_and_bound(
+    lookup: LookupGrid, cells: Cells, n: int, start: _Optimum | None = None, box: Box = _NO_BOX
+) -> _Optimum:
+    """The best leaf of the window outside ``box`` that beats ``start`` (None: the initial
+    guess's leaf), ``start`` itself when none does."""
     level = lookup.levels - 1
     starts = np.arange(-n, n + 1, 1 << level)
     n_k = cells[0].shape[0]
@@ -446,12 +469,15 @@ def _branch_and_bound(lookup: LookupGrid, cells: Cells, n: int) -> _Optimum:
     cut = float(lookup.tables[-1].max()) <= 0.0  # the top table's max is every table's
     zero = np.zeros(1, dtype=np.int64)
     mid = n_k // 2
-    best = _Optimum(mid, 0, 0, float(_score(lookup, 0, cells, zero + mid, zero, zero)[0]), 0)
+    best = start or _Optimum(
+        mid, 0, 0, float(_score(lookup, 0, cells, zero + mid, zero, zero)[0]), 0
+    )
     if cut and compiled.enabled() and lookup.counts is not None:
-        return _depth_first(lookup, cells, n, starts, best)
+        return _depth_first(lookup, cells, n, starts, best, box)
     ks, ii, jj = np.meshgrid(np.arange(n_k), starts, starts, indexing="ij")
     k, i, j = ks.ravel(), ii.ravel(), jj.ravel()
     bound = _score(lookup, level, cells, k, i, j, best.score if cut else -np.inf)
+    bound[~_outside(i, j, 1 << level, box)] = -np.inf
     left = bound.copy()
     # The top nodes in rounds, best bounds first: the first round's leaves give the later
     # rounds a threshold near the optimum. A node left when its bound is below the best leaf
@@ -464,14 +490,14 @@ def _branch_and_bound(lookup: LookupGrid, cells: Cells, n: int) -> _Optimum:
             open_ = open_[np.argpartition(-left[open_], size - 1)[:size]]
         left[open_] = -np.inf
         nodes = (k[open_], i[open_], j[open_])
-        found = _search_blocks(lookup, cells, nodes, bound[open_], level, n, best, cut)
+        found = _search_blocks(lookup, cells, nodes, bound[open_], level, n, best, cut, box)
         if found is not None and _better(found, best):
             best = found
     return _Optimum(best.k, best.i, best.j, best.score, lookup.levels)
 
 
 def _depth_first(
-    lookup: LookupGrid, cells: Cells, n: int, starts: IntArray, start: _Optimum
+    lookup: LookupGrid, cells: Cells, n: int, starts: IntArray, start: _Optimum, box: Box
 ) -> _Optimum:
     """The compiled search (integer tables): the top-level nodes bounded by groups of ``2
     _SPREAD + 1`` rotations (:func:`compiled.group_bounds`, where :func:`_near_groups`
@@ -488,7 +514,9 @@ def _depth_first(
         threshold, bounds,
     )  # fmt: skip
     best = np.array([threshold, start.k, start.i, start.j], dtype=np.int64)
-    compiled.depth_first(lookup.counts, rows, cols, n, _SPREAD, bounds, starts, best)
+    compiled.depth_first(
+        lookup.counts, rows, cols, n, _SPREAD, bounds, starts, best, np.array(box, np.int64)
+    )
     k, i, j = (int(v) for v in best[1:])
     return _Optimum(k, i, j, float(best[0]) * QUANTUM, lookup.levels)
 
@@ -522,6 +550,7 @@ def _search_blocks(
     n: int,
     incumbent: _Optimum,
     cut: bool,
+    box: Box,
 ) -> _Optimum | None:
     """Branch and bound below ``nodes`` (at ``level``, with their ``bound``): the first best
     leaf (ties to the smallest ``(k, i, j)``) of those scoring at least ``incumbent``'s
@@ -532,12 +561,14 @@ def _search_blocks(
         if k.size == 0:
             return None
         u = int(np.argmax(bound))
-        best = max(best, _descend(lookup, cells, int(k[u]), int(i[u]), int(j[u]), level, n))
+        node = (int(k[u]), int(i[u]), int(j[u]))
+        best = max(best, _descend(lookup, cells, node, level, n, box))
         # A node whose bound is below a leaf already reached cannot hold the optimum.
         keep = bound >= best
         k, i, j = _children(k[keep], i[keep], j[keep], 1 << (level - 1), n)
         level -= 1
         bound = _score(lookup, level, cells, k, i, j, best if cut else -np.inf)
+        bound[~_outside(i, j, 1 << level, box)] = -np.inf
     if k.size == 0 or not bound.max() >= incumbent.score:
         return None
     u = _first_best(bound, k, i, j)
@@ -580,6 +611,94 @@ def _response_covariance(
     return cov, ratio_xy, ratio_t
 
 
+@dataclass(frozen=True)
+class _Window:
+    """One search: the prepared reference's lookup, the config, the current points, the
+    initial guess, the half-window ``n`` in cells, the rotations and every point's cell at
+    each rotation."""
+
+    lookup: LookupGrid
+    config: CorrelativeConfig
+    points: FloatArray
+    guess: FloatArray
+    n: int
+    thetas: FloatArray
+    dtheta: float
+    cells: Cells
+
+    @classmethod
+    def of(
+        cls,
+        reference: CorrelativeReference | OccupancyGrid | LikelihoodField | ArrayLike,
+        current_points: ArrayLike,
+        initial: ArrayLike,
+        config: CorrelativeConfig | None,
+    ) -> _Window:
+        ref, cfg = _prepare(reference, config)
+        lookup = ref.lookup
+        pts = require_points(
+            as_array(current_points, "current points", (None, 2)), cfg.min_points, "current"
+        )
+        guess = as_array(initial, "initial pose", (3,))
+        res = lookup.resolution
+        if cfg.angular_step is not None:
+            dtheta = cfg.angular_step
+        else:
+            r_max = max(float(np.sqrt((pts**2).sum(axis=1)).max()), res)
+            dtheta = res / r_max
+        m = _cells(cfg.window_theta, dtheta)
+        thetas = guess[2] + np.arange(-m, m + 1) * dtheta
+        cells = _rotated_cells(lookup, pts, guess[:2], thetas)
+        return cls(lookup, cfg, pts, guess, _cells(cfg.window_xy, res), thetas, dtheta, cells)
+
+    def normalised(self, total: float) -> float:
+        """The score ``1 - S / (N log f)`` in ``[0, 1]`` of a sum ``S``."""
+        floor, n_pts = self.lookup.floor, self.points.shape[0]
+        score = 1.0 - total / (n_pts * floor) if floor < 0 else 1.0
+        return min(max(score, 0.0), 1.0)
+
+
+def correlative_rival(
+    reference: CorrelativeReference | OccupancyGrid | LikelihoodField | ArrayLike,
+    current_points: ArrayLike,
+    initial: ArrayLike,
+    match: MatchResult,
+    separation: float,
+    ratio: float,
+    config: CorrelativeConfig | None = None,
+) -> float | None:
+    """The best score, over the window of :func:`correlative_match` (same arguments), of a
+    pose whose translation lies more than ``separation`` [m] from ``match``'s along x or y
+    (any rotation), when it reaches ``ratio · match.score``; None when no pose does.
+
+    A match is unique in its window when it has no rival: in a corridor of identical doors
+    or a row of look-alike rooms the true place and its aliases score alike, and whichever
+    wins depends on noise. The search is the same branch and bound with the translations
+    near ``match`` left out and the bar set at ``ratio · match.score`` from the start, so
+    most nodes are cut at the top level when there is no rival."""
+    w = _Window.of(reference, current_points, initial, config)
+    res = w.lookup.resolution
+    if not w.lookup.floor < 0:
+        return None  # a table without misses scores every pose alike
+    bi = round((float(match.pose[1]) - w.guess[1]) / res)
+    bj = round((float(match.pose[0]) - w.guess[0]) / res)
+    c = _cells(separation, res)
+    box: Box = (bi - c, bi + c, bj - c, bj + c)
+    # The sum S of a pose scoring exactly the bar: 1 - S / (N log f) = ratio · score.
+    bar = (1.0 - ratio * match.score) * w.points.shape[0] * w.lookup.floor
+    n_k = w.thetas.size
+    start = _Optimum(n_k, w.n + 1, w.n + 1, bar, 0)  # past every leaf: a tie goes to a leaf
+    if w.config.search == "exhaustive" or w.lookup.levels == 1:
+        opt = _exhaustive(w.lookup, w.cells, w.n, box)
+        if opt.score < bar:
+            return None
+    else:
+        opt = _branch_and_bound(w.lookup, w.cells, w.n, start, box)
+        if opt.k == n_k:
+            return None
+    return w.normalised(opt.score)
+
+
 def correlative_match(
     reference: CorrelativeReference | OccupancyGrid | LikelihoodField | ArrayLike,
     current_points: ArrayLike,
@@ -600,27 +719,13 @@ def correlative_match(
     ``config.min_points`` current points), ``"degenerate"`` (a flat response, see
     ``max_flatness``) or ``"low_score"`` (below ``min_score``).
     """
-    ref, cfg = _prepare(reference, config)
-    lookup = ref.lookup
-    pts = require_points(
-        as_array(current_points, "current points", (None, 2)), cfg.min_points, "current"
-    )
-    guess = as_array(initial, "initial pose", (3,))
-    res = lookup.resolution
-    n = _cells(cfg.window_xy, res)
-    if cfg.angular_step is not None:
-        dtheta = cfg.angular_step
-    else:
-        r_max = max(float(np.sqrt((pts**2).sum(axis=1)).max()), res)
-        dtheta = res / r_max
-    m = _cells(cfg.window_theta, dtheta)
-    thetas = guess[2] + np.arange(-m, m + 1) * dtheta
-    cells = _rotated_cells(lookup, pts, guess[:2], thetas)
-
+    win = _Window.of(reference, current_points, initial, config)
+    lookup, cfg, pts, guess, cells = win.lookup, win.config, win.points, win.guess, win.cells
+    res, thetas, dtheta = lookup.resolution, win.thetas, win.dtheta
     if cfg.search == "exhaustive" or lookup.levels == 1:
-        opt = _exhaustive(lookup, cells, n)
+        opt = _exhaustive(lookup, cells, win.n)
     else:
-        opt = _branch_and_bound(lookup, cells, n)
+        opt = _branch_and_bound(lookup, cells, win.n)
 
     pose = np.array(
         [
@@ -633,8 +738,7 @@ def correlative_match(
         lookup.tables[0], lookup.floor, cells[0][opt.k] + opt.i, cells[1][opt.k] + opt.j
     )
     n_pts = pts.shape[0]
-    score = 1.0 - opt.score / (n_pts * lookup.floor) if lookup.floor < 0 else 1.0
-    score = min(max(score, 0.0), 1.0)
+    score = win.normalised(opt.score)
     inliers = float(np.count_nonzero(values >= lookup.inlier_log)) / n_pts
     if score < cfg.min_score:
         raise MatchError(

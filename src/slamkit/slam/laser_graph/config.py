@@ -100,11 +100,6 @@ class LoopSettings(Section):
     """Smear of the lookup grid [m]."""
     min_score: float = setting(0.55, fraction(), "a fraction in [0, 1]")
     """Verification: the correlative match's normalised score must reach this."""
-    near_window: float = setting(0.3, finite_above(0.0), "a finite number > 0")
-    """Ambiguity: a correlative optimum farther than this from the estimate [m] ..."""
-    ambiguity_ratio: float = setting(0.95, fraction(), "a fraction in [0, 1]")
-    """... is refused (``"ambiguous"``) when the best pose within ``near_window`` scores at
-    least this fraction of it."""
     min_inliers: float = setting(0.6, fraction(), "a fraction in [0, 1]")
     """Verification: the refining point-to-normal ICP must pair this fraction of the scan."""
     max_refinement_xy: float = setting(0.25, finite_above(0.0), "a finite number > 0")

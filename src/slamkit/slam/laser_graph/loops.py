@@ -14,10 +14,15 @@ candidates, nearest first.
 
 **Verification.** The new keyframe's scan is matched against the candidate's submap (its
 scan and its neighbours', in its frame) by Olson's correlative search over the window
-``±r(j)``, ``±α(j)`` around the current estimate; the match must reach ``min_score``. The
-optimum, when it lies farther than ``near_window`` from the estimate, must also score
-clearly better (by ``1 / ambiguity_ratio``) than the best pose within ``near_window``: an
-aliased match along a corridor scores about as well as the true one. The optimum is
+``±r(j)``, ``±α(j)`` around the current estimate; the match must reach ``min_score``. It
+must also be the only good explanation of the scan: no pose farther than
+:data:`RIVAL_SEPARATION` from the optimum (along x or y) within the window widened
+:data:`RIVAL_WINDOW` times may score :data:`RIVAL_RATIO` of it
+(:func:`~slamkit.scanmatch.correlative.correlative_rival`). Along a corridor of identical
+doors, at one of a building's many look-alike corners or between look-alike rooms, the
+true place and its aliases score alike, and which one wins depends on noise and on how far
+the estimate has drifted; the window is widened because the true place may lie just
+outside it when the drift is near the window's size. The optimum is
 refined by point-to-normal ICP against the same submap, which must pair
 ``min_inliers`` of the scan and may move the optimum only a few cells (a refinement that
 walks away means the correlative peak was not a real alignment). The back end then checks
@@ -44,7 +49,12 @@ from slamkit._validation import FloatArray
 from slamkit.errors import MatchError
 from slamkit.geometry.angles import wrap_angle_float
 from slamkit.geometry.pose2 import between, compose, transform_points
-from slamkit.scanmatch.correlative import CorrelativeConfig, CorrelativeReference, correlative_match
+from slamkit.scanmatch.correlative import (
+    CorrelativeConfig,
+    CorrelativeReference,
+    correlative_match,
+    correlative_rival,
+)
 from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
 from slamkit.scanmatch.point_map import PointMap, ScanNormals
 from slamkit.scanmatch.result import MatchResult
@@ -61,6 +71,15 @@ __all__ = [
     "submap",
     "verify_closure",
 ]
+
+
+RIVAL_SEPARATION = 0.3
+"""A rival of a closure's optimum lies farther than this from it along x or y [m]: nearer
+poses are the optimum's own peak (the smear of the lookup grid is 5 cm)."""
+RIVAL_RATIO = 0.95
+"""A rival scoring this fraction of the optimum makes the closure ambiguous."""
+RIVAL_WINDOW = 1.0
+"""The rivals are searched for in the closure's window widened this many times."""
 
 
 @dataclass(frozen=True)
@@ -218,23 +237,15 @@ def verify_closure(
         coarse = correlative_match(reference, points, initial, cfg)
     except MatchError as exc:
         return exc.reason
-    shift = between(initial, coarse.pose)
-    if math.hypot(shift[0], shift[1]) > settings.near_window:
-        # A far optimum must beat the best pose near the estimate clearly: along a corridor
-        # or between look-alike rooms the two score alike (an aliased match).
-        near = dataclasses.replace(cfg, window_xy=settings.near_window, min_score=0.0)
-        try:
-            close = correlative_match(reference, points, initial, near)
-        except MatchError:
-            close = None
-        # A near optimum on the window's edge is the far peak's flank, not a peak of its own.
-        inner = settings.near_window - 2.0 * settings.resolution
-        if (
-            close is not None
-            and np.abs(close.pose[:2] - initial[:2]).max() < inner
-            and close.score >= settings.ambiguity_ratio * coarse.score
-        ):
-            return "ambiguous"
+    # The optimum must be the only good explanation in the window: along a corridor of
+    # identical doors or between look-alike rooms the true place and its aliases score
+    # alike, and which one wins depends on noise and on how far the estimate has drifted.
+    wide = dataclasses.replace(cfg, window_xy=RIVAL_WINDOW * cfg.window_xy)
+    rival = correlative_rival(
+        reference, points, initial, coarse, RIVAL_SEPARATION, RIVAL_RATIO, wide
+    )
+    if rival is not None:
+        return "ambiguous"
     try:
         fine: MatchResult = normal_icp(reference_cloud, points, coarse.pose, icp_config)
     except MatchError as exc:
