@@ -72,6 +72,7 @@ import numpy as np
 
 from slamkit._validation import FloatArray
 from slamkit.config import config_from_mapping, config_to_dict
+from slamkit.datasets.assemble import assemble_events, odometry_events, scan_events
 from slamkit.datasets.carmen_parse import (
     SKIPPED_SHOWN,
     CarmenLog,
@@ -89,12 +90,9 @@ from slamkit.datasets.reading import ReadingSummary, check_dropped_share
 from slamkit.datasets.stamps import RESTAMP_REASON, StampRepair, repair_stamps
 from slamkit.datasets.stream import (
     Dataset,
-    Event,
     GroundTruth,
-    LaserScan,
     LaserSpec,
     MotionSpec,
-    Odometry,
 )
 from slamkit.errors import ConfigError, DatasetFormatError
 from slamkit.geometry.angles import wrap_angle
@@ -293,11 +291,7 @@ def carmen_dataset(
     rng = np.random.default_rng(seed)
     cov = options.odometry_cov()
     odom = _noisy_odometry(truth_poses, cov, rng)
-    events: list[Event] = []
-    for k in range(times.size):
-        t = float(times[k])
-        events.append(Odometry(t, odom[k]))
-        events.append(LaserScan(t, ranges[k]))
+    events = assemble_events(odometry_events(times, odom), scan_events(times, ranges))
     laser = LaserSpec(
         beam_angles_from_geometry(log.n_beams, fov_deg, res_deg), max_range, options.range_sigma
     )
@@ -305,7 +299,7 @@ def carmen_dataset(
     reading = _reading_summary(log, stamps, geometry.note)
     return Dataset(
         name=name,
-        events=tuple(events),
+        events=events,
         motion=MotionSpec(OdometryModel(), cov, source="odometry"),
         laser=laser,
         initial_pose=truth_poses[0].copy(),
@@ -437,13 +431,10 @@ def read_dpslam_log(
     odom = np.asarray(odom_rows, dtype=np.float64)
     odom[:, 2] = wrap_angle(odom[:, 2])
     times = opts.scan_period * np.arange(ranges.shape[0], dtype=np.float64)
-    events: list[Event] = []
-    for k in range(times.size):
-        events.append(Odometry(float(times[k]), odom[k]))
-        events.append(LaserScan(float(times[k]), ranges[k]))
+    events = assemble_events(odometry_events(times, odom), scan_events(times, ranges))
     return Dataset(
         name=name or p.name.split(".")[0],
-        events=tuple(events),
+        events=events,
         motion=MotionSpec(OdometryModel(), opts.odometry_cov(), source="odometry"),
         laser=LaserSpec(
             beam_angles_from_geometry(n_expected, fov_deg, res_deg),
