@@ -100,7 +100,7 @@ def test_a_csv_with_odometry_and_unknown_ids_reads_in_order(tmp_path):
     assert data.known_landmarks is not None and data.known_landmarks.ids.tolist() == [7, 8]
     np.testing.assert_allclose(data.truth.times, [0.0, 1.0])
     assert data.motion.noise_cov[1, 1] == pytest.approx(0.01)
-    assert data.metadata["path"] == str(p.resolve()) and data.name == "robot"
+    assert data.provenance.path == str(p.resolve()) and data.name == "robot"
 
 
 @pytest.mark.parametrize(

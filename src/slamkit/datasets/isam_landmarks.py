@@ -45,7 +45,7 @@ from scipy.linalg import cho_solve
 
 from slamkit._validation import FloatArray
 from slamkit.config import config_from_mapping
-from slamkit.datasets.assemble import assemble_events, odometry_events
+from slamkit.datasets.assemble import assemble_events, odometry_events, reading_events
 from slamkit.datasets.paths import require_file
 from slamkit.datasets.stream import (
     Dataset,
@@ -396,15 +396,11 @@ def _readings(
     each pose's readings shuffled by ``rng`` (pose by pose) and their ids -1."""
     pose_of = noisy.landmark_ids[:, 0]
     order = np.argsort(pose_of, kind="stable")
-    starts = np.searchsorted(pose_of[order], np.arange(n_poses + 1))
-    out: list[LandmarkReadings] = []
-    for k in range(n_poses):
-        rows = order[starts[k] : starts[k + 1]]
-        if rows.size == 0:
-            continue
-        ids = noisy.landmark_ids[rows, 1].copy()
-        if not identities:
-            rows = rows[rng.permutation(rows.size)]
-            ids = np.full(rows.size, -1, dtype=np.int64)
-        out.append(LandmarkReadings(float(k), noisy.landmark_z[rows], ids))
-    return out
+    if not identities:
+        starts = np.searchsorted(pose_of[order], np.arange(n_poses + 1))
+        for k in range(n_poses):
+            if starts[k + 1] > starts[k]:
+                rows = order[starts[k] : starts[k + 1]]
+                order[starts[k] : starts[k + 1]] = rows[rng.permutation(rows.size)]
+    ids = noisy.landmark_ids[order, 1] if identities else np.full(order.size, -1, np.int64)
+    return reading_events(pose_of[order].astype(np.float64), noisy.landmark_z[order], ids)

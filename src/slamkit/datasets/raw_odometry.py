@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
 from slamkit.datasets.assemble import assemble_events, odometry_events, scan_events
+from slamkit.datasets.provenance import Provenance
 from slamkit.datasets.reading import ReadingSummary
 from slamkit.datasets.relations import Relations
 from slamkit.datasets.stream import Dataset, GroundTruth, LaserSpec, MotionSpec, Odometry
@@ -192,12 +193,13 @@ def raw_laser_dataset(
     metadata: dict[str, Any],
     relations: Relations | None = None,
     reading: ReadingSummary | None = None,
+    provenance: Provenance | None = None,
 ) -> Dataset:
     """The :class:`Dataset` of a raw log: per scan an :class:`Odometry` event (the robot's
     pose in the odometry frame) and a :class:`LaserScan` at the same stamp, in that order;
     an odometry :class:`MotionSpec` with the nominal ``motion_cov``; the prior around the
     first odometry pose (:data:`RAW_INITIAL_COV`); ``relations`` as the ground truth;
-    ``reading``, what the reader did to the file.
+    ``reading``, what the reader did to the file; ``provenance``, the reader's record.
     ``odometry=None`` (a log without it): scans only, no motion model, the prior at the
     origin."""
     t_list = np.asarray(times, dtype=np.float64)
@@ -216,4 +218,5 @@ def raw_laser_dataset(
         description=description,
         metadata=metadata,
         reading=reading,
+        provenance=provenance or Provenance(),
     )

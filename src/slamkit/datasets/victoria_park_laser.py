@@ -230,6 +230,12 @@ def _check_sensors(
     return {"arrivals": len(table), "same_time_as_previous": ties}
 
 
+_DESCRIPTION = (
+    "Victoria Park raw laser: 361-beam scans (180°, laser 3.78 m ahead of the rear axle), "
+    "40 Hz Ackermann speed/steering, GPS positions as reference"
+)
+
+
 @dataclass(frozen=True)
 class _Use:
     """Which scans the data set keeps (``use``), the cut, and the counts for the summary:
@@ -314,10 +320,7 @@ def load_victoria_park_laser(
             position_times=t_gps[: use.n_gps],
             positions=gps.values[: use.n_gps, 2:0:-1].copy(),  # the file's columns: north, east
         ),
-        description=(
-            "Victoria Park raw laser: 361-beam scans (180°, laser 3.78 m ahead of the rear "
-            "axle), 40 Hz Ackermann speed/steering, GPS positions as reference"
-        ),
+        description=_DESCRIPTION,
         metadata=_metadata(opts, use, (len(scans), len(drs)), arrivals),
         reading=_summary(use, len(scans), (p_drs.name, len(drs)), (p_gps.name, len(gps)), opts),
     )
