@@ -78,7 +78,7 @@ def test_load_file_reads_bags_and_carmen_logs_and_records_the_path(bags, tmp_pat
     ros2 = load_file(_bag(bags, tmp_path / "r2", "ros2"))
     for ds in (ros1, ros2):
         assert [e.t for e in ds.events if isinstance(e, LaserScan)] == [1.0, 1.1, 1.2, 1.3, 1.4]
-    assert ros1.metadata["path"] == str((tmp_path / "r.bag").resolve())
+    assert ros1.provenance.path == str((tmp_path / "r.bag").resolve())
     assert ros2.metadata["format"] == "rosbag2"
     (tmp_path / "c.log").write_text(CLF + "\n")
     clf = load_file(tmp_path / "c.log", {"max_range": 1.5})
@@ -90,7 +90,7 @@ def test_load_data_takes_names_then_paths(bags, tmp_path):
     assert load_data("five-features").name == "five-features"
     path = _bag(bags, tmp_path / "mine.bag")
     ds = load_data(str(path), options={"max_odom_gap": 1.0})
-    assert ds.name == "mine.bag" and ds.metadata["config"]["max_odom_gap"] == 1.0
+    assert ds.name == "mine.bag" and ds.provenance.options["max_odom_gap"] == 1.0
     assert "registered_as" not in ds.metadata
     with pytest.raises(UnknownNameError, match=r"unknown dataset 'no-such-set'"):
         load_data("no-such-set")
@@ -175,7 +175,7 @@ def test_a_registered_bags_path_reads_as_the_registered_data_set(data_root):
         pytest.skip(f"real data not found: {bag}")
     by_path = load_data(str(bag), data_root=data_root)
     by_name = load_data("aces-raw", data_root=data_root)
-    assert by_path.metadata["registered_as"] == "aces-raw"
-    assert by_path.metadata["config"]["max_odom_gap"] == 3.5
+    assert by_path.provenance.registered_as == "aces-raw"
+    assert by_path.provenance.options["max_odom_gap"] == 3.5
     assert [e.t for e in by_path.events] == [e.t for e in by_name.events]
     assert by_path.truth.relations is None and by_name.truth.relations is not None

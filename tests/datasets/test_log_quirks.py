@@ -158,10 +158,10 @@ def test_the_reader_is_chosen_by_content(tmp_path):
     assert laser_log_format(_log(tmp_path, scans, "x-corrected.log")) == "carmen-corrected"
     assert laser_log_format(dpslam) == "dpslam"
     ds = load_file(corrected, seed=3)
-    assert ds.metadata["reader"] == "carmen-corrected" and ds.truth.poses is not None
-    assert load_file(dpslam).metadata["reader"] == "dpslam"
+    assert ds.provenance.reader == "carmen-corrected" and ds.truth.poses is not None
+    assert load_file(dpslam).provenance.reader == "dpslam"
     forced = load_file(corrected, {"reader": "carmen-raw"})
-    assert forced.metadata["reader"] == "carmen-raw" and forced.truth.poses is None
+    assert forced.provenance.reader == "carmen-raw" and forced.truth.poses is None
     with pytest.raises(ConfigError, match="reader: expected one of"):
         load_file(corrected, {"reader": "carmen"})
 
@@ -190,7 +190,7 @@ def test_each_corrected_log_reads_by_path(data_root, name):
     path = data_root / "laser" / "corrected_carmen" / f"{name}-corrected.log.gz"
     ds = load_data(str(path))
     scans, beams, repair = CORRECTED[name]
-    assert ds.metadata["reader"] == "carmen-corrected"
+    assert ds.provenance.reader == "carmen-corrected"
     assert ds.laser is not None and ds.laser.n_beams == beams
     np.testing.assert_allclose(
         np.rad2deg(ds.laser.beam_angles[[0, -1]]), [-90, 90 - 180 / beams * (beams % 2 == 0)]

@@ -11,7 +11,8 @@ import pytest
 
 from slamkit.app import RunRequest, run_job
 from slamkit.datasets import Control, LandmarkReadings, LandmarkSensorSpec, Odometry
-from slamkit.datasets.arrays import landmark_dataset_from_arrays, ordered_events
+from slamkit.datasets.arrays import landmark_dataset_from_arrays
+from slamkit.datasets.assemble import assemble_events
 from slamkit.datasets.files import load_data, load_file
 from slamkit.datasets.landmark_csv import read_landmark_csv
 from slamkit.errors import DatasetFormatError, InputError
@@ -46,7 +47,7 @@ def test_same_time_events_are_ordered_motion_first_whatever_the_input_order():
         LandmarkReadings(0.5, z, np.array([1])),
         Control(0.5, np.array([1.0, 0.0]), 0.5),
     ]
-    out = ordered_events(events)
+    out = assemble_events(events)
     assert [(type(e).__name__, e.t) for e in out] == [
         ("Control", 0.5),
         ("LandmarkReadings", 0.5),
@@ -99,7 +100,7 @@ def test_a_csv_with_odometry_and_unknown_ids_reads_in_order(tmp_path):
     assert data.known_landmarks is not None and data.known_landmarks.ids.tolist() == [7, 8]
     np.testing.assert_allclose(data.truth.times, [0.0, 1.0])
     assert data.motion.noise_cov[1, 1] == pytest.approx(0.01)
-    assert data.metadata["path"] == str(p.resolve()) and data.name == "robot"
+    assert data.provenance.path == str(p.resolve()) and data.name == "robot"
 
 
 @pytest.mark.parametrize(

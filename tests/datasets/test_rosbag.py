@@ -13,7 +13,8 @@ import pytest
 
 from slamkit.datasets import LaserScan, Odometry, load_dataset
 from slamkit.datasets.raw_odometry import RAW_ODOMETRY_SIGMA_ROT_DEG, RAW_ODOMETRY_SIGMA_TRANS
-from slamkit.datasets.rosbag import FREIBURG_BAGS, RosbagOptions, read_rosbag
+from slamkit.datasets.registry import DATASETS
+from slamkit.datasets.rosbag import RosbagOptions, read_rosbag
 from slamkit.errors import ConfigError, DataNotFoundError, DatasetFormatError
 from slamkit.geometry import wrap_angle
 from slamkit.geometry.pose2 import between
@@ -167,7 +168,7 @@ def test_odometry_direction_twist_reverses_the_steps_the_speed_says_went_backwar
     np.testing.assert_allclose(by_twist[:, :2], expected, atol=1e-12)
     np.testing.assert_allclose(by_twist[:, 2], as_poses[:, 2], atol=1e-15)  # headings kept
     np.testing.assert_allclose(as_poses[:, :2], (np.arange(4) + 0.5)[:, None] * step, atol=1e-12)
-    assert signed.metadata["config"]["odometry_direction"] == "twist"
+    assert signed.provenance.options["odometry_direction"] == "twist"
 
 
 def test_mounting_chains_static_transforms_and_can_be_given(bags, tmp_path):
@@ -491,12 +492,7 @@ FREIBURG = {
 
 @pytest.fixture(scope="module")
 def freiburg(data_root: Path) -> dict:
-    missing = [
-        f
-        for e in FREIBURG_BAGS.values()
-        for f in (e.bag, e.relations)
-        if not (data_root / f).exists()
-    ]
+    missing = [f for name in FREIBURG for f in DATASETS[name].files if not (data_root / f).exists()]
     if missing:
         pytest.skip(f"real data not found under {data_root}: {', '.join(missing)}")
     return {name: load_dataset(name, data_root=data_root) for name in FREIBURG}
@@ -610,8 +606,8 @@ def test_aces_odometry_from_tf_is_the_odom_topics(freiburg, data_root):
     read from /tf, ACES's Odometry events are bit-identical to the registered ones (so are
     Intel's and Freiburg 079's with the poses' direction, measured)."""
     ds = read_rosbag(
-        data_root / FREIBURG_BAGS["aces-raw"].bag,
-        {**FREIBURG_BAGS["aces-raw"].defaults, "odometry_source": "tf"},
+        data_root / DATASETS["aces-raw"].files[0],
+        {**DATASETS["aces-raw"].defaults, "odometry_source": "tf"},
     )
     registered = freiburg["aces-raw"]
     assert ds.metadata["odometry_from"] == "/tf (odom → base_link)"

@@ -151,13 +151,14 @@ def dataset_table(dataset: Dataset, options: Mapping[str, Any] | None = None) ->
     """The ``[dataset]`` table ``config.json`` writes of a loaded data set: its ``name``; the
     ``path`` and ``reader`` of the file it was read from (so that the file re-runs the run,
     read by the same reader even when the run named another than the content calls for);
-    and its resolved options (the loader's record, else ``options``)."""
+    and its resolved options (the loader's record, else ``options``) — all from the data
+    set's :class:`~slamkit.datasets.provenance.Provenance`."""
     table: dict[str, Any] = {"name": dataset.name}
-    if "path" in dataset.metadata:
-        table["path"] = dataset.metadata["path"]
-        if "reader" in dataset.metadata:
-            table["reader"] = dataset.metadata["reader"]
-    table.update(dataset.metadata.get("config", dict(options or {})))
+    source = dataset.provenance
+    if source.path is not None:
+        table["path"] = source.path
+        table["reader"] = source.reader
+    table.update(source.options if source.options is not None else dict(options or {}))
     return table
 
 
@@ -346,7 +347,7 @@ def config_toml(
     if data in DATASETS:
         from slamkit.datasets.files import load_data
 
-        resolved = load_data(data, data_root=data_root).metadata.get("config", {})
+        resolved = load_data(data, data_root=data_root).provenance.options or {}
         table = dataset_toml(data, resolved, DATASETS[data].options_type())
     else:
         from slamkit.datasets.files import file_options

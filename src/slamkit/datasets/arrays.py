@@ -1,34 +1,32 @@
 """A :class:`~slamkit.datasets.stream.Dataset` from your own arrays.
 
-:func:`ordered_events` puts events in the order every estimator expects: by time, and at one
-time stamp the known pose first, then the motion (:class:`Control` over ``(t − dt, t]``, or
-the :class:`Odometry` pose at ``t``), then the readings and scans taken at ``t`` — so a
-reading at the stamp of a control is processed after the robot has moved. Events given in
-any order come out in that one (stable within a kind).
-
 :func:`landmark_dataset_from_arrays` builds a landmark data set from plain arrays: one row per
 control (or odometry pose), one row per landmark reading (rows with the same time become one
 :class:`LandmarkReadings` event), optional truth. Units: seconds, metres, radians.
+The events are merged by the loader kit's :func:`~slamkit.datasets.assemble.assemble_events`
+(by time; at one stamp the motion before the readings).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from slamkit._validation import as_array
+from slamkit.datasets.assemble import (
+    assemble_events,
+    control_events,
+    odometry_events,
+    reading_events,
+)
 from slamkit.datasets.stream import (
     Control,
     Dataset,
-    Event,
     GroundTruth,
-    KnownPose,
     LandmarkReadings,
     LandmarkSensorSpec,
-    LaserScan,
     MotionSpec,
     Odometry,
 )
@@ -36,30 +34,12 @@ from slamkit.errors import InputError, ShapeError
 from slamkit.maps import LandmarkMap
 from slamkit.models import OdometryModel, UnicycleEuler
 
-__all__ = ["EVENT_RANK", "landmark_dataset_from_arrays", "ordered_events"]
-
-EVENT_RANK: dict[type, int] = {
-    KnownPose: 0,
-    Control: 1,
-    Odometry: 1,
-    LandmarkReadings: 2,
-    LaserScan: 2,
-}
-"""The order of event kinds at one time stamp (lower first)."""
+__all__ = ["landmark_dataset_from_arrays"]
 
 
-def ordered_events(events: Iterable[Event]) -> tuple[Event, ...]:
-    """``events`` sorted by time and, at equal times, by :data:`EVENT_RANK` (stable)."""
-    items = list(events)
-    for ev in items:
-        if type(ev) not in EVENT_RANK:
-            raise InputError(f"ordered_events: unknown event type {type(ev).__name__}")
-    keys = [(float(ev.t), EVENT_RANK[type(ev)]) for ev in items]
-    order = sorted(range(len(items)), key=keys.__getitem__)
-    return tuple(items[i] for i in order)
-
-
-def _readings(times: ArrayLike, z: ArrayLike, ids: ArrayLike | None, dim: int) -> list[Event]:
+def _readings(
+    times: ArrayLike, z: ArrayLike, ids: ArrayLike | None, dim: int
+) -> list[LandmarkReadings]:
     t = as_array(times, "reading times", (None,))
     zz = np.asarray(z, dtype=float)
     if zz.ndim == 1 and dim == 1:
@@ -75,13 +55,7 @@ def _readings(times: ArrayLike, z: ArrayLike, ids: ArrayLike | None, dim: int) -
             )
         idv = raw.astype(np.int64)
     order = np.argsort(t, kind="stable")
-    t, zz, idv = t[order], zz[order], idv[order]
-    starts = np.flatnonzero(np.r_[True, np.diff(t) > 0])
-    ends = np.r_[starts[1:], t.size]
-    return [
-        LandmarkReadings(float(t[a]), zz[a:b].copy(), idv[a:b].copy())
-        for a, b in zip(starts, ends, strict=True)
-    ]
+    return reading_events(t[order], zz[order], idv[order])
 
 
 def landmark_dataset_from_arrays(
@@ -121,31 +95,12 @@ def landmark_dataset_from_arrays(
     has_odometry = odometry_poses is not None or odometry_times is not None
     if has_controls == has_odometry:
         raise InputError("give the motion as controls or as odometry poses (one of the two)")
-    events: list[Event] = _readings(reading_times, readings, reading_ids, sensor.dim)
+    readings_ = _readings(reading_times, readings, reading_ids, sensor.dim)
+    moves: list[Control] | list[Odometry]
     if has_controls:
-        if control_times is None or controls is None:
-            raise InputError("controls: give control_times and controls together")
-        t = as_array(control_times, "control times", (None,))
-        u = as_array(controls, "controls", (t.size, 2))
-        if control_dt is None:
-            if t.size < 2:
-                raise InputError("control_dt: needed when there is only one control")
-            gaps = np.diff(t)
-            dt = np.r_[gaps[0], gaps]
-        else:
-            dt = as_array(control_dt, "control dt", (t.size,))
-        if np.any(dt <= 0):
-            raise InputError("control dt: expected durations > 0 s")
-        events += [Control(float(t[k]), u[k].copy(), float(dt[k])) for k in range(t.size)]
-        motion = MotionSpec(UnicycleEuler(), as_array(motion_noise_cov, "motion noise", (2, 2)))
+        motion, moves = _control_stream(control_times, controls, control_dt, motion_noise_cov)
     else:
-        if odometry_times is None or odometry_poses is None:
-            raise InputError("odometry: give odometry_times and odometry_poses together")
-        t = as_array(odometry_times, "odometry times", (None,))
-        p = as_array(odometry_poses, "odometry poses", (t.size, 3))
-        events += [Odometry(float(t[k]), p[k].copy()) for k in range(t.size)]
-        cov = as_array(motion_noise_cov, "motion noise", (3, 3))
-        motion = MotionSpec(OdometryModel(), cov, source="odometry")
+        motion, moves = _odometry_stream(odometry_times, odometry_poses, motion_noise_cov)
     truth = GroundTruth(
         times=None if truth_times is None else as_array(truth_times, "truth times", (None,)),
         poses=None if truth_poses is None else as_array(truth_poses, "truth poses", (None, 3)),
@@ -153,7 +108,7 @@ def landmark_dataset_from_arrays(
     )
     return Dataset(
         name=name,
-        events=ordered_events(events),
+        events=assemble_events(moves, readings_),
         motion=motion,
         landmark_sensor=sensor,
         initial_pose=None if initial_pose is None else as_array(initial_pose, "initial pose", (3,)),
@@ -163,3 +118,34 @@ def landmark_dataset_from_arrays(
         description=description,
         metadata=dict(metadata or {}),
     )
+
+
+def _control_stream(
+    times: ArrayLike | None, u: ArrayLike | None, dt: ArrayLike | None, cov: ArrayLike
+) -> tuple[MotionSpec, list[Control]]:
+    if times is None or u is None:
+        raise InputError("controls: give control_times and controls together")
+    t = as_array(times, "control times", (None,))
+    uu = as_array(u, "controls", (t.size, 2))
+    if dt is None:
+        if t.size < 2:
+            raise InputError("control_dt: needed when there is only one control")
+        gaps = np.diff(t)
+        dts = np.r_[gaps[0], gaps]
+    else:
+        dts = as_array(dt, "control dt", (t.size,))
+    if np.any(dts <= 0):
+        raise InputError("control dt: expected durations > 0 s")
+    motion = MotionSpec(UnicycleEuler(), as_array(cov, "motion noise", (2, 2)))
+    return motion, control_events(t, uu, dts)
+
+
+def _odometry_stream(
+    times: ArrayLike | None, poses: ArrayLike | None, cov: ArrayLike
+) -> tuple[MotionSpec, list[Odometry]]:
+    if times is None or poses is None:
+        raise InputError("odometry: give odometry_times and odometry_poses together")
+    t = as_array(times, "odometry times", (None,))
+    p = as_array(poses, "odometry poses", (t.size, 3))
+    motion = MotionSpec(OdometryModel(), as_array(cov, "motion noise", (3, 3)), source="odometry")
+    return motion, odometry_events(t, p)

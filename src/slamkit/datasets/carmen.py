@@ -64,7 +64,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -72,11 +72,14 @@ import numpy as np
 
 from slamkit._validation import FloatArray
 from slamkit.config import config_from_mapping, config_to_dict
+from slamkit.datasets.assemble import assemble_events, odometry_events, scan_events
 from slamkit.datasets.carmen_parse import (
     SKIPPED_SHOWN,
     CarmenLog,
     LineProblems,
+    LogGeometry,
     beam_angles_from_geometry,
+    ignored_lines,
     log_geometry,
     parse_carmen_log,
     parse_floats,
@@ -85,16 +88,14 @@ from slamkit.datasets.carmen_parse import (
 )
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.paths import require_file
+from slamkit.datasets.provenance import Provenance
 from slamkit.datasets.reading import ReadingSummary, check_dropped_share
 from slamkit.datasets.stamps import RESTAMP_REASON, StampRepair, repair_stamps
 from slamkit.datasets.stream import (
     Dataset,
-    Event,
     GroundTruth,
-    LaserScan,
     LaserSpec,
     MotionSpec,
-    Odometry,
 )
 from slamkit.errors import ConfigError, DatasetFormatError
 from slamkit.geometry.angles import wrap_angle
@@ -240,6 +241,7 @@ def _reading_summary(log: CarmenLog, stamps: StampRepair, note: str | None) -> R
         dropped=dropped,
         repaired={k: v for k, v in stamps.counts.items() if k != RESTAMP_REASON},
         notes=tuple(notes),
+        ignored=ignored_lines(log.counts),
     )
 
 
@@ -283,59 +285,55 @@ def carmen_dataset(
         raise DatasetFormatError(
             f"{log.n_beams} beams do not match the declared field of view", log.path
         )
-    fov_deg, res_deg, how = geometry.fov_deg, geometry.resolution_deg, geometry.source
     max_range, max_source = _max_range_source(options, log)
     ranges = np.where(log.ranges >= max_range, max_range, log.ranges)
     times, stamps = repair_stamps(log.times, STAMP_PERIOD)
-    repaired = stamps.repaired
     truth_poses = log.laser_poses.copy()
     truth_poses[:, 2] = wrap_angle(truth_poses[:, 2])
     rng = np.random.default_rng(seed)
     cov = options.odometry_cov()
     odom = _noisy_odometry(truth_poses, cov, rng)
-    events: list[Event] = []
-    for k in range(times.size):
-        t = float(times[k])
-        events.append(Odometry(t, odom[k]))
-        events.append(LaserScan(t, ranges[k]))
-    laser = LaserSpec(
-        beam_angles_from_geometry(log.n_beams, fov_deg, res_deg), max_range, options.range_sigma
-    )
-    n_max = int(np.count_nonzero(log.ranges >= max_range))
-    reading = _reading_summary(log, stamps, geometry.note)
+    events = assemble_events(odometry_events(times, odom), scan_events(times, ranges))
+    angles = beam_angles_from_geometry(log.n_beams, geometry.fov_deg, geometry.resolution_deg)
     return Dataset(
         name=name,
-        events=tuple(events),
+        events=events,
         motion=MotionSpec(OdometryModel(), cov, source="odometry"),
-        laser=laser,
+        laser=LaserSpec(angles, max_range, options.range_sigma),
         initial_pose=truth_poses[0].copy(),
         initial_cov=np.diag([1e-4, 1e-4, math.radians(0.5) ** 2]),
         truth=GroundTruth(times=times, poses=truth_poses),
         description=description or f"CARMEN log {log.path.name} ({log.n_scans} scans)",
-        metadata={
-            "kind": "real",
-            "format": "carmen",
-            "file": log.path.name,
-            "config": config_to_dict(options),
-            "scans": log.n_scans,
-            "beams": log.n_beams,
-            "fov_deg": fov_deg,
-            "angular_resolution_deg": res_deg,
-            "geometry_from": how,
-            "max_range": max_range,
-            "max_range_from": max_source,
-            "max_range_readings": n_max,
-            "message_counts": dict(log.counts),
-            "odom_lines_ignored": int(log.counts.get("ODOM", 0)),
-            "odometry": "corrected poses + known Gaussian noise (ODOM lines not used)",
-            "timestamps_repaired": repaired,
-            "skipped_lines": {
-                "count": len(log.skipped),
-                "first": [{"line": n, "reason": m} for n, m in log.skipped[:SKIPPED_SHOWN]],
-            },
-        },
-        reading=reading,
+        metadata=_carmen_metadata(log, geometry, (max_range, max_source), stamps.repaired),
+        reading=_reading_summary(log, stamps, geometry.note),
+        provenance=Provenance(options=config_to_dict(options)),
     )
+
+
+def _carmen_metadata(
+    log: CarmenLog, geometry: LogGeometry, max_range: tuple[float, str], repaired: int
+) -> dict[str, Any]:
+    return {
+        "kind": "real",
+        "format": "carmen",
+        "file": log.path.name,
+        "scans": log.n_scans,
+        "beams": log.n_beams,
+        "fov_deg": geometry.fov_deg,
+        "angular_resolution_deg": geometry.resolution_deg,
+        "geometry_from": geometry.source,
+        "max_range": max_range[0],
+        "max_range_from": max_range[1],
+        "max_range_readings": int(np.count_nonzero(log.ranges >= max_range[0])),
+        "message_counts": dict(log.counts),
+        "odom_lines_ignored": int(log.counts.get("ODOM", 0)),
+        "odometry": "corrected poses + known Gaussian noise (ODOM lines not used)",
+        "timestamps_repaired": repaired,
+        "skipped_lines": {
+            "count": len(log.skipped),
+            "first": [{"line": n, "reason": m} for n, m in log.skipped[:SKIPPED_SHOWN]],
+        },
+    }
 
 
 def read_carmen_log(
@@ -365,6 +363,21 @@ def read_carmen_log(
 # --------------------------------------------------------------------------------------------
 
 
+@dataclass
+class _DpSlamLines:
+    """The scans of a DP-SLAM log: each ``Laser`` line's ranges with the pose of the
+    ``Odometry`` line before it, the scans' line numbers and the count of every type."""
+
+    odom_rows: list[list[float]] = field(default_factory=list)
+    range_rows: list[list[float]] = field(default_factory=list)
+    numbers: list[int] = field(default_factory=list)
+    counts: dict[str, int] = field(default_factory=dict)
+
+
+DPSLAM_BEAMS = 181
+"""Beams of a DP-SLAM log's ``Laser`` line (180° at 1°)."""
+
+
 def read_dpslam_log(
     path: str | Path,
     options: DpSlamOptions | Mapping[str, Any] | None = None,
@@ -381,72 +394,25 @@ def read_dpslam_log(
     )
     p = Path(path)
     problems = LineProblems(p, opts.lenient)
-    n_expected = 181
-    geometry = resolve_geometry(n_expected, opts.fov_deg, None, "declared")
+    geometry = resolve_geometry(DPSLAM_BEAMS, opts.fov_deg, None, "declared")
     if geometry is None:  # pragma: no cover - 181 beams always resolve
         raise ConfigError(f"fov_deg {opts.fov_deg} does not fit 181 beams")
     fov_deg, res_deg, _ = geometry
-    pending: tuple[int, list[float]] | None = None
-    odom_rows: list[list[float]] = []
-    range_rows: list[list[float]] = []
-    numbers: list[int] = []
-    counts: dict[str, int] = {}
-    for number, line in enumerate(read_lines(p), start=1):
-        tokens = line.split()
-        if not tokens or tokens[0].startswith("#"):
-            continue
-        kind = tokens[0]
-        counts[kind] = counts.get(kind, 0) + 1
-        if kind == "Odometry":
-            values = parse_floats(tokens[1:]) if len(tokens) == 4 else None
-            if values is None or not all(math.isfinite(v) for v in values):
-                problems.report(number, "Odometry: expected three finite numbers x y theta")
-                continue
-            pending = (number, values)
-        elif kind == "Laser":
-            try:
-                n = int(tokens[1]) if len(tokens) > 1 else -1
-            except ValueError:
-                n = -1
-            if n != n_expected:
-                problems.report(
-                    number, f"Laser: {n} beams disagree with the declared {n_expected} beams"
-                )
-                continue
-            values = parse_floats(tokens[2:]) if len(tokens) == n + 2 else None
-            if values is None:
-                problems.report(number, f"Laser: expected {n} numbers after the count")
-                continue
-            bad = [v for v in values if not (math.isfinite(v) and v >= 0.0)]
-            if bad:
-                problems.report(number, f"Laser: ranges must be finite and >= 0, got {bad[0]!r}")
-                continue
-            if pending is None:
-                problems.report(number, "Laser: no Odometry line before this scan")
-                continue
-            odom_rows.append(pending[1])
-            range_rows.append(values)
-            numbers.append(number)
-            pending = None
-        else:
-            problems.report(number, f"unknown message {kind!r}: expected Odometry or Laser")
-    if not range_rows:
+    found = _dpslam_lines(p, problems)
+    if not found.range_rows:
         raise DatasetFormatError("no Laser scans found", p)
-    raw = np.asarray(range_rows, dtype=np.float64)
+    raw = np.asarray(found.range_rows, dtype=np.float64)
     ranges = np.where(raw >= opts.max_range, opts.max_range, raw)
-    odom = np.asarray(odom_rows, dtype=np.float64)
+    odom = np.asarray(found.odom_rows, dtype=np.float64)
     odom[:, 2] = wrap_angle(odom[:, 2])
     times = opts.scan_period * np.arange(ranges.shape[0], dtype=np.float64)
-    events: list[Event] = []
-    for k in range(times.size):
-        events.append(Odometry(float(times[k]), odom[k]))
-        events.append(LaserScan(float(times[k]), ranges[k]))
+    events = assemble_events(odometry_events(times, odom), scan_events(times, ranges))
     return Dataset(
         name=name or p.name.split(".")[0],
-        events=tuple(events),
+        events=events,
         motion=MotionSpec(OdometryModel(), opts.odometry_cov(), source="odometry"),
         laser=LaserSpec(
-            beam_angles_from_geometry(n_expected, fov_deg, res_deg),
+            beam_angles_from_geometry(DPSLAM_BEAMS, fov_deg, res_deg),
             opts.max_range,
             opts.range_sigma,
         ),
@@ -457,18 +423,69 @@ def read_dpslam_log(
             "kind": "real",
             "format": "dpslam",
             "file": p.name,
-            "config": config_to_dict(opts),
             "scans": int(ranges.shape[0]),
-            "beams": n_expected,
+            "beams": DPSLAM_BEAMS,
             "fov_deg": fov_deg,
             "angular_resolution_deg": res_deg,
             "max_range": opts.max_range,
             "max_range_readings": int(np.count_nonzero(raw >= opts.max_range)),
-            "message_counts": counts,
-            "first_line_numbers": numbers[:3],
+            "message_counts": found.counts,
+            "first_line_numbers": found.numbers[:3],
             "skipped_lines": problems.metadata(),
         },
+        provenance=Provenance(options=config_to_dict(opts)),
     )
+
+
+def _dpslam_lines(path: Path, problems: LineProblems) -> _DpSlamLines:
+    """One pass over a DP-SLAM log: each good ``Laser`` line paired with the ``Odometry``
+    line before it; a malformed line, a scan without odometry or another type reported."""
+    out = _DpSlamLines()
+    pending: list[float] | None = None
+    for number, line in enumerate(read_lines(path), start=1):
+        tokens = line.split()
+        if not tokens or tokens[0].startswith("#"):
+            continue
+        kind = tokens[0]
+        out.counts[kind] = out.counts.get(kind, 0) + 1
+        if kind == "Odometry":
+            values = parse_floats(tokens[1:]) if len(tokens) == 4 else None
+            if values is None or not all(math.isfinite(v) for v in values):
+                problems.report(number, "Odometry: expected three finite numbers x y theta")
+                continue
+            pending = values
+        elif kind == "Laser":
+            ranges = _dpslam_ranges(tokens)
+            if isinstance(ranges, str) or pending is None:
+                problems.report(number, ranges if isinstance(ranges, str) else _NO_ODOMETRY)
+                continue
+            out.odom_rows.append(pending)
+            out.range_rows.append(ranges)
+            out.numbers.append(number)
+            pending = None
+        else:
+            problems.report(number, f"unknown message {kind!r}: expected Odometry or Laser")
+    return out
+
+
+_NO_ODOMETRY = "Laser: no Odometry line before this scan"
+
+
+def _dpslam_ranges(tokens: list[str]) -> list[float] | str:
+    """The ranges of a ``Laser`` line, or what is wrong with it."""
+    try:
+        n = int(tokens[1]) if len(tokens) > 1 else -1
+    except ValueError:
+        n = -1
+    if n != DPSLAM_BEAMS:
+        return f"Laser: {n} beams disagree with the declared {DPSLAM_BEAMS} beams"
+    values = parse_floats(tokens[2:]) if len(tokens) == n + 2 else None
+    if values is None:
+        return f"Laser: expected {n} numbers after the count"
+    bad = [v for v in values if not (math.isfinite(v) and v >= 0.0)]
+    if bad:
+        return f"Laser: ranges must be finite and >= 0, got {bad[0]!r}"
+    return values
 
 
 # --------------------------------------------------------------------------------------------

@@ -6,6 +6,7 @@ the rules for malformed lines are described in :mod:`slamkit.datasets.carmen`.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import warnings
 from collections.abc import Mapping
@@ -22,6 +23,7 @@ from slamkit.errors import DatasetFormatError
 
 __all__ = [
     "FOV_PARAMS",
+    "IGNORED_MESSAGES",
     "RESOLUTION_PARAMS",
     "SKIPPED_SHOWN",
     "CarmenLog",
@@ -29,6 +31,7 @@ __all__ = [
     "LogGeometry",
     "beam_angles_from_geometry",
     "count_geometry",
+    "ignored_lines",
     "log_geometry",
     "parse_carmen_log",
     "parse_floats",
@@ -48,6 +51,25 @@ RADIAN_RESOLUTION_BELOW = 0.05
 under 0.05° apart)."""
 ASSUMED_FOV_DEG = 180.0
 """The field of view of a log that states none: the SICK LMS and PLS of the CARMEN era."""
+
+
+IGNORED_MESSAGES = {
+    "SYNC": "clock sync between the logging hosts; the stamps are read as logged",
+    "TRUEPOS": "a simulator's true pose; not read as ground truth",
+}
+"""CARMEN messages the readers read past on purpose, and why: counted in the reading
+summary (:func:`ignored_lines`), never refused."""
+
+
+def ignored_lines(counts: Mapping[str, int]) -> dict[str, int]:
+    """The lines of :data:`IGNORED_MESSAGES` among a log's ``counts`` (lines per message
+    type), by kind and reason, for :attr:`ReadingSummary.ignored
+    <slamkit.datasets.reading.ReadingSummary.ignored>`."""
+    return {
+        f"{kind} lines ({why})": int(counts[kind])
+        for kind, why in IGNORED_MESSAGES.items()
+        if counts.get(kind)
+    }
 
 
 def read_lines(path: Path) -> list[str]:
@@ -319,6 +341,21 @@ def _param_number(
     return value
 
 
+@dataclass
+class _LogLines:
+    """What one pass over a CARMEN log's lines found: the ``FLASER`` lines split cheaply
+    (the numbers, the stamp, the beam count, the line), the ``PARAM`` values and the count
+    of every message type."""
+
+    bodies: list[str] = field(default_factory=list)
+    body_lines: list[int] = field(default_factory=list)
+    stamps: list[str] = field(default_factory=list)
+    beams_of: list[int] = field(default_factory=list)
+    params: dict[str, str] = field(default_factory=dict)
+    param_lines: dict[str, int] = field(default_factory=dict)
+    counts: dict[str, int] = field(default_factory=dict)
+
+
 def parse_carmen_log(
     path: str | Path,
     *,
@@ -334,65 +371,120 @@ def parse_carmen_log(
     ``TRUEPOS``, …) are counted and ignored.
     """
     p = Path(path)
-    lines = read_lines(p)
     problems = LineProblems(p, lenient)
-    params: dict[str, str] = {}
-    param_lines: dict[str, int] = {}
-    counts: dict[str, int] = {}
-    # FLASER lines split cheaply: "FLASER n <ranges and 6 pose numbers> ts host logger_ts".
-    bodies: list[str] = []
-    body_lines: list[int] = []
-    stamps: list[str] = []
-    beams_of: list[int] = []
+    found = _log_lines(read_lines(p), problems)
+    n_beams, geometry, keep = _scan_geometry(found, p, fov_deg, angular_resolution_deg, problems)
+    values, numbers = _parse_block(
+        [found.bodies[i] for i in keep],
+        n_beams + 6,
+        [found.body_lines[i] for i in keep],
+        problems,
+        "FLASER",
+    )
+    stamp_of = {found.body_lines[i]: found.stamps[i] for i in keep}
+    times, ok_time = _flaser_stamps(numbers, stamp_of, problems)
+    ranges = values[:, :n_beams]
+    ok = ok_time & _check_ranges(ranges, numbers, problems, "FLASER")
+    ok &= np.all(np.isfinite(values[:, n_beams:]), axis=1)
+    for row in np.flatnonzero(~np.all(np.isfinite(values[:, n_beams:]), axis=1) & ok_time):
+        problems.report(numbers[int(row)], "FLASER: the poses must be finite numbers")
+    return CarmenLog(
+        path=p,
+        times=times[ok],
+        ranges=np.ascontiguousarray(ranges[ok]),
+        laser_poses=np.ascontiguousarray(values[ok, n_beams : n_beams + 3]),
+        odom_poses=np.ascontiguousarray(values[ok, n_beams + 3 : n_beams + 6]),
+        line_numbers=np.asarray(numbers, dtype=np.int64)[ok],
+        params=found.params,
+        param_lines=found.param_lines,
+        counts=found.counts,
+        skipped=tuple(sorted(problems.lines)),
+        geometry=geometry,
+    )
+
+
+def _log_lines(lines: list[str], problems: LineProblems) -> _LogLines:
+    """One pass over the lines: FLASER lines split into count, numbers and stamp; PARAM
+    values kept; ODOM and NEFF lines checked for their form; every type counted."""
+    out = _LogLines()
     for number, line in enumerate(lines, start=1):
         stripped = line.strip()
         if not stripped or stripped.startswith("#"):
             continue
         first = stripped.split(None, 1)  # any whitespace separates the fields
         kind, rest = first[0], (first[1] if len(first) > 1 else "")
-        counts[kind] = counts.get(kind, 0) + 1
+        out.counts[kind] = out.counts.get(kind, 0) + 1
         if kind == "FLASER":
-            head = rest.split(None, 1)
-            try:
-                n = int(head[0]) if head else -1
-            except ValueError:
-                n = -1
-            if n < 1 or len(head) < 2:
-                problems.report(number, "FLASER: expected a beam count >= 1 and the readings")
+            split = _split_flaser(rest)
+            if isinstance(split, str):
+                problems.report(number, split)
                 continue
-            parts = head[1].rsplit(None, 3)
-            if len(parts) != 4:
-                problems.report(number, "FLASER: too few fields")
-                continue
-            bodies.append(parts[0])
-            body_lines.append(number)
-            stamps.append(parts[1])
-            beams_of.append(n)
+            out.beams_of.append(split[0])
+            out.bodies.append(split[1])
+            out.stamps.append(split[2])
+            out.body_lines.append(number)
         elif kind == "PARAM":
             fields_ = rest.split()
             if len(fields_) < 2:
                 problems.report(number, "PARAM: expected a name and a value")
                 continue
-            params[fields_[0]] = fields_[1]
-            param_lines[fields_[0]] = number
-        elif kind == "ODOM":
-            fields_ = rest.split()
-            if len(fields_) != 9 or parse_floats(fields_[:7]) is None:
-                problems.report(number, "ODOM: expected x y theta tv rv accel ts host logger_ts")
-        elif kind == "NEFF":
-            fields_ = rest.split()
-            if len(fields_) != 1 or parse_floats(fields_) is None:
-                problems.report(number, "NEFF: expected one number")
+            out.params[fields_[0]] = fields_[1]
+            out.param_lines[fields_[0]] = number
+        else:
+            wrong = _wrong_form(kind, rest)
+            if wrong is not None:
+                problems.report(number, wrong)
+    return out
 
+
+def _split_flaser(rest: str) -> tuple[int, str, str] | str:
+    """``FLASER n <ranges and 6 pose numbers> ts host logger_ts`` → ``(n, numbers, ts)``,
+    or what is wrong."""
+    head = rest.split(None, 1)
+    try:
+        n = int(head[0]) if head else -1
+    except ValueError:
+        n = -1
+    if n < 1 or len(head) < 2:
+        return "FLASER: expected a beam count >= 1 and the readings"
+    parts = head[1].rsplit(None, 3)
+    if len(parts) != 4:
+        return "FLASER: too few fields"
+    return n, parts[0], parts[1]
+
+
+def _wrong_form(kind: str, rest: str) -> str | None:
+    """What is wrong with an ``ODOM`` or ``NEFF`` line (None: nothing; other types are
+    not checked)."""
+    fields_ = rest.split()
+    if kind == "ODOM" and (len(fields_) != 9 or parse_floats(fields_[:7]) is None):
+        return "ODOM: expected x y theta tv rv accel ts host logger_ts"
+    if kind == "NEFF" and (len(fields_) != 1 or parse_floats(fields_) is None):
+        return "NEFF: expected one number"
+    return None
+
+
+def _scan_geometry(
+    found: _LogLines,
+    path: Path,
+    fov_deg: float | None,
+    resolution_deg: float | None,
+    problems: LineProblems,
+) -> tuple[int, LogGeometry, list[int]]:
+    """The log's beam count and geometry (from the first scan whose count fits what is
+    declared), and the scans that have that count (others reported)."""
     n_beams: int | None = None
     geometry: LogGeometry | None = None
     keep: list[int] = []
-    for i, n in enumerate(beams_of):
+    for i, n in enumerate(found.beams_of):
+        line = found.body_lines[i]
         if n_beams is None:
-            geometry = log_geometry(n, params, param_lines, p, fov_deg, angular_resolution_deg)
+            geometry = log_geometry(
+                n, found.params, found.param_lines, path, fov_deg, resolution_deg
+            )
             if geometry is None:
                 problems.report(
-                    body_lines[i],
+                    line,
                     f"FLASER: {n} beams do not match the declared field of view and "
                     "resolution (in degrees or in radians); give fov_deg and "
                     "angular_resolution_deg",
@@ -401,46 +493,23 @@ def parse_carmen_log(
             n_beams = n
         elif n != n_beams:
             problems.report(
-                body_lines[i],
-                f"FLASER: {n} beams disagree with the log's geometry of {n_beams} beams",
+                line, f"FLASER: {n} beams disagree with the log's geometry of {n_beams} beams"
             )
             continue
         keep.append(i)
     if n_beams is None or geometry is None:
-        raise DatasetFormatError("no FLASER scans found", p)
+        raise DatasetFormatError("no FLASER scans found", path)
+    return n_beams, geometry, keep
 
-    width = n_beams + 6
-    values, numbers = _parse_block(
-        [bodies[i] for i in keep], width, [body_lines[i] for i in keep], problems, "FLASER"
-    )
-    stamp_of = {body_lines[i]: stamps[i] for i in keep}
-    times_list: list[float] = []
-    ok_time = np.ones(len(numbers), dtype=bool)
+
+def _flaser_stamps(
+    numbers: list[int], stamp_of: Mapping[int, str], problems: LineProblems
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """The ``ts`` of each scan line (NaN where it is not a number, reported)."""
+    times = np.full(len(numbers), math.nan)
     for j, number in enumerate(numbers):
-        try:
-            t = float(stamp_of[number])
-        except ValueError:
-            t = math.nan
-        if not math.isfinite(t):
+        with contextlib.suppress(ValueError):  # not a number: stays NaN, reported below
+            times[j] = float(stamp_of[number])
+        if not math.isfinite(times[j]):
             problems.report(number, f"FLASER: time stamp {stamp_of[number]!r} is not a number")
-            ok_time[j] = False
-        times_list.append(t)
-    ranges = values[:, :n_beams]
-    ok = ok_time & _check_ranges(ranges, numbers, problems, "FLASER")
-    ok &= np.all(np.isfinite(values[:, n_beams:]), axis=1)
-    for row in np.flatnonzero(~np.all(np.isfinite(values[:, n_beams:]), axis=1) & ok_time):
-        problems.report(numbers[int(row)], "FLASER: the poses must be finite numbers")
-    numbers_arr = np.asarray(numbers, dtype=np.int64)[ok]
-    return CarmenLog(
-        path=p,
-        times=np.asarray(times_list, dtype=np.float64)[ok],
-        ranges=np.ascontiguousarray(ranges[ok]),
-        laser_poses=np.ascontiguousarray(values[ok, n_beams : n_beams + 3]),
-        odom_poses=np.ascontiguousarray(values[ok, n_beams + 3 : n_beams + 6]),
-        line_numbers=numbers_arr,
-        params=params,
-        param_lines=param_lines,
-        counts=counts,
-        skipped=tuple(sorted(problems.lines)),
-        geometry=geometry,
-    )
+    return times, np.isfinite(times)

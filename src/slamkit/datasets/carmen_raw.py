@@ -59,10 +59,12 @@ from slamkit.config import config_from_mapping, config_to_dict
 from slamkit.datasets.carmen_parse import (
     LineProblems,
     beam_angles_from_geometry,
+    ignored_lines,
     log_geometry,
     parse_floats,
     read_lines,
 )
+from slamkit.datasets.provenance import Provenance
 from slamkit.datasets.raw_odometry import (
     DEFAULT_MAX_ODOM_GAP,
     RAW_ODOMETRY_SIGMA_ROT_DEG,
@@ -302,6 +304,53 @@ def parse_carmen_raw(path: str | Path, options: CarmenRawOptions | None = None) 
     p = Path(path)
     lines = read_lines(p)
     problems = LineProblems(p, opts.lenient)
+    counts, params, param_lines = _count_and_params(lines, problems)
+    laser = opts.laser or next((k for k in LASER_MESSAGES if k in counts), None)
+    if laser is None or laser not in counts:
+        raise DatasetFormatError(
+            f"no {laser or ' or '.join(LASER_MESSAGES)} lines in the log; it has: "
+            f"{', '.join(sorted(counts)) or 'nothing'}",
+            p,
+        )
+    scans, numbers, odom_rows = _laser_and_odom_lines(lines, laser, problems)
+    angles, scans, numbers, note = _geometry(
+        scans, numbers, laser, opts, params, param_lines, p, problems
+    )
+    times, stamps = repair_stamps(np.asarray([s.t for s in scans], dtype=np.float64))
+    odom, repeats, unordered = _odom_table(odom_rows)
+    with_poses = laser in ("FLASER", "ROBOTLASER1")
+    return CarmenRawLog(
+        path=p,
+        laser=laser,
+        times=times,
+        ranges=np.asarray([s.ranges for s in scans], dtype=np.float64).reshape(len(scans), -1),
+        beam_angles=angles,
+        line_max_range=np.asarray(
+            [math.nan if s.geometry is None else s.geometry[2] for s in scans], dtype=np.float64
+        ),
+        laser_poses=_pose_rows([s.laser_pose for s in scans]) if with_poses else None,
+        odom_poses=_pose_rows([s.odom_pose for s in scans]) if with_poses else None,
+        odom_times=odom[:, 0].copy(),
+        odom_lines=odom[:, 1:].copy(),
+        line_numbers=np.asarray(numbers, dtype=np.int64),
+        param_max_range=_param_float(params, param_lines, p, "robot_front_laser_max"),
+        counts=counts,
+        skipped=problems.metadata(),
+        odom_repeats=repeats,
+        odom_unordered=unordered,
+        stamps=stamps,
+        geometry_note=note,
+    )
+
+
+def _pose_rows(rows: list[list[float] | None]) -> FloatArray:
+    return np.asarray(rows, dtype=np.float64).reshape(-1, 3)
+
+
+def _count_and_params(
+    lines: list[str], problems: LineProblems
+) -> tuple[dict[str, int], dict[str, str], dict[str, int]]:
+    """The first pass: lines per message type, and the ``PARAM`` values with their lines."""
     counts: dict[str, int] = {}
     params: dict[str, str] = {}
     param_lines: dict[str, int] = {}
@@ -317,13 +366,14 @@ def parse_carmen_raw(path: str | Path, options: CarmenRawOptions | None = None) 
                 continue
             params[fields_[0]] = fields_[1]
             param_lines[fields_[0]] = number
-    laser = opts.laser or next((k for k in LASER_MESSAGES if k in counts), None)
-    if laser is None or laser not in counts:
-        raise DatasetFormatError(
-            f"no {laser or ' or '.join(LASER_MESSAGES)} lines in the log; it has: "
-            f"{', '.join(sorted(counts)) or 'nothing'}",
-            p,
-        )
+    return counts, params, param_lines
+
+
+def _laser_and_odom_lines(
+    lines: list[str], laser: str, problems: LineProblems
+) -> tuple[list[_Scan], list[int], list[list[float]]]:
+    """The second pass: the scans of ``laser`` (with their lines) whose ranges and poses
+    are finite, and the ODOM rows ``(t, x, y, theta)``; malformed lines reported."""
     scans: list[_Scan] = []
     numbers: list[int] = []
     odom_rows: list[list[float]] = []
@@ -338,63 +388,45 @@ def parse_carmen_raw(path: str | Path, options: CarmenRawOptions | None = None) 
             else:
                 odom_rows.append(row)
             continue
-        if laser == "FLASER":
-            scan = _parse_flaser(tokens[1:])
-        elif laser == "ROBOTLASER1":
-            scan = _parse_robotlaser(tokens[1:])
-        else:
-            scan = _parse_rawlaser(tokens[1:], laser)
+        scan = _parse_scan(tokens, laser)
         if isinstance(scan, str):
             problems.report(number, scan)
             continue
-        bad = [v for v in scan.ranges if not (math.isfinite(v) and v >= 0.0)]
-        poses = (scan.laser_pose or []) + (scan.odom_pose or [])
-        if bad:
-            problems.report(number, f"{laser}: ranges must be finite and >= 0, got {bad[0]!r}")
-        elif not all(math.isfinite(v) for v in poses):
-            problems.report(number, f"{laser}: the poses must be finite numbers")
-        else:
-            scans.append(scan)
-            numbers.append(number)
-    angles, scans, numbers, note = _geometry(
-        scans, numbers, laser, opts, params, param_lines, p, problems
-    )
-    times, stamps = repair_stamps(np.asarray([s.t for s in scans], dtype=np.float64))
-    odom = np.asarray(odom_rows, dtype=np.float64).reshape(-1, 4)
+        scans.append(scan)
+        numbers.append(number)
+    return scans, numbers, odom_rows
+
+
+def _parse_scan(tokens: list[str], laser: str) -> _Scan | str:
+    """A laser line of the log's laser, or what is wrong with it (its form, a range that
+    is not finite and >= 0, a pose that is not finite)."""
+    if laser == "FLASER":
+        scan = _parse_flaser(tokens[1:])
+    elif laser == "ROBOTLASER1":
+        scan = _parse_robotlaser(tokens[1:])
+    else:
+        scan = _parse_rawlaser(tokens[1:], laser)
+    if isinstance(scan, str):
+        return scan
+    bad = [v for v in scan.ranges if not (math.isfinite(v) and v >= 0.0)]
+    poses = (scan.laser_pose or []) + (scan.odom_pose or [])
+    if bad:
+        return f"{laser}: ranges must be finite and >= 0, got {bad[0]!r}"
+    if not all(math.isfinite(v) for v in poses):
+        return f"{laser}: the poses must be finite numbers"
+    return scan
+
+
+def _odom_table(rows: list[list[float]]) -> tuple[FloatArray, int, int]:
+    """The ODOM rows ``(M, 4)`` in time order, headings wrapped: repeats left out, and
+    rows stamped 0 or out of order, which cannot be placed in time (they matter only to a
+    laser without poses, which interpolates them); with the two counts."""
+    odom = np.asarray(rows, dtype=np.float64).reshape(-1, 4)
     odom[:, 3] = wrap_angle(odom[:, 3])
     repeats = repeat_mask(odom[:, 0], odom[:, 1:])
     odom = odom[~repeats]
-    # ODOM lines stamped 0 or out of order cannot be placed in time: left out and counted
-    # (they matter only to a laser without poses, which interpolates them).
-    odom_order = increasing_mask(odom[:, 0]) & (odom[:, 0] > 0.0)
-    odom = odom[odom_order]
-    with_poses = laser in ("FLASER", "ROBOTLASER1")
-    return CarmenRawLog(
-        path=p,
-        laser=laser,
-        times=times,
-        ranges=np.asarray([s.ranges for s in scans], dtype=np.float64).reshape(len(scans), -1),
-        beam_angles=angles,
-        line_max_range=np.asarray(
-            [math.nan if s.geometry is None else s.geometry[2] for s in scans], dtype=np.float64
-        ),
-        laser_poses=np.asarray([s.laser_pose for s in scans], dtype=np.float64).reshape(-1, 3)
-        if with_poses
-        else None,
-        odom_poses=np.asarray([s.odom_pose for s in scans], dtype=np.float64).reshape(-1, 3)
-        if with_poses
-        else None,
-        odom_times=odom[:, 0].copy(),
-        odom_lines=odom[:, 1:].copy(),
-        line_numbers=np.asarray(numbers, dtype=np.int64),
-        param_max_range=_param_float(params, param_lines, p, "robot_front_laser_max"),
-        counts=counts,
-        skipped=problems.metadata(),
-        odom_repeats=int(np.count_nonzero(repeats)),
-        odom_unordered=int(np.count_nonzero(~odom_order)),
-        stamps=stamps,
-        geometry_note=note,
-    )
+    in_order = increasing_mask(odom[:, 0]) & (odom[:, 0] > 0.0)
+    return odom[in_order], int(np.count_nonzero(repeats)), int(np.count_nonzero(~in_order))
 
 
 def _geometry(
@@ -479,27 +511,12 @@ def read_carmen_raw_log(
     log = parse_carmen_raw(path, opts)
     if log.n_scans == 0:
         raise DatasetFormatError(f"no valid {log.laser} scans", log.path)
-    if opts.max_range is not None:
-        max_range, max_from = opts.max_range, "option max_range"
-    elif np.isfinite(log.line_max_range[0]):
-        max_range, max_from = float(log.line_max_range[0]), f"{log.laser} max range field"
-    elif log.param_max_range is not None:
-        max_range, max_from = log.param_max_range, "PARAM robot_front_laser_max"
-    else:
-        max_range, max_from = DEFAULT_MAX_RANGE, "SICK LMS default (80 m)"
+    max_range, max_from = _max_range(log, opts)
     threshold = np.where(np.isfinite(log.line_max_range), log.line_max_range, max_range)
     threshold = np.minimum(threshold, max_range)
     no_return = log.ranges >= threshold[:, None]
     ranges = np.where(no_return, max_range, log.ranges)
-    dropped = {"before_odometry": 0, "after_odometry": 0, "odometry_gap": 0}
-    if log.odom_poses is not None:
-        keep = np.ones(log.n_scans, dtype=bool)
-        odometry = log.odom_poses.copy()
-        odometry[:, 2] = wrap_angle(odometry[:, 2])
-        odometry_from = f"{log.laser} odometry pose"
-    else:
-        keep, odometry, dropped = _odom_lines(log, opts)
-        odometry_from = "ODOM lines interpolated to the scan stamps"
+    keep, odometry, dropped, odometry_from = _scan_odometry(log, opts)
     mounting, spread = _mounting(log)
     laser = LaserSpec(log.beam_angles, max_range, opts.range_sigma, mounting=mounting)
     n = int(keep.sum())
@@ -509,7 +526,6 @@ def read_carmen_raw_log(
         "kind": "real",
         "format": "carmen-raw",
         "file": p.name,
-        "config": config_to_dict(opts),
         "laser_message": log.laser,
         "scans": n,
         "scan_lines": log.n_scans,
@@ -538,7 +554,35 @@ def read_carmen_raw_log(
         f"{log.beam_angles.size} beams, raw odometry ({odometry_from})",
         metadata=metadata,
         reading=reading,
+        provenance=Provenance(options=config_to_dict(opts)),
     )
+
+
+def _max_range(log: CarmenRawLog, opts: CarmenRawOptions) -> tuple[float, str]:
+    """The max range and where it came from: the option, the laser lines' field, PARAM
+    ``robot_front_laser_max``, else the SICK LMS's 80 m."""
+    if opts.max_range is not None:
+        return opts.max_range, "option max_range"
+    if np.isfinite(log.line_max_range[0]):
+        return float(log.line_max_range[0]), f"{log.laser} max range field"
+    if log.param_max_range is not None:
+        return log.param_max_range, "PARAM robot_front_laser_max"
+    return DEFAULT_MAX_RANGE, "SICK LMS default (80 m)"
+
+
+def _scan_odometry(
+    log: CarmenRawLog, opts: CarmenRawOptions
+) -> tuple[NDArray[np.bool_], FloatArray, dict[str, int], str]:
+    """The robot's odometry at the scans: the laser lines' own poses, else the ODOM lines
+    interpolated (:func:`_odom_lines`); which scans have it, the drops by reason, and
+    where it came from."""
+    if log.odom_poses is None:
+        keep, odometry, dropped = _odom_lines(log, opts)
+        return keep, odometry, dropped, "ODOM lines interpolated to the scan stamps"
+    odometry = log.odom_poses.copy()
+    odometry[:, 2] = wrap_angle(odometry[:, 2])
+    dropped = {"before_odometry": 0, "after_odometry": 0, "odometry_gap": 0}
+    return np.ones(log.n_scans, dtype=bool), odometry, dropped, f"{log.laser} odometry pose"
 
 
 def _reading_summary(log: CarmenRawLog, used: int, dropped: Mapping[str, int]) -> ReadingSummary:
@@ -566,6 +610,7 @@ def _reading_summary(log: CarmenRawLog, used: int, dropped: Mapping[str, int]) -
         dropped=by_reason,
         repaired=repaired,
         notes=tuple(notes),
+        ignored=ignored_lines(log.counts),
     )
 
 

@@ -21,8 +21,9 @@
 :func:`load_data` is what ``slamkit run --data`` calls: a registered name loads that data
 set, anything else is taken as a path. A path that is one of the registered raw bags
 under the data folder is read with that data set's default options (the registered name is
-in ``metadata["registered_as"]``), so ``--data …/aces.bag`` reads what ``--data aces-raw``
-reads, without its relations. ``metadata["path"]`` holds the absolute path read.
+``provenance.registered_as``), so ``--data …/aces.bag`` reads what ``--data aces-raw``
+reads, without its relations. ``provenance.path`` holds the absolute path read and
+``provenance.reader`` the reader (:class:`~slamkit.datasets.provenance.Provenance`).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from slamkit.datasets.paths import find_data_root
-from slamkit.datasets.registry import DATASETS, load_dataset
+from slamkit.datasets.registry import DATASETS, load_dataset, registered_file
 from slamkit.datasets.stream import Dataset
 from slamkit.datasets.text import head_lines
 from slamkit.errors import ConfigError, DataNotFoundError, DatasetFormatError, UnknownNameError
@@ -194,9 +195,7 @@ def load_file(
         from slamkit.datasets.carmen_raw import read_carmen_raw_log
 
         dataset = read_carmen_raw_log(p, opts, name=name)
-    dataset.metadata["path"] = str(p.resolve())
-    dataset.metadata["reader"] = kind
-    return dataset
+    return dataset.with_provenance(dataset.provenance.read_from(str(p.resolve()), kind))
 
 
 def _reader_option(value: Any) -> FileFormat | None:
@@ -243,13 +242,11 @@ def _registered_options(
 ) -> tuple[dict[str, Any], str | None]:
     """``options`` over the defaults of the registered bag ``p`` is (if it is one), and its
     registered name."""
-    from slamkit.datasets.rosbag import registered_bag_defaults
-
     merged = dict(options or {})
-    registered = registered_bag_defaults(p, find_data_root(data_root)) if p.exists() else None
-    if registered is None:
+    entry = registered_file(p, find_data_root(data_root)) if p.exists() else None
+    if entry is None:
         return merged, None
-    return {**registered[1], **merged}, registered[0]
+    return {**entry.defaults, **merged}, entry.name
 
 
 def load_data(
@@ -269,7 +266,9 @@ def load_data(
     merged, registered = _registered_options(p, options, data_root)
     dataset = load_file(p, merged, seed=seed)
     if registered is not None:
-        dataset.metadata["registered_as"] = registered
+        source = dataset.provenance
+        assert source.path is not None and source.reader is not None  # load_file set them
+        dataset = dataset.with_provenance(source.read_from(source.path, source.reader, registered))
     return dataset
 
 

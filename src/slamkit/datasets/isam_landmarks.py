@@ -40,19 +40,19 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.linalg import cho_solve
 
 from slamkit._validation import FloatArray
 from slamkit.config import config_from_mapping
+from slamkit.datasets.assemble import assemble_events, odometry_events, reading_events
 from slamkit.datasets.paths import require_file
 from slamkit.datasets.stream import (
     Dataset,
-    Event,
     GroundTruth,
     LandmarkReadings,
     LandmarkSensorSpec,
     MotionSpec,
-    Odometry,
 )
 from slamkit.datasets.text import ascii_fields, integer_values, read_text, text_lines
 from slamkit.errors import DatasetFormatError
@@ -291,67 +291,19 @@ def load_citytrees10000(
     _same_rows(noisy, exact, "EDGE2", noisy.edge_ids, exact.edge_ids)
     odom = _chain(noisy, n_poses)
     true_poses = _chain(exact, n_poses)
-
     # Readings: sensor noise, pose indices in range, the same sightings in both files.
-    lm_sqrt = _uniform_noise(noisy.landmark_sqrt_info, noisy.landmark_lines, "LANDMARK", noisy_path)
-    try:
-        lm_cov = sqrt_information_to_covariance(lm_sqrt, 2)
-        edge_sqrt = _uniform_noise(noisy.edge_sqrt_info, noisy.edge_lines, "EDGE2", noisy_path)
-        edge_cov = sqrt_information_to_covariance(edge_sqrt, 3)
-    except ValueError as exc:
-        raise DatasetFormatError(str(exc), noisy_path) from None
-    pose_of = noisy.landmark_ids[:, 0]
-    if np.any(pose_of >= n_poses):
-        k = int(np.flatnonzero(pose_of >= n_poses)[0])
-        raise DatasetFormatError(
-            f"LANDMARK: pose {pose_of[k]} does not exist (poses 0..{n_poses - 1})",
-            noisy_path,
-            int(noisy.landmark_lines[k]),
-        )
+    lm_sqrt, lm_cov, edge_sqrt, edge_cov = _noise(noisy)
+    _check_pose_refs(noisy, n_poses)
     _same_rows(noisy, exact, "LANDMARK", noisy.landmark_ids, exact.landmark_ids)
-
-    # Truth landmarks: the mean of each landmark's noise-free sightings, in the world frame.
-    seen = pose2.transform_points(true_poses[pose_of], exact.landmark_z)
-    lm_ids, inverse = np.unique(noisy.landmark_ids[:, 1], return_inverse=True)
-    counts = np.bincount(inverse)
-    centre = np.stack(
-        [np.bincount(inverse, seen[:, d]) / counts for d in range(2)], axis=-1
-    )  # (M, 2)
-    spread = float(np.max(np.hypot(*(seen - centre[inverse]).T)))
-    # The file holds pairs of landmark ids at one position (read together at every
-    # sighting); association cannot tell them apart, so they are listed for the user.
-    gap = np.hypot(*(centre[:, None, :] - centre[None, :, :]).transpose(2, 0, 1))
-    first, second = np.nonzero(np.triu(gap < 1e-9, k=1))
-    coincident = np.column_stack([lm_ids[first], lm_ids[second]]).astype(int).tolist()
-
-    # Odometry noise (dx, dy, dth) → (rot1, trans, rot2) at a straight step of length d:
-    # rot1 ≈ dy/d, trans ≈ dx, rot2 = dth − rot1.
-    d = float(np.median(np.hypot(noisy.edge_z[:, 0], noisy.edge_z[:, 1])))
-    J = np.array([[0.0, 1.0 / d, 0.0], [1.0, 0.0, 0.0], [0.0, -1.0 / d, 1.0]])
-    odo_cov = J @ edge_cov @ J.T
-
+    lm_ids, centre, spread, coincident = _true_landmarks(noisy, exact, true_poses)
     rng = np.random.default_rng(seed)
-    order = np.argsort(pose_of, kind="stable")
-    starts = np.searchsorted(pose_of[order], np.arange(n_poses + 1))
-    events: list[Event] = []
-    for k in range(n_poses):
-        t = float(k)
-        events.append(Odometry(t, odom[k]))
-        rows = order[starts[k] : starts[k + 1]]
-        if rows.size == 0:
-            continue
-        ids = noisy.landmark_ids[rows, 1].copy()
-        if not opts.identities:
-            rows = rows[rng.permutation(rows.size)]
-            ids = np.full(rows.size, -1, dtype=np.int64)
-        events.append(LandmarkReadings(t, noisy.landmark_z[rows], ids))
-
-    sensor = LandmarkSensorSpec("position", lm_cov, identities=opts.identities)
+    readings = _readings(noisy, n_poses, opts.identities, rng)
+    odometry = odometry_events(np.arange(n_poses, dtype=np.float64), odom)
     return Dataset(
         name="citytrees10000",
-        events=tuple(events),
-        motion=MotionSpec(OdometryModel(), odo_cov, source="odometry"),
-        landmark_sensor=sensor,
+        events=assemble_events(odometry, readings),
+        motion=MotionSpec(OdometryModel(), _odometry_cov(noisy, edge_cov), source="odometry"),
+        landmark_sensor=LandmarkSensorSpec("position", lm_cov, identities=opts.identities),
         initial_pose=np.zeros(3),
         initial_cov=np.zeros((3, 3)),
         truth=GroundTruth(
@@ -370,7 +322,7 @@ def load_citytrees10000(
             "time": "synthetic: t = pose index, 1 s per pose",
             "poses": n_poses,
             "landmarks": int(lm_ids.size),
-            "landmark_readings": int(pose_of.size),
+            "landmark_readings": int(noisy.landmark_ids.shape[0]),
             "landmark_sqrt_information": lm_sqrt.tolist(),
             "landmark_noise_cov": lm_cov.tolist(),
             "odometry_sqrt_information": edge_sqrt.tolist(),
@@ -380,3 +332,75 @@ def load_citytrees10000(
             "identities": opts.identities,
         },
     )
+
+
+def _noise(noisy: IsamLandmarkGraph) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The one square-root information (and covariance) of the readings and of the
+    odometry edges of the file."""
+    path = noisy.path
+    lm_sqrt = _uniform_noise(noisy.landmark_sqrt_info, noisy.landmark_lines, "LANDMARK", path)
+    try:
+        lm_cov = sqrt_information_to_covariance(lm_sqrt, 2)
+        edge_sqrt = _uniform_noise(noisy.edge_sqrt_info, noisy.edge_lines, "EDGE2", path)
+        edge_cov = sqrt_information_to_covariance(edge_sqrt, 3)
+    except ValueError as exc:
+        raise DatasetFormatError(str(exc), path) from None
+    return lm_sqrt, lm_cov, edge_sqrt, edge_cov
+
+
+def _check_pose_refs(noisy: IsamLandmarkGraph, n_poses: int) -> None:
+    pose_of = noisy.landmark_ids[:, 0]
+    if np.any(pose_of >= n_poses):
+        k = int(np.flatnonzero(pose_of >= n_poses)[0])
+        raise DatasetFormatError(
+            f"LANDMARK: pose {pose_of[k]} does not exist (poses 0..{n_poses - 1})",
+            noisy.path,
+            int(noisy.landmark_lines[k]),
+        )
+
+
+def _true_landmarks(
+    noisy: IsamLandmarkGraph, exact: IsamLandmarkGraph, true_poses: FloatArray
+) -> tuple[NDArray[np.int64], FloatArray, float, list[list[int]]]:
+    """The true landmarks: the mean of each landmark's noise-free sightings in the world
+    frame (ids, positions ``(M, 2)``), the largest spread of a sighting from its mean [m],
+    and the pairs of ids at one position."""
+    seen = pose2.transform_points(true_poses[noisy.landmark_ids[:, 0]], exact.landmark_z)
+    lm_ids, inverse = np.unique(noisy.landmark_ids[:, 1], return_inverse=True)
+    counts = np.bincount(inverse)
+    centre = np.stack(
+        [np.bincount(inverse, seen[:, d]) / counts for d in range(2)], axis=-1
+    )  # (M, 2)
+    spread = float(np.max(np.hypot(*(seen - centre[inverse]).T)))
+    # The file holds pairs of landmark ids at one position (read together at every
+    # sighting); association cannot tell them apart, so they are listed for the user.
+    gap = np.hypot(*(centre[:, None, :] - centre[None, :, :]).transpose(2, 0, 1))
+    first, second = np.nonzero(np.triu(gap < 1e-9, k=1))
+    coincident = np.column_stack([lm_ids[first], lm_ids[second]]).astype(int).tolist()
+    return lm_ids, centre, spread, coincident
+
+
+def _odometry_cov(noisy: IsamLandmarkGraph, edge_cov: FloatArray) -> FloatArray:
+    """Odometry noise ``(dx, dy, dth)`` → ``(rot1, trans, rot2)`` at a straight step of the
+    median length d: rot1 ≈ dy/d, trans ≈ dx, rot2 = dth − rot1."""
+    d = float(np.median(np.hypot(noisy.edge_z[:, 0], noisy.edge_z[:, 1])))
+    J = np.array([[0.0, 1.0 / d, 0.0], [1.0, 0.0, 0.0], [0.0, -1.0 / d, 1.0]])
+    out: FloatArray = J @ edge_cov @ J.T
+    return out
+
+
+def _readings(
+    noisy: IsamLandmarkGraph, n_poses: int, identities: bool, rng: np.random.Generator
+) -> list[LandmarkReadings]:
+    """The readings of each pose at its stamp (t = pose index); without ``identities``
+    each pose's readings shuffled by ``rng`` (pose by pose) and their ids -1."""
+    pose_of = noisy.landmark_ids[:, 0]
+    order = np.argsort(pose_of, kind="stable")
+    if not identities:
+        starts = np.searchsorted(pose_of[order], np.arange(n_poses + 1))
+        for k in range(n_poses):
+            if starts[k + 1] > starts[k]:
+                rows = order[starts[k] : starts[k + 1]]
+                order[starts[k] : starts[k + 1]] = rows[rng.permutation(rows.size)]
+    ids = noisy.landmark_ids[order, 1] if identities else np.full(order.size, -1, np.int64)
+    return reading_events(pose_of[order].astype(np.float64), noisy.landmark_z[order], ids)

@@ -16,7 +16,7 @@ blank lines are skipped):
 
 Motion comes as ``control`` rows or as ``odometry`` rows, not both. A ``reading`` row is one
 landmark seen at ``t``; rows with the same time are one scan of the sensor, processed after
-the motion at that time (:func:`slamkit.datasets.arrays.ordered_events`), whatever the order
+the motion at that time (:func:`slamkit.datasets.assemble.assemble_events`), whatever the order
 of the lines. For a range-only or bearing-only sensor leave ``b`` empty; for a ``position``
 sensor ``a, b`` are the landmark's ``(x, y)`` in the robot frame. ``landmark`` rows are the
 truth the map is scored against and, with ``known_map = true``, the map localization uses.
@@ -34,7 +34,7 @@ from typing import Any, ClassVar, Literal
 
 import numpy as np
 
-from slamkit._validation import check_unique_ids
+from slamkit._validation import FloatArray, check_unique_ids
 from slamkit.config import (
     Section,
     config_from_mapping,
@@ -44,6 +44,7 @@ from slamkit.config import (
     setting,
 )
 from slamkit.datasets.arrays import landmark_dataset_from_arrays
+from slamkit.datasets.provenance import Provenance
 from slamkit.datasets.stream import Dataset, LandmarkSensorSpec
 from slamkit.errors import DatasetFormatError
 from slamkit.maps import LandmarkMap
@@ -141,16 +142,7 @@ def read_landmark_csv(path: str | Path, options: Any = None, *, name: str | None
     )
     rows = _rows(p)
     dim = 2 if opts.sensor in ("range-bearing", "position") else 1
-
-    def table(kind: str, cols: int) -> np.ndarray:
-        out = [
-            [_cell(c[1], p, n, "t")]
-            + [_cell(v, p, n, h) for v, h in zip(c[2 : 2 + cols], "abc"[:cols], strict=True)]
-            for n, c in rows[kind]
-        ]
-        return np.asarray(out, dtype=float).reshape(-1, 1 + cols)
-
-    readings = table("reading", dim)
+    readings = _table(rows, "reading", dim, p)
     if readings.shape[0] == 0:
         raise DatasetFormatError("no reading rows: nothing to localize or map with", p)
     ids = []
@@ -161,56 +153,12 @@ def read_landmark_csv(path: str | Path, options: Any = None, *, name: str | None
         raise DatasetFormatError("control and odometry rows in one file: give one", p, n)
     if not (rows["control"] or rows["odometry"]):
         raise DatasetFormatError("no control or odometry rows: the robot never moves", p)
-    if opts.sensor == "range-bearing":
-        noise = np.diag([opts.sigma_range**2, math.radians(opts.sigma_bearing_deg) ** 2])
-    elif opts.sensor == "bearing":
-        noise = np.array([[math.radians(opts.sigma_bearing_deg) ** 2]])
-    elif opts.sensor == "range":
-        noise = np.array([[opts.sigma_range**2]])
-    else:
-        noise = np.eye(2) * opts.sigma_range**2
-    sensor = LandmarkSensorSpec(
-        opts.sensor,
-        noise,
-        max_range=opts.max_range,
-        min_range=opts.min_range,
-        fov=math.radians(opts.fov_deg),
-        identities=bool(np.all(np.asarray(ids) >= 0)),
-    )
-    motion: dict[str, Any]
-    if rows["control"]:
-        ctl = table("control", 3)
-        motion = {
-            "control_times": ctl[:, 0],
-            "controls": ctl[:, 1:3],
-            "control_dt": ctl[:, 3],
-            "motion_noise_cov": np.diag([opts.sigma_v**2, math.radians(opts.sigma_omega_deg) ** 2]),
-        }
-    else:
-        o = table("odometry", 3)
-        rot = math.radians(opts.sigma_rot_deg) ** 2
-        motion = {
-            "odometry_times": o[:, 0],
-            "odometry_poses": o[:, 1:],
-            "motion_noise_cov": np.diag([rot, opts.sigma_trans**2, rot]),
-        }
-    truth = table("truth", 3) if rows["truth"] else None
+    sensor = _sensor(opts, identities=bool(np.all(np.asarray(ids) >= 0)))
+    motion = _motion(rows, opts, p)
+    truth = _table(rows, "truth", 3, p) if rows["truth"] else None
     if truth is not None:
         truth = truth[np.argsort(truth[:, 0], kind="stable")]
-    landmarks = None
-    if rows["landmark"]:
-        lm = np.asarray(
-            [
-                [_cell(v, p, n, h) for v, h in zip(c[2:5], "abc", strict=True)]
-                for n, c in rows["landmark"]
-            ]
-        )
-        lines = [n for n, _ in rows["landmark"]]
-        for n, ident in zip(lines, lm[:, 2].tolist(), strict=True):
-            if not float(ident).is_integer():
-                raise DatasetFormatError(f"landmark id: expected an integer, got {ident}", p, n)
-        check_unique_ids(lm[:, 2].astype(np.int64), lines, "landmark id", p)
-        landmarks = LandmarkMap(lm[:, :2], lm[:, 2].astype(np.int64))
+    landmarks = _landmarks(rows, p) if rows["landmark"] else None
     s, st = opts.initial_sigma_xy, math.radians(opts.initial_sigma_theta_deg)
     has_prior = opts.initial_pose is not None
     dataset = landmark_dataset_from_arrays(
@@ -227,6 +175,75 @@ def read_landmark_csv(path: str | Path, options: Any = None, *, name: str | None
         known_landmarks=landmarks if opts.known_map else None,
         name=name or p.stem,
         description=f"landmark CSV file {p.name}",
-        metadata={"kind": "file", "config": config_to_dict(opts)},
+        metadata={"kind": "file"},
     )
-    return dataset
+    return dataset.with_provenance(Provenance(options=config_to_dict(opts)))
+
+
+def _table(
+    rows: dict[str, list[tuple[int, list[str]]]], kind: str, cols: int, p: Path
+) -> FloatArray:
+    """The rows of ``kind`` as numbers ``(n, 1 + cols)``: the time and ``cols`` values."""
+    out = [
+        [_cell(c[1], p, n, "t")]
+        + [_cell(v, p, n, h) for v, h in zip(c[2 : 2 + cols], "abc"[:cols], strict=True)]
+        for n, c in rows[kind]
+    ]
+    return np.asarray(out, dtype=float).reshape(-1, 1 + cols)
+
+
+def _sensor(opts: LandmarkCsvOptions, *, identities: bool) -> LandmarkSensorSpec:
+    if opts.sensor == "range-bearing":
+        noise = np.diag([opts.sigma_range**2, math.radians(opts.sigma_bearing_deg) ** 2])
+    elif opts.sensor == "bearing":
+        noise = np.array([[math.radians(opts.sigma_bearing_deg) ** 2]])
+    elif opts.sensor == "range":
+        noise = np.array([[opts.sigma_range**2]])
+    else:
+        noise = np.eye(2) * opts.sigma_range**2
+    return LandmarkSensorSpec(
+        opts.sensor,
+        noise,
+        max_range=opts.max_range,
+        min_range=opts.min_range,
+        fov=math.radians(opts.fov_deg),
+        identities=identities,
+    )
+
+
+def _motion(
+    rows: dict[str, list[tuple[int, list[str]]]], opts: LandmarkCsvOptions, p: Path
+) -> dict[str, Any]:
+    """The motion arguments of :func:`landmark_dataset_from_arrays`: the control rows with
+    the unicycle's noise, or the odometry rows with the odometry model's."""
+    if rows["control"]:
+        ctl = _table(rows, "control", 3, p)
+        return {
+            "control_times": ctl[:, 0],
+            "controls": ctl[:, 1:3],
+            "control_dt": ctl[:, 3],
+            "motion_noise_cov": np.diag([opts.sigma_v**2, math.radians(opts.sigma_omega_deg) ** 2]),
+        }
+    o = _table(rows, "odometry", 3, p)
+    rot = math.radians(opts.sigma_rot_deg) ** 2
+    return {
+        "odometry_times": o[:, 0],
+        "odometry_poses": o[:, 1:],
+        "motion_noise_cov": np.diag([rot, opts.sigma_trans**2, rot]),
+    }
+
+
+def _landmarks(rows: dict[str, list[tuple[int, list[str]]]], p: Path) -> LandmarkMap:
+    """The landmark rows ``x, y, id`` as a map (integer, unique ids)."""
+    lm = np.asarray(
+        [
+            [_cell(v, p, n, h) for v, h in zip(c[2:5], "abc", strict=True)]
+            for n, c in rows["landmark"]
+        ]
+    )
+    lines = [n for n, _ in rows["landmark"]]
+    for n, ident in zip(lines, lm[:, 2].tolist(), strict=True):
+        if not float(ident).is_integer():
+            raise DatasetFormatError(f"landmark id: expected an integer, got {ident}", p, n)
+    check_unique_ids(lm[:, 2].astype(np.int64), lines, "landmark id", p)
+    return LandmarkMap(lm[:, :2], lm[:, 2].astype(np.int64))

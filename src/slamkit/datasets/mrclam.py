@@ -103,15 +103,15 @@ from types import MappingProxyType
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
-from slamkit._validation import check_unique_ids
+from slamkit._validation import FloatArray, check_unique_ids
 from slamkit.config import config_from_mapping, config_to_dict
+from slamkit.datasets.assemble import assemble_events, control_events, reading_events
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.stamps import MAX_PLAUSIBLE_STAMP
 from slamkit.datasets.stream import (
-    Control,
     Dataset,
-    Event,
     GroundTruth,
     LandmarkReadings,
     LandmarkSensorSpec,
@@ -247,6 +247,18 @@ def _check_stamps(table: NumericTable, path: Path) -> None:
         )
 
 
+@dataclass(frozen=True)
+class _Readings:
+    """Robot readings converted: sorted stamps (relative to the start), ``(range, bearing)``
+    rows, subject ids, and what was dropped or relabelled."""
+
+    t: FloatArray
+    z: FloatArray
+    ids: NDArray[np.int64]
+    dropped: dict[str, int]
+    relabelled: int
+
+
 def load_mrclam(
     options: Mapping[str, Any] | None = None,
     *,
@@ -265,50 +277,97 @@ def load_mrclam(
     opts = config_from_mapping(MrclamOptions, options, "mrclam")
     root = resolve_data_root(data_root)
     folder = _folder(opts)
-    p_barcodes = _find(root, f"{folder}/Barcodes.dat")
-    p_landmarks = _find(root, f"{folder}/Landmark_Groundtruth.dat")
-    p_odometry = _find(root, f"{folder}/Robot{opts.robot}_Odometry.dat")
-    p_readings = _find(root, f"{folder}/Robot{opts.robot}_Measurement.dat")
-
+    files = [
+        _find(root, f"{folder}/{name}")
+        for name in (
+            "Barcodes.dat",
+            "Landmark_Groundtruth.dat",
+            f"Robot{opts.robot}_Odometry.dat",
+            f"Robot{opts.robot}_Measurement.dat",
+        )
+    ]
+    p_barcodes, p_landmarks, p_odometry, p_readings = files
     barcode_to_subject = _barcode_table(read_table(p_barcodes, 2), p_barcodes)
     world = _landmark_map(read_table(p_landmarks, 5), p_landmarks)
-    odo = read_table(p_odometry, 3)
-    meas = read_table(p_readings, 4)
-
-    # ---- odometry: command k holds over (t_k, t_{k+1}] ----------------------------------
-    if len(odo) < 2:
-        raise DatasetFormatError(
-            f"expected at least 2 odometry samples, got {len(odo)}", p_odometry
-        )
-    t_abs = odo.values[:, 0]
-    _check_stamps(odo, p_odometry)
+    odo, meas = read_table(p_odometry, 3), read_table(p_readings, 4)
+    _check_odometry(odo, p_odometry)
     _check_stamps(meas, p_readings)
-    back = np.flatnonzero(np.diff(t_abs) < 0)
-    if back.size:
-        line = int(odo.line_numbers[back[0] + 1])
-        raise DatasetFormatError("time goes backwards", p_odometry, line)
-    t_start = float(t_abs[0])
-    t_odo = np.round(t_abs - t_start, _TIME_DECIMALS)
-    ctrl_t = t_odo[1:]
-    ctrl_dt = np.round(np.diff(t_odo), _TIME_DECIMALS)
-    ctrl_u = odo.values[:-1, 1:3]
+    _check_readings(meas, p_readings)
+    t_start = float(odo.values[0, 0])
+    ctrl_t, ctrl_u, ctrl_dt = _controls(odo, t_start)
+    corrections = dict(LABEL_CORRECTIONS.get(opts.dataset, {})) if opts.correct_labels else {}
+    readings = _readings(meas, barcode_to_subject, world, corrections, t_start)
+    cut = np.inf if opts.max_duration_s is None else float(opts.max_duration_s)
+    n_ctrl = int(np.searchsorted(ctrl_t, cut, side="right"))
+    n_read = int(np.searchsorted(readings.t, cut, side="right"))
+    controls = control_events(ctrl_t[:n_ctrl], ctrl_u[:n_ctrl], ctrl_dt[:n_ctrl])
+    read = reading_events(readings.t[:n_read], readings.z[:n_read], readings.ids[:n_read])
+    sensor = LandmarkSensorSpec(
+        kind="range-bearing",
+        noise_cov=np.diag([opts.sigma_range**2, opts.sigma_bearing**2]),
+    )
+    return Dataset(
+        name=f"mrclam{opts.dataset}",
+        events=assemble_events(controls, read),
+        motion=MotionSpec(UnicycleArc(), np.diag([opts.sigma_v**2, opts.sigma_omega**2])),
+        landmark_sensor=sensor,
+        known_landmarks=world if opts.landmarks_known else None,
+        truth=GroundTruth(landmarks=world),
+        description=(
+            f"UTIAS MRCLAM data set {opts.dataset}, robot {opts.robot}: commanded velocities "
+            "at 100 Hz, camera range-bearing readings of 15 landmarks, Vicon landmark map; "
+            "no prior, no true trajectory"
+        ),
+        metadata=_metadata(
+            opts, root, files, (odo, meas), (t_start, n_ctrl), readings, read, corrections
+        ),
+    )
 
-    # ---- readings: barcode -> subject, keep landmarks ------------------------------------
+
+def _check_odometry(odo: NumericTable, path: Path) -> None:
+    """At least two samples, Unix stamps, never going back."""
+    if len(odo) < 2:
+        raise DatasetFormatError(f"expected at least 2 odometry samples, got {len(odo)}", path)
+    _check_stamps(odo, path)
+    back = np.flatnonzero(np.diff(odo.values[:, 0]) < 0)
+    if back.size:
+        raise DatasetFormatError("time goes backwards", path, int(odo.line_numbers[back[0] + 1]))
+
+
+def _check_readings(meas: NumericTable, path: Path) -> None:
+    """Positive ranges and integer barcodes."""
     m = meas.values
     bad_range = np.flatnonzero(~(m[:, 2] > 0))
     if bad_range.size:
         r = bad_range[0]
         raise DatasetFormatError(
-            f"expected a positive range, got {m[r, 2]}", p_readings, int(meas.line_numbers[r])
+            f"expected a positive range, got {m[r, 2]}", path, int(meas.line_numbers[r])
         )
     barcodes = m[:, 1]
     if np.any(barcodes != np.round(barcodes)):
         r = int(np.flatnonzero(barcodes != np.round(barcodes))[0])
-        raise DatasetFormatError(
-            "expected an integer barcode", p_readings, int(meas.line_numbers[r])
-        )
-    subjects = np.array([barcode_to_subject.get(int(b), -1) for b in barcodes], dtype=np.int64)
-    corrections = dict(LABEL_CORRECTIONS.get(opts.dataset, {})) if opts.correct_labels else {}
+        raise DatasetFormatError("expected an integer barcode", path, int(meas.line_numbers[r]))
+
+
+def _controls(odo: NumericTable, t_start: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Command ``k`` holds over ``(t_k, t_{k+1}]``: the controls' end stamps, ``(v, ω)`` and
+    durations, in seconds since ``t_start``."""
+    t_odo = np.round(odo.values[:, 0] - t_start, _TIME_DECIMALS)
+    return t_odo[1:], odo.values[:-1, 1:3], np.round(np.diff(t_odo), _TIME_DECIMALS)
+
+
+def _readings(
+    meas: NumericTable,
+    barcode_to_subject: Mapping[int, int],
+    world: LandmarkMap,
+    corrections: Mapping[int, int],
+    t_start: float,
+) -> _Readings:
+    """Barcode → subject (label corrections applied); readings of robots, of unknown
+    barcodes, of unmapped subjects and before the odometry dropped and counted; the rest
+    sorted by time."""
+    m = meas.values
+    subjects = np.array([barcode_to_subject.get(int(b), -1) for b in m[:, 1]], dtype=np.int64)
     relabelled = np.isin(subjects, list(corrections))
     subjects[relabelled] = [corrections[int(s)] for s in subjects[relabelled]]
     unknown = subjects < 0
@@ -323,34 +382,28 @@ def load_mrclam(
         "before_odometry": int((early & ~(unknown | robots | not_mapped)).sum()),
     }
     order = np.argsort(m[keep, 0], kind="stable")
-    r_t = np.round(m[keep, 0] - t_start, _TIME_DECIMALS)[order]
-    r_z = np.column_stack([m[keep, 2], wrap_angle(m[keep, 3])])[order]
-    r_id = subjects[keep][order]
-
-    # ---- cut, then merge the two streams by time (controls first at equal times) ---------
-    cut = np.inf if opts.max_duration_s is None else float(opts.max_duration_s)
-    n_ctrl = int(np.searchsorted(ctrl_t, cut, side="right"))
-    n_read = int(np.searchsorted(r_t, cut, side="right"))
-    group_t, group_start = np.unique(r_t[:n_read], return_index=True)
-    group_end = np.append(group_start[1:], n_read)
-    times = np.concatenate([ctrl_t[:n_ctrl], group_t])
-    kinds = np.concatenate([np.zeros(n_ctrl, np.int8), np.ones(group_t.size, np.int8)])
-    index = np.concatenate([np.arange(n_ctrl), np.arange(group_t.size)])
-    events: list[Event] = []
-    for j in np.lexsort((kinds, times)):
-        i = int(index[j])
-        if kinds[j] == 0:
-            events.append(Control(float(ctrl_t[i]), ctrl_u[i].copy(), float(ctrl_dt[i])))
-        else:
-            a, b = group_start[i], group_end[i]
-            events.append(LandmarkReadings(float(group_t[i]), r_z[a:b].copy(), r_id[a:b].copy()))
-
-    sensor = LandmarkSensorSpec(
-        kind="range-bearing",
-        noise_cov=np.diag([opts.sigma_range**2, opts.sigma_bearing**2]),
+    return _Readings(
+        t=np.round(m[keep, 0] - t_start, _TIME_DECIMALS)[order],
+        z=np.column_stack([m[keep, 2], wrap_angle(m[keep, 3])])[order],
+        ids=subjects[keep][order],
+        dropped=dropped,
+        relabelled=int(relabelled[keep].sum()),
     )
-    files = [p_barcodes, p_landmarks, p_odometry, p_readings]
-    metadata: dict[str, Any] = {
+
+
+def _metadata(
+    opts: MrclamOptions,
+    root: Path,
+    files: list[Path],
+    tables: tuple[NumericTable, NumericTable],
+    start_and_controls: tuple[float, int],
+    readings: _Readings,
+    events: list[LandmarkReadings],
+    corrections: Mapping[int, int],
+) -> dict[str, Any]:
+    cut = opts.max_duration_s
+    (odo, meas), (t_start, n_ctrl) = tables, start_and_controls
+    return {
         "kind": "real",
         "source": f"UTIAS MRCLAM Dataset {opts.dataset}, robot {opts.robot}",
         "files": [str(p.relative_to(root)) for p in files],
@@ -358,27 +411,13 @@ def load_mrclam(
         "odometry_samples": len(odo),
         "controls": n_ctrl,
         "readings_in_file": len(meas),
-        "readings_kept": int(group_end[-1]) if group_t.size else 0,
-        "reading_events": int(group_t.size),
-        "dropped": dropped,
+        "readings_kept": sum(ev.ids.size for ev in events),
+        "reading_events": len(events),
+        "dropped": readings.dropped,
         "label_corrections": {
             "applied": {str(k): v for k, v in sorted(corrections.items())},
-            "readings_relabelled": int(relabelled[keep].sum()),
+            "readings_relabelled": readings.relabelled,
         },
-        "cut_at_s": None if opts.max_duration_s is None else cut,
+        "cut_at_s": None if cut is None else float(cut),
         "options": config_to_dict(opts),
     }
-    return Dataset(
-        name=f"mrclam{opts.dataset}",
-        events=tuple(events),
-        motion=MotionSpec(UnicycleArc(), np.diag([opts.sigma_v**2, opts.sigma_omega**2])),
-        landmark_sensor=sensor,
-        known_landmarks=world if opts.landmarks_known else None,
-        truth=GroundTruth(landmarks=world),
-        description=(
-            f"UTIAS MRCLAM data set {opts.dataset}, robot {opts.robot}: commanded velocities "
-            "at 100 Hz, camera range-bearing readings of 15 landmarks, Vicon landmark map; "
-            "no prior, no true trajectory"
-        ),
-        metadata=metadata,
-    )

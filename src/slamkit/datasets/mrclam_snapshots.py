@@ -43,8 +43,9 @@ import numpy as np
 
 from slamkit._validation import check_unique_ids
 from slamkit.config import config_from_mapping
+from slamkit.datasets.assemble import assemble_events, reading_events
 from slamkit.datasets.paths import data_root as resolve_data_root
-from slamkit.datasets.stream import Dataset, GroundTruth, LandmarkReadings, LandmarkSensorSpec
+from slamkit.datasets.stream import Dataset, GroundTruth, LandmarkSensorSpec
 from slamkit.datasets.text import NumericTable, integer_column, read_table
 from slamkit.errors import ConfigError, DatasetFormatError
 from slamkit.geometry import wrap_angle
@@ -179,13 +180,8 @@ def load_mrclam_snapshots(
         sel = meas_exp <= keep[-1]
         meas_exp, meas_lm, z = meas_exp[sel], meas_lm[sel], z[sel]
 
-    # Rows are ordered by experiment: split them where the experiment id changes.
-    starts = np.flatnonzero(np.r_[True, np.diff(meas_exp) != 0])
-    ends = np.r_[starts[1:], meas_exp.size]
-    events = tuple(
-        LandmarkReadings(float(meas_exp[a]), z[a:b].copy(), meas_lm[a:b].copy())
-        for a, b in zip(starts, ends, strict=True)
-    )
+    # Rows are ordered by experiment (checked): one event per experiment.
+    events = assemble_events(reading_events(meas_exp.astype(float), z, meas_lm))
     sensor = LandmarkSensorSpec(
         "range-bearing", np.diag([cfg.sigma_range**2, cfg.sigma_bearing**2])
     )

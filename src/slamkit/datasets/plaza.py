@@ -75,14 +75,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray, check_unique_ids
 from slamkit.config import config_from_mapping, config_to_dict
+from slamkit.datasets.assemble import assemble_events, control_events, reading_events
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.stream import (
-    Control,
     Dataset,
-    Event,
     GroundTruth,
     LandmarkReadings,
     LandmarkSensorSpec,
@@ -210,107 +210,36 @@ def load_plaza1(
     opts = config_from_mapping(Plaza1Options, options, "plaza1")
     root = resolve_data_root(data_root)
     p_dr, p_td, p_gt, p_tl = (_require(root, f) for f in PLAZA1_FILES)
-    dr = read_table(p_dr, 3)
-    td = read_table(p_td, 4)
-    gt = read_table(p_gt, 4)
+    dr, td, gt = read_table(p_dr, 3), read_table(p_td, 4), read_table(p_gt, 4)
     beacons = _beacons(read_table(p_tl, 3), p_tl)
     for table, path in ((dr, p_dr), (gt, p_gt)):
         if len(table) < 2:
             raise DatasetFormatError(f"expected at least 2 rows, got {len(table)}", path)
     _check_increasing(dr, p_dr, strict=True)
     _check_increasing(gt, p_gt, strict=False)
-
-    # ---- truth and prior -----------------------------------------------------------------
     gt_t = gt.values[:, 0]
     gt_pose = np.column_stack([gt.values[:, 1:3], wrap_angle(gt.values[:, 3])])
     t0 = float(gt_t[0])
-    if dr.values[0, 0] <= t0:
-        raise DatasetFormatError(
-            f"the first odometry row ({dr.values[0, 0]}) is not after the first true pose "
-            f"({t0} in {p_gt.name})",
-            p_dr,
-            int(dr.line_numbers[0]),
-        )
+    _check_odometry_start(dr, p_dr, t0, p_gt)
     cut = np.inf if opts.max_duration_s is None else t0 + float(opts.max_duration_s)
-
-    # ---- odometry increments -> constant (v, omega) over each row's interval -------------
     t_end = dr.values[:, 0]
     t_begin = np.concatenate([[t0], t_end[:-1]])
-    span = t_end - t_begin
-    with np.errstate(over="ignore"):  # an overflow is reported below, by its line
-        rates = dr.values[:, 1:3] / span[:, None]  # (d / dt, dtheta / dt)
-    bad = np.flatnonzero(~np.all(np.isfinite(rates), axis=1))
-    if bad.size:
-        r = int(bad[0])
-        raise DatasetFormatError(
-            f"the increment ({dr.values[r, 1]:g}, {dr.values[r, 2]:g}) over {span[r]:g} s "
-            "overflows as a rate: expected increments of a plausible size",
-            p_dr,
-            int(dr.line_numbers[r]),
-        )
-
-    # ---- range readings -------------------------------------------------------------------
-    m = td.values
-    bad = np.flatnonzero(~(m[:, 3] > 0))
-    if bad.size:
-        r = int(bad[0])
-        raise DatasetFormatError(
-            f"expected a positive range, got {m[r, 3]}", p_td, int(td.line_numbers[r])
-        )
-    ids = integer_values(m[:, 2], td.line_numbers, "beacon id", p_td)
-    known = np.isin(ids, beacons.ids)
-    jumps_back = int(np.count_nonzero(np.diff(m[:, 0]) < 0))
-    order = np.argsort(m[known, 0], kind="stable")
-    r_t = m[known, 0][order]
-    r_z = (opts.range_scale * m[known, 3][order])[:, None]
-    r_id = ids[known][order]
+    rates = _rates(dr, p_dr, t_end - t_begin)
+    r_t, r_z, r_id, known = _ranges(td, p_td, beacons, opts.range_scale)
     n_read = int(np.searchsorted(r_t, cut, side="right"))
-    group_t, group_start = np.unique(r_t[:n_read], return_index=True)
-    group_end = np.append(group_start[1:], n_read)
-
-    # ---- controls, cut at reading times ----------------------------------------------------
+    readings = reading_events(r_t[:n_read], r_z[:n_read], r_id[:n_read])
     if opts.split_at_readings:
+        group_t = np.asarray([ev.t for ev in readings], dtype=np.float64)
         ends, dts, owner = cut_intervals(t_begin, t_end, group_t)
     else:
-        ends, dts, owner = t_end, span, np.arange(t_end.size)
+        ends, dts, owner = t_end, t_end - t_begin, np.arange(t_end.size)
     n_ctrl = int(np.searchsorted(ends, cut, side="right"))
-
-    times = np.concatenate([ends[:n_ctrl], group_t])
-    kinds = np.concatenate([np.zeros(n_ctrl, np.int8), np.ones(group_t.size, np.int8)])
-    index = np.concatenate([np.arange(n_ctrl), np.arange(group_t.size)])
-    events: list[Event] = []
-    for j in np.lexsort((kinds, times)):
-        i = int(index[j])
-        if kinds[j] == 0:
-            events.append(Control(float(ends[i]), rates[owner[i]].copy(), float(dts[i])))
-        else:
-            a, b = group_start[i], group_end[i]
-            events.append(LandmarkReadings(float(group_t[i]), r_z[a:b].copy(), r_id[a:b].copy()))
-
+    controls = control_events(ends[:n_ctrl], rates[owner[:n_ctrl]], dts[:n_ctrl])
     n_truth = int(np.searchsorted(gt_t, cut, side="right"))
     s_xy, s_th = opts.initial_sigma_xy, opts.initial_sigma_theta
-    rows_used = int(np.searchsorted(t_end, cut, side="right"))
-    metadata: dict[str, Any] = {
-        "kind": "real",
-        "source": "CMU Plaza 1 (Djugash et al., ICRA 2006)",
-        "files": list(PLAZA1_FILES),
-        "odometry_rows": len(dr),
-        "odometry_rows_used": rows_used,
-        "controls": n_ctrl,
-        "controls_added_by_splitting": n_ctrl - rows_used,
-        "readings_in_file": len(td),
-        "readings_kept": int(n_read),
-        "reading_events": int(group_t.size),
-        "reading_time_jumps_back": jumps_back,
-        "dropped": {"unknown_beacon": int(np.count_nonzero(~known))},
-        "senders": sorted({int(s) for s in np.unique(m[:, 1])}),
-        "range_scale": opts.range_scale,
-        "cut_at_s": None if opts.max_duration_s is None else cut,
-        "options": config_to_dict(opts),
-    }
     return Dataset(
         name="plaza1",
-        events=tuple(events),
+        events=assemble_events(controls, readings),
         motion=MotionSpec(UnicycleArc(), np.diag([opts.sigma_v**2, opts.sigma_omega**2])),
         landmark_sensor=LandmarkSensorSpec(
             kind="range", noise_cov=np.array([[opts.sigma_range**2]])
@@ -323,5 +252,80 @@ def load_plaza1(
             "CMU Plaza 1: odometry increments at 5 Hz, range-only readings of 4 radio "
             "beacons (calibrated, see slamkit.datasets.plaza), true path; known start"
         ),
-        metadata=metadata,
+        metadata=_metadata(opts, dr, td, n_ctrl, readings, known, cut),
     )
+
+
+def _check_odometry_start(dr: NumericTable, p_dr: Path, t0: float, p_gt: Path) -> None:
+    if dr.values[0, 0] <= t0:
+        raise DatasetFormatError(
+            f"the first odometry row ({dr.values[0, 0]}) is not after the first true pose "
+            f"({t0} in {p_gt.name})",
+            p_dr,
+            int(dr.line_numbers[0]),
+        )
+
+
+def _rates(dr: NumericTable, path: Path, span: FloatArray) -> FloatArray:
+    """Odometry increments → constant ``(v, ω)`` over each row's interval ``span``."""
+    with np.errstate(over="ignore"):  # an overflow is reported below, by its line
+        rates = dr.values[:, 1:3] / span[:, None]  # (d / dt, dtheta / dt)
+    bad = np.flatnonzero(~np.all(np.isfinite(rates), axis=1))
+    if bad.size:
+        r = int(bad[0])
+        raise DatasetFormatError(
+            f"the increment ({dr.values[r, 1]:g}, {dr.values[r, 2]:g}) over {span[r]:g} s "
+            "overflows as a rate: expected increments of a plausible size",
+            path,
+            int(dr.line_numbers[r]),
+        )
+    return rates
+
+
+def _ranges(
+    td: NumericTable, path: Path, beacons: LandmarkMap, range_scale: float
+) -> tuple[FloatArray, FloatArray, NDArray[np.int64], NDArray[np.bool_]]:
+    """The readings of known beacons sorted by time: stamps, scaled ranges ``(K, 1)``, ids,
+    and which rows of the file were of a known beacon."""
+    m = td.values
+    bad = np.flatnonzero(~(m[:, 3] > 0))
+    if bad.size:
+        r = int(bad[0])
+        raise DatasetFormatError(
+            f"expected a positive range, got {m[r, 3]}", path, int(td.line_numbers[r])
+        )
+    ids = integer_values(m[:, 2], td.line_numbers, "beacon id", path)
+    known = np.isin(ids, beacons.ids)
+    order = np.argsort(m[known, 0], kind="stable")
+    r_z = (range_scale * m[known, 3][order])[:, None]
+    return m[known, 0][order], r_z, ids[known][order], known
+
+
+def _metadata(
+    opts: Plaza1Options,
+    dr: NumericTable,
+    td: NumericTable,
+    n_ctrl: int,
+    readings: list[LandmarkReadings],
+    known: NDArray[np.bool_],
+    cut: float,
+) -> dict[str, Any]:
+    rows_used = int(np.searchsorted(dr.values[:, 0], cut, side="right"))
+    return {
+        "kind": "real",
+        "source": "CMU Plaza 1 (Djugash et al., ICRA 2006)",
+        "files": list(PLAZA1_FILES),
+        "odometry_rows": len(dr),
+        "odometry_rows_used": rows_used,
+        "controls": n_ctrl,
+        "controls_added_by_splitting": n_ctrl - rows_used,
+        "readings_in_file": len(td),
+        "readings_kept": sum(ev.ids.size for ev in readings),
+        "reading_events": len(readings),
+        "reading_time_jumps_back": int(np.count_nonzero(np.diff(td.values[:, 0]) < 0)),
+        "dropped": {"unknown_beacon": int(np.count_nonzero(~known))},
+        "senders": sorted({int(s) for s in np.unique(td.values[:, 1])}),
+        "range_scale": opts.range_scale,
+        "cut_at_s": None if opts.max_duration_s is None else cut,
+        "options": config_to_dict(opts),
+    }

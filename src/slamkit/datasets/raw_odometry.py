@@ -32,17 +32,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
+from slamkit.datasets.assemble import assemble_events, odometry_events, scan_events
+from slamkit.datasets.provenance import Provenance
 from slamkit.datasets.reading import ReadingSummary
 from slamkit.datasets.relations import Relations
-from slamkit.datasets.stream import (
-    Dataset,
-    Event,
-    GroundTruth,
-    LaserScan,
-    LaserSpec,
-    MotionSpec,
-    Odometry,
-)
+from slamkit.datasets.stream import Dataset, GroundTruth, LaserSpec, MotionSpec, Odometry
 from slamkit.errors import ConfigError
 from slamkit.geometry.pose2 import interpolate_poses
 from slamkit.models import OdometryModel
@@ -199,32 +193,30 @@ def raw_laser_dataset(
     metadata: dict[str, Any],
     relations: Relations | None = None,
     reading: ReadingSummary | None = None,
+    provenance: Provenance | None = None,
 ) -> Dataset:
     """The :class:`Dataset` of a raw log: per scan an :class:`Odometry` event (the robot's
     pose in the odometry frame) and a :class:`LaserScan` at the same stamp, in that order;
     an odometry :class:`MotionSpec` with the nominal ``motion_cov``; the prior around the
     first odometry pose (:data:`RAW_INITIAL_COV`); ``relations`` as the ground truth;
-    ``reading``, what the reader did to the file.
+    ``reading``, what the reader did to the file; ``provenance``, the reader's record.
     ``odometry=None`` (a log without it): scans only, no motion model, the prior at the
     origin."""
-    events: list[Event] = []
-    t_list = np.asarray(times, dtype=np.float64).tolist()
-    for k, t in enumerate(t_list):
-        if odometry is not None:
-            events.append(Odometry(t, odometry[k]))
-        events.append(LaserScan(t, ranges[k]))
+    t_list = np.asarray(times, dtype=np.float64)
+    moves: list[Odometry] = [] if odometry is None else odometry_events(t_list, odometry)
     start = np.zeros(3) if odometry is None else np.array(odometry[0], dtype=np.float64)
     return Dataset(
         name=name,
-        events=tuple(events),
+        events=assemble_events(moves, scan_events(t_list, ranges)),
         motion=None
         if odometry is None
         else MotionSpec(OdometryModel(), motion_cov, source="odometry"),
         laser=laser,
-        initial_pose=start if len(t_list) else None,
-        initial_cov=RAW_INITIAL_COV.copy() if len(t_list) else None,
+        initial_pose=start if t_list.size else None,
+        initial_cov=RAW_INITIAL_COV.copy() if t_list.size else None,
         truth=GroundTruth(relations=relations),
         description=description,
         metadata=metadata,
         reading=reading,
+        provenance=provenance or Provenance(),
     )

@@ -39,7 +39,9 @@ class ReadingSummary:
 
     ``records`` is what the file held of the kind that matters (scans for a laser log), and
     ``used`` how many of them the data set has. ``dropped`` and ``repaired`` count records by
-    reason (a short phrase such as ``"stamp re-made from the line order"``); ``notes`` are
+    reason (a short phrase such as ``"stamp re-made from the line order"``); ``ignored``
+    counts the lines of other kinds that were read and deliberately not used, by kind and
+    reason (``"SYNC lines (clock sync between hosts; not needed)"``); ``notes`` are
     one-off remarks about the whole file (``"angle_max is one increment off; the increment
     wins"``).
     """
@@ -51,14 +53,15 @@ class ReadingSummary:
     dropped: Mapping[str, int] = field(default_factory=dict)
     repaired: Mapping[str, int] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    ignored: Mapping[str, int] = field(default_factory=dict)
 
     @property
     def clean(self) -> bool:
-        """True when nothing was dropped, repaired or noted."""
-        return not (self.dropped or self.repaired or self.notes)
+        """True when nothing was dropped, repaired, ignored or noted."""
+        return not (self.dropped or self.repaired or self.ignored or self.notes)
 
     def lines(self) -> list[str]:
-        """One line (two when something was repaired or noted) for the console."""
+        """One line (two when something was repaired, ignored or noted) for the console."""
         head = f"read {self.file}: {self.used} of {self.records} {self.what}"
         if self.dropped:
             head += "; dropped " + _counts(self.dropped)
@@ -66,6 +69,8 @@ class ReadingSummary:
         tail = []
         if self.repaired:
             tail.append("repaired " + _counts(self.repaired))
+        if self.ignored:
+            tail.append("ignored " + _counts(self.ignored))
         tail.extend(self.notes)
         if tail:
             out.append("  " + "; ".join(tail))
@@ -80,6 +85,7 @@ class ReadingSummary:
             "used": self.used,
             "dropped": dict(self.dropped),
             "repaired": dict(self.repaired),
+            "ignored": dict(self.ignored),
             "notes": list(self.notes),
         }
 
@@ -87,7 +93,8 @@ class ReadingSummary:
     def from_dict(cls, data: Mapping[str, Any]) -> ReadingSummary:
         """The summary :meth:`to_dict` wrote (``metrics.json``'s ``"reading"``, read back for
         the report page). A value of the wrong kind raises :class:`~slamkit.errors.InputError`
-        naming the key; ``what``, ``dropped``, ``repaired`` and ``notes`` may be missing."""
+        naming the key; ``what``, ``dropped``, ``repaired``, ``ignored`` and ``notes`` may be
+        missing (a ``metrics.json`` written before they were counted)."""
 
         def count(key: str) -> int:
             value = data.get(key)
@@ -114,6 +121,7 @@ class ReadingSummary:
             dropped=by_reason("dropped"),
             repaired=by_reason("repaired"),
             notes=tuple(notes),
+            ignored=by_reason("ignored"),
         )
 
 

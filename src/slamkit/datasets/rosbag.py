@@ -56,7 +56,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -67,6 +67,7 @@ from slamkit._validation import FloatArray
 from slamkit.config import config_from_mapping, config_to_dict
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.paths import require_file
+from slamkit.datasets.provenance import Provenance
 from slamkit.datasets.raw_odometry import (
     DEFAULT_MAX_ODOM_GAP,
     RAW_ODOMETRY_SIGMA_ROT_DEG,
@@ -87,55 +88,12 @@ from slamkit.datasets.stream import Dataset, LaserSpec
 from slamkit.errors import ConfigError, DatasetFormatError
 
 __all__ = [
-    "FR079_MOUNTING",
-    "FREIBURG_BAGS",
     "RosbagOptions",
     "load_aces_raw",
     "load_fr079_raw",
     "load_intel_raw",
     "read_rosbag",
-    "registered_bag_defaults",
 ]
-
-
-@dataclass(frozen=True)
-class FreiburgBag:
-    """A registered raw log: its bag and relations files under the data root, and the
-    options it is read with by default."""
-
-    bag: str
-    relations: str
-    defaults: Mapping[str, Any] = field(default_factory=dict)
-
-
-FR079_MOUNTING = (-0.04, 0.0, 0.0)
-"""The laser's pose on the robot in the registered ``fr079-raw``: the original log's
-``robot_frontlaser_offset`` (the frame of the benchmark's relations), not the bag's
-``/tf_static`` (+0.04 m, the opposite sign)."""
-
-FREIBURG_BAGS: dict[str, FreiburgBag] = {
-    # The Intel logger stalls: 2033 scans lie in odometry gaps > 0.5 s, the longest 3.1 s
-    # (the scans stall with it); ACES has one scan in a 2.95 s gap.
-    "intel-raw": FreiburgBag(
-        "laser/rosbags/intel.bag", "laser/relations/intel.relations", {"max_odom_gap": 3.5}
-    ),
-    "aces-raw": FreiburgBag(
-        "laser/rosbags/aces.bag", "laser/relations/aces.relations", {"max_odom_gap": 3.5}
-    ),
-    # The bag's /tf_static puts the laser 4 cm ahead of base_link; the original CARMEN log
-    # says 4 cm behind (PARAM robot_frontlaser_offset -0.04), and the benchmark's relations
-    # are in that robot frame: graph SLAM's path scores 0.068 m read with +0.04 and 0.033 m
-    # with -0.04 (docs/relations.md, "Which robot frame"). Its /odom poses never go
-    # backward, while the twist reverses on 514 of 8,950 steps (10.9 m): the poses were
-    # integrated from the unsigned speed, so they follow the twist's sign
-    # (docs/relations.md, "Freiburg 079's odometry backs up forward").
-    "fr079-raw": FreiburgBag(
-        "laser/rosbags/fr079.bag",
-        "laser/relations/fr079.relations",
-        {"mounting": FR079_MOUNTING, "odometry_direction": "twist"},
-    ),
-}
-"""Registered name → the files of the Freiburg benchmark's raw logs and their defaults."""
 
 
 def _check_nonneg(value: float, name: str) -> None:
@@ -303,21 +261,112 @@ def _odometry_at_scans(
     return at.poses, at.keep, at.dropped, repeats
 
 
+@dataclass(frozen=True)
+class _Scans:
+    """The scans the geometry check and the order kept (indices into the bag's scan
+    messages, stamps, raw ranges), how many there were before the cut, and the beams."""
+
+    index: NDArray[np.int64]
+    t: FloatArray
+    raw: FloatArray
+    n_before_cut: int
+    n_beams: int
+
+
 def _convert(
     bag: BagContents, opts: RosbagOptions, path: Path, name: str, relations: Relations | None
 ) -> Dataset:
     problems = Problems(path, opts.lenient)
     s = bag.scans
-    topic = opts.scan_topic
     if s.beam_counts.size == 0:
-        raise DatasetFormatError(f"no messages on {topic}", path)
+        raise DatasetFormatError(f"no messages on {opts.scan_topic}", path)
     if bag.odometry_topic is not None and bag.odometry.sec.size == 0:
         raise DatasetFormatError(f"no messages on {bag.odometry_from}", path)
-    ok, angle_note = check_geometry(bag, topic, problems)
+    ok, angle_note = check_geometry(bag, opts.scan_topic, problems)
+    scans = _ordered_scans(bag, opts, ok, problems)
+    index, t = scans.index, scans.t
+    if relations is not None and opts.max_duration_s is not None:
+        relations = relations.until(float(t[-1]))
+    max_range = opts.max_range if opts.max_range is not None else float(s.range_max[index[0]])
+    ranges, reading_counts = clean_ranges(
+        scans.raw, s.range_min[index], s.range_max[index], max_range, index,
+        opts.scan_topic, problems,
+    )  # fmt: skip
+    odometry, keep, dropped, repeats = _odometry_at_scans(bag, opts, t, index, problems)
+    angles = s.angle_min[index[0]] + np.arange(scans.n_beams) * s.angle_increment[index[0]]
+    mounting, mounting_from = _mounting(bag, opts, path)
+    laser = LaserSpec(angles, max_range, opts.range_sigma, mounting=mounting)
+    n_kept = int(keep.sum())
+    notes = [n for n in (angle_note, _odometry_note(bag, problems)) if n]
+    if index.size < scans.n_before_cut:
+        notes.append(
+            f"cut after the first {opts.max_duration_s:g} s: {index.size} of "
+            f"{scans.n_before_cut} scans"
+        )
+    reading = _summary(path, int(s.beam_counts.size), n_kept, problems, dropped, notes)
+    check_dropped_share(
+        path, reading.records, sum(reading.dropped.values()), reasons=reading.dropped
+    )
+    return raw_laser_dataset(
+        name=name,
+        times=t[keep],
+        odometry=odometry,
+        ranges=ranges[keep],
+        laser=laser,
+        motion_cov=raw_odometry_cov(opts.odometry_sigma_trans, opts.odometry_sigma_rot_deg),
+        description=_description(bag, path, opts.scan_topic, n_kept, scans.n_beams, odometry),
+        metadata=_metadata(bag, opts, path, scans.n_beams, laser, problems)
+        | {
+            "scans": n_kept,
+            "odometry_repeats_dropped": repeats,
+            "max_range": max_range,
+            "mounting_from": mounting_from,
+            "dropped": dropped,
+            "readings": reading_counts,
+        },
+        relations=relations,
+        reading=reading,
+        provenance=Provenance(options=config_to_dict(opts)),
+    )
+
+
+def _metadata(
+    bag: BagContents,
+    opts: RosbagOptions,
+    path: Path,
+    n_beams: int,
+    laser: LaserSpec,
+    problems: Problems,
+) -> dict[str, Any]:
+    """What the bag held and how it was read (the counts of the conversion are added by
+    the caller)."""
+    return {
+        "kind": "real",
+        "format": "rosbag1" if bag.ros1 else ("mcap" if path.suffix == ".mcap" else "rosbag2"),
+        "file": path.name,
+        "scan_messages": int(bag.scans.beam_counts.size),
+        "odometry_topic": bag.odometry_topic,
+        "odometry_from": bag.odometry_from or None,
+        "odometry_messages": int(bag.odometry.sec.size),
+        "beams": n_beams,
+        "laser_frame": bag.scan_frame,
+        "mounting": list(laser.mounting),
+        "lenient": {"counts": dict(problems.counts), "first": list(problems.first)},
+        "topics": dict(bag.topics),
+        "cut_at_s": opts.max_duration_s,
+    }
+
+
+def _ordered_scans(
+    bag: BagContents, opts: RosbagOptions, ok: NDArray[np.bool_], problems: Problems
+) -> _Scans:
+    """The scans of good geometry (``ok``) whose stamps (the header's or the bag's) increase
+    (others reported), cut after ``max_duration_s``."""
+    s, topic = bag.scans, opts.scan_topic
     index = np.flatnonzero(ok)
-    n_beams = int(s.beam_counts[index[0]]) if index.size else 0
     if index.size == 0:
-        raise DatasetFormatError(f"no usable scans on {topic}", path)
+        raise DatasetFormatError(f"no usable scans on {topic}", problems.path)
+    n_beams = int(s.beam_counts[index[0]])
     raw = np.vstack([s.ranges[i] for i in index.tolist()]).astype(np.float64)
     t_all = s.bag_times if opts.stamps == "bag" else header_stamps(s.sec, s.nsec)
     t = t_all[index]
@@ -334,69 +383,19 @@ def _convert(
     if opts.max_duration_s is not None:
         within = t <= t[0] + opts.max_duration_s
         index, t, raw = index[within], t[within], raw[within]
-        relations = None if relations is None else relations.until(float(t[-1]))
-    max_range = opts.max_range if opts.max_range is not None else float(s.range_max[index[0]])
-    ranges, reading_counts = clean_ranges(
-        raw, s.range_min[index], s.range_max[index], max_range, index, topic, problems
+    return _Scans(index, t, raw, n_before_cut, n_beams)
+
+
+def _description(
+    bag: BagContents, path: Path, topic: str, n_kept: int, n_beams: int, odometry: Any
+) -> str:
+    motion = (
+        f"raw odometry ({bag.odometry_from})"
+        if odometry is not None
+        else "no odometry (scan matching alone)"
     )
-    odometry, keep, dropped, repeats = _odometry_at_scans(bag, opts, t, index, problems)
-    angles = s.angle_min[index[0]] + np.arange(n_beams) * s.angle_increment[index[0]]
-    mounting, mounting_from = _mounting(bag, opts, path)
-    laser = LaserSpec(angles, max_range, opts.range_sigma, mounting=mounting)
-    fmt = "rosbag1" if bag.ros1 else ("mcap" if path.suffix == ".mcap" else "rosbag2")
-    n_kept = int(keep.sum())
-    description = (
-        f"{'ROS 1' if bag.ros1 else 'ROS 2'} bag {path.name}: {n_kept} scans × {n_beams} beams "
-        f"({topic}), "
-        + (
-            f"raw odometry ({bag.odometry_from})"
-            if odometry is not None
-            else "no odometry (scan matching alone)"
-        )
-    )
-    metadata: dict[str, Any] = {
-        "kind": "real",
-        "format": fmt,
-        "file": path.name,
-        "config": config_to_dict(opts),
-        "scans": n_kept,
-        "scan_messages": int(s.beam_counts.size),
-        "odometry_topic": bag.odometry_topic,
-        "odometry_from": bag.odometry_from or None,
-        "odometry_messages": int(bag.odometry.sec.size),
-        "odometry_repeats_dropped": repeats,
-        "beams": n_beams,
-        "max_range": max_range,
-        "laser_frame": bag.scan_frame,
-        "mounting": list(laser.mounting),
-        "mounting_from": mounting_from,
-        "dropped": dropped,
-        "readings": reading_counts,
-        "lenient": {"counts": dict(problems.counts), "first": list(problems.first)},
-        "topics": dict(bag.topics),
-        "cut_at_s": opts.max_duration_s,
-    }
-    notes = [n for n in (angle_note, _odometry_note(bag, problems)) if n]
-    if index.size < n_before_cut:
-        notes.append(
-            f"cut after the first {opts.max_duration_s:g} s: {index.size} of {n_before_cut} scans"
-        )
-    reading = _summary(path, int(s.beam_counts.size), n_kept, problems, dropped, notes)
-    check_dropped_share(
-        path, reading.records, sum(reading.dropped.values()), reasons=reading.dropped
-    )
-    return raw_laser_dataset(
-        name=name,
-        times=t[keep],
-        odometry=odometry,
-        ranges=ranges[keep],
-        laser=laser,
-        motion_cov=raw_odometry_cov(opts.odometry_sigma_trans, opts.odometry_sigma_rot_deg),
-        description=description,
-        metadata=metadata,
-        relations=relations,
-        reading=reading,
-    )
+    version = "ROS 1" if bag.ros1 else "ROS 2"
+    return f"{version} bag {path.name}: {n_kept} scans × {n_beams} beams ({topic}), {motion}"
 
 
 SCAN_DROPS = {
@@ -517,30 +516,25 @@ _DESCRIPTIONS = {
 
 
 def _freiburg(name: str, options: Mapping[str, Any], data_root: Path | None) -> Dataset:
-    entry = FREIBURG_BAGS[name]
+    """A raw log of the Freiburg benchmark registered as ``name``: its bag (the entry's
+    first file) read with ``options`` (the entry's defaults already under them), its
+    relations (the second) as the ground truth."""
+    from slamkit.datasets.registry import get_dataset_entry
+
+    bag, relations_file = get_dataset_entry(name).files
     root = resolve_data_root(data_root)
-    opts = _options({**entry.defaults, **dict(options)}, name)
-    relations = read_relations(require_file(entry.relations, root))
-    ds = read_rosbag(require_file(entry.bag, root), opts, name=name, relations=relations)
-    kept = ds.truth.relations if ds.truth is not None else None
+    opts = _options(options, name)
+    relations = read_relations(require_file(relations_file, root))
+    ds = read_rosbag(require_file(bag, root), opts, name=name, relations=relations)
+    kept = ds.truth.relations
     summary = (
         f"{_DESCRIPTIONS[name]}, raw log: {ds.metadata['scans']} scans × "
         f"{ds.metadata['beams']} beams, raw odometry, "
         f"{0 if kept is None else len(kept)} reference relations"
         + ("" if opts.max_duration_s is None else f" (first {opts.max_duration_s:g} s)")
     )
-    return Dataset(
-        name=ds.name,
-        events=ds.events,
-        motion=ds.motion,
-        laser=ds.laser,
-        initial_pose=ds.initial_pose,
-        initial_cov=ds.initial_cov,
-        truth=ds.truth,
-        description=summary,
-        metadata={**ds.metadata, "relations_file": Path(entry.relations).name},
-        reading=ds.reading,
-    )
+    metadata = {**ds.metadata, "relations_file": Path(relations_file).name}
+    return replace(ds, description=summary, metadata=metadata)
 
 
 def load_intel_raw(
@@ -565,19 +559,3 @@ def load_fr079_raw(
     """Freiburg 079 raw log (ROS 1 bag): 4934 scans of 360 beams, raw odometry, laser 4 cm
     behind the robot's centre (:data:`FR079_MOUNTING`), 1685 relations."""
     return _freiburg("fr079-raw", options, data_root)
-
-
-def registered_bag_defaults(path: Path, root: Path | None) -> tuple[str, Mapping[str, Any]] | None:
-    """The registered name and default options of ``path`` when it is one of the registered
-    bags under ``root`` (so that ``--data PATH`` of a registered bag reads it as registered)."""
-    if root is None:
-        return None
-    try:
-        target = path.resolve()
-    except OSError:
-        return None
-    for name, entry in FREIBURG_BAGS.items():
-        candidate = root / entry.bag
-        if candidate.exists() and candidate.resolve() == target:
-            return name, entry.defaults
-    return None

@@ -310,6 +310,64 @@ def _tf_odometry(
     return messages, f"{TF_TOPIC} ({via})"
 
 
+@dataclass
+class _Collected:
+    """The scan and odometry messages as read, field by field, before they become arrays."""
+
+    s_int: list[tuple[int, int, int]] = field(default_factory=list)
+    s_geo: list[tuple[float, float, float, float, float]] = field(default_factory=list)
+    s_ranges: list[NDArray[np.float32]] = field(default_factory=list)
+    o_int: list[tuple[int, int, int]] = field(default_factory=list)
+    o_pose: list[tuple[float, ...]] = field(default_factory=list)
+    scan_frame: str = ""
+    odom_child: str = ""
+
+    def add(self, msg: Any, ts: int, is_scan: bool) -> None:
+        """One message: a LaserScan (``is_scan``) or an Odometry, recorded at ``ts`` [ns]."""
+        stamp = msg.header.stamp
+        if is_scan:
+            if not self.s_int:
+                self.scan_frame = str(msg.header.frame_id)
+            self.s_int.append((stamp.sec, stamp.nanosec, ts))
+            self.s_geo.append((msg.angle_min, msg.angle_max, msg.angle_increment,
+                               msg.range_min, msg.range_max))  # fmt: skip
+            self.s_ranges.append(np.asarray(msg.ranges, dtype=np.float32))
+            return
+        if not self.o_int:
+            self.odom_child = str(msg.child_frame_id)
+        pos, q = msg.pose.pose.position, msg.pose.pose.orientation
+        self.o_int.append((stamp.sec, stamp.nanosec, ts))
+        self.o_pose.append((pos.x, pos.y, q.x, q.y, q.z, q.w, msg.twist.twist.linear.x))
+
+    def scans(self) -> ScanMessages:
+        si = np.asarray(self.s_int, dtype=np.int64).reshape(-1, 3)
+        sg = np.asarray(self.s_geo, dtype=np.float64).reshape(-1, 5)
+        return ScanMessages(
+            sec=si[:, 0],
+            nsec=si[:, 1],
+            bag_times=_ns_seconds(si[:, 2]),
+            angle_min=sg[:, 0],
+            angle_max=sg[:, 1],
+            angle_increment=sg[:, 2],
+            range_min=sg[:, 3],
+            range_max=sg[:, 4],
+            beam_counts=np.asarray([r.size for r in self.s_ranges], dtype=np.int64),
+            ranges=self.s_ranges,
+        )
+
+    def odometry(self) -> OdometryMessages:
+        oi = np.asarray(self.o_int, dtype=np.int64).reshape(-1, 3)
+        op = np.asarray(self.o_pose, dtype=np.float64).reshape(-1, 7)
+        return OdometryMessages(
+            sec=oi[:, 0],
+            nsec=oi[:, 1],
+            bag_times=_ns_seconds(oi[:, 2]),
+            position=op[:, :2].copy(),
+            orientation=op[:, 2:6].copy(),
+            speed=op[:, 6].copy(),
+        )
+
+
 def _read_messages(
     reader: Any, path: Path, scan_topic: str, request: OdometryRequest
 ) -> BagContents:
@@ -319,64 +377,21 @@ def _read_messages(
     odom_conns = (
         [] if odom_topic is None else _connections(reader, odom_topic, ODOMETRY, topics, path)
     )
-    s_int: list[tuple[int, int, int]] = []
-    s_geo: list[tuple[float, float, float, float, float]] = []
-    s_ranges: list[NDArray[np.float32]] = []
-    o_int: list[tuple[int, int, int]] = []
-    o_pose: list[tuple[float, float, float, float, float, float, float]] = []
-    scan_frame = odom_child = ""
+    got = _Collected()
     deserialize = reader.deserialize
     for conn, ts, raw in reader.messages(connections=[*scan_conns, *odom_conns]):
-        msg = deserialize(raw, conn.msgtype)
-        stamp = msg.header.stamp
-        if conn.topic == scan_topic:
-            if not s_int:
-                scan_frame = str(msg.header.frame_id)
-            s_int.append((stamp.sec, stamp.nanosec, ts))
-            s_geo.append((msg.angle_min, msg.angle_max, msg.angle_increment,
-                          msg.range_min, msg.range_max))  # fmt: skip
-            s_ranges.append(np.asarray(msg.ranges, dtype=np.float32))
-        else:
-            if not o_int:
-                odom_child = str(msg.child_frame_id)
-            pos, q = msg.pose.pose.position, msg.pose.pose.orientation
-            o_int.append((stamp.sec, stamp.nanosec, ts))
-            o_pose.append((pos.x, pos.y, q.x, q.y, q.z, q.w, msg.twist.twist.linear.x))
+        got.add(deserialize(raw, conn.msgtype), ts, conn.topic == scan_topic)
     edges, tf_rows = _read_tf(reader, topics, request.odom_frame if from_tf else None)
-    si = np.asarray(s_int, dtype=np.int64).reshape(-1, 3)
-    sg = np.asarray(s_geo, dtype=np.float64).reshape(-1, 5)
-    oi = np.asarray(o_int, dtype=np.int64).reshape(-1, 3)
-    op = np.asarray(o_pose, dtype=np.float64).reshape(-1, 7)
-    scans = ScanMessages(
-        sec=si[:, 0],
-        nsec=si[:, 1],
-        bag_times=_ns_seconds(si[:, 2]),
-        angle_min=sg[:, 0],
-        angle_max=sg[:, 1],
-        angle_increment=sg[:, 2],
-        range_min=sg[:, 3],
-        range_max=sg[:, 4],
-        beam_counts=np.asarray([r.size for r in s_ranges], dtype=np.int64),
-        ranges=s_ranges,
-    )
-    odometry = OdometryMessages(
-        sec=oi[:, 0],
-        nsec=oi[:, 1],
-        bag_times=_ns_seconds(oi[:, 2]),
-        position=op[:, :2].copy(),
-        orientation=op[:, 2:6].copy(),
-        speed=op[:, 6].copy(),
-    )
-    odometry_from = odom_topic or ""
+    odometry, odometry_from, odom_child = got.odometry(), odom_topic or "", got.odom_child
     found = _tf_odometry(tf_rows, edges, request, path) if from_tf else None
     if found is not None:
         odometry, odometry_from = found
         odom_topic, odom_child = TF_TOPIC, request.base_frame
     return BagContents(
         ros1=not reader.is2,
-        scans=scans,
+        scans=got.scans(),
         odometry=odometry,
-        scan_frame=scan_frame,
+        scan_frame=got.scan_frame,
         odom_child_frame=odom_child,
         topics=topics,
         edges=edges,

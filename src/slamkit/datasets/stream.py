@@ -26,6 +26,7 @@ shapes, finiteness) so estimators can trust it.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
@@ -35,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray, as_array, as_covariance, as_positive
+from slamkit.datasets.provenance import Provenance
 from slamkit.datasets.reading import ReadingSummary
 from slamkit.datasets.relations import Relations
 from slamkit.errors import InputError, NonFiniteError, ShapeError
@@ -339,7 +341,10 @@ class Dataset:
     ``known_grid`` are maps a *localization* estimator may use; SLAM estimators ignore them.
     ``truth`` is for evaluation only: estimators must not read it. ``reading`` says what a
     reader of a real file dropped and repaired (:class:`~slamkit.datasets.reading.
-    ReadingSummary`; None for simulated data). (Settings measured to
+    ReadingSummary`; None for simulated data). ``provenance`` says where it came from — the
+    file and reader, the resolved options (:class:`~slamkit.datasets.provenance.
+    Provenance`): what a run records to re-run it. ``metadata`` holds descriptive counts
+    for people; no layer reads keys of it back. (Settings measured to
     suit one estimator on a data set are not part of it: see :mod:`slamkit.app.presets`.)
     """
 
@@ -356,6 +361,7 @@ class Dataset:
     description: str = ""
     metadata: dict[str, Any] = field(default_factory=dict)
     reading: ReadingSummary | None = None
+    provenance: Provenance = field(default_factory=Provenance)
 
     def __post_init__(self) -> None:
         if self.initial_pose is not None:
@@ -474,6 +480,14 @@ class Dataset:
             for i in idx:
                 if not np.all(np.isfinite(self.events[i].z)):  # type: ignore[union-attr]
                     self._fail(i, "z: expected finite readings", NonFiniteError)
+
+    def with_provenance(self, provenance: Provenance) -> Dataset:
+        """This data set with ``provenance``: a copy sharing the events, which are not
+        checked again (they did not change), with a copy of ``metadata``."""
+        out = copy.copy(self)
+        object.__setattr__(out, "provenance", provenance)
+        object.__setattr__(out, "metadata", dict(self.metadata))
+        return out
 
     # -- convenience views -------------------------------------------------------------
 

@@ -153,6 +153,37 @@ def _line_problem(fields: list[str], k: int) -> str | None:
     return None
 
 
+def _split_lines(
+    text: str, columns: int, delimiter: str | None, lenient: bool, p: Path
+) -> tuple[list[str], list[int], list[int], DatasetFormatError | None]:
+    """The fields of the lines that hold ``columns`` ASCII fields, their line numbers, the
+    lines skipped (lenient), and the error of the first line that does not (strict: the
+    lines after it are not read; it is raised after the values before it are checked)."""
+    fields: list[str] = []
+    numbers: list[int] = []
+    bad: list[int] = []
+    for i, line in enumerate(text_lines(text), start=1):
+        parts = _split(line, delimiter)
+        if not parts:
+            continue
+        if not ascii_fields(parts):
+            if not lenient:
+                why = "a field holds non-ASCII characters; expected ASCII numbers"
+                return fields, numbers, bad, DatasetFormatError(why, p, i)
+            bad.append(i)
+            continue
+        if len(parts) != columns:
+            if not lenient:
+                # Raised by the caller unless an earlier line holds a bad value: the first wins.
+                why = f"expected {columns} columns, got {len(parts)}"
+                return fields, numbers, bad, DatasetFormatError(why, p, i)
+            bad.append(i)
+            continue
+        fields.extend(parts)
+        numbers.append(i)
+    return fields, numbers, bad, None
+
+
 def read_table(
     path: str | Path,
     columns: int,
@@ -174,36 +205,7 @@ def read_table(
     if columns < 1:
         raise ValueError(f"columns: expected a positive number, got {columns}")
     p = Path(path)
-    text = read_text(p)
-
-    fields: list[str] = []
-    numbers: list[int] = []
-    bad: list[int] = []
-    count_error: DatasetFormatError | None = None
-    for i, line in enumerate(text_lines(text), start=1):
-        parts = _split(line, delimiter)
-        if not parts:
-            continue
-        if not ascii_fields(parts):
-            if not lenient:
-                count_error = DatasetFormatError(
-                    "a field holds non-ASCII characters; expected ASCII numbers", p, i
-                )
-                break
-            bad.append(i)
-            continue
-        if len(parts) != columns:
-            if not lenient:
-                # Raised below unless an earlier line holds a bad value: the first wins.
-                count_error = DatasetFormatError(
-                    f"expected {columns} columns, got {len(parts)}", p, i
-                )
-                break
-            bad.append(i)
-            continue
-        fields.extend(parts)
-        numbers.append(i)
-
+    fields, numbers, bad, count_error = _split_lines(read_text(p), columns, delimiter, lenient, p)
     try:
         # Python's float() syntax, applied by NumPy to every field at once.
         values = np.array(fields, dtype=np.float64).reshape(-1, columns)

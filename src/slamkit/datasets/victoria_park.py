@@ -131,14 +131,17 @@ from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
 from slamkit.config import config_from_mapping, config_to_dict
+from slamkit.datasets.assemble import (
+    assemble_events,
+    control_events,
+    reading_events,
+    time_groups,
+)
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.plaza import cut_intervals
 from slamkit.datasets.stream import (
-    Control,
     Dataset,
-    Event,
     GroundTruth,
-    LandmarkReadings,
     LandmarkSensorSpec,
     MotionSpec,
     measured_detection_range,
@@ -351,6 +354,25 @@ def _read_detections(path: Path) -> NumericTable:
     return det
 
 
+_DESCRIPTION = (
+    "Victoria Park: truck odometry at 40 Hz (Ackermann, rear-axle centre), laser "
+    "range-bearing readings of 299 trees moved to the rear axle, ids unknown; GPS "
+    "positions as reference"
+)
+
+
+@dataclass(frozen=True)
+class _Detections:
+    """The detections kept (stamps, ``(range, bearing)`` from the rear axle, true tree
+    ids) and the counts of those dropped."""
+
+    t: FloatArray
+    z: FloatArray
+    tree: NDArray[np.int64]
+    poor: int
+    outside: int
+
+
 def load_victoria_park(
     options: Mapping[str, Any] | None = None,
     *,
@@ -378,96 +400,27 @@ def load_victoria_park(
     gps = read_table(p_gps, 3)
     check_times(gps, p_gps, strict=True, unit="ms")
     det = _read_detections(p_det)
-
-    # ---- odometry: sample k holds over (t_k, t_{k+1}] -------------------------------------
+    # Odometry sample k holds over (t_k, t_{k+1}]; the run ends with the last one (or cut).
     t_odo = odo.values[:, 0] * _MS
     t0, t_last = float(t_odo[0]), float(t_odo[-1])
     cut = t_last if opts.max_duration_s is None else min(t_last, t0 + opts.max_duration_s)
-
-    # ---- detections: drop poor features and those outside the odometry span --------------
-    d = det.values
-    poor = d[:, 5] < 0
-    t_det = d[:, 0] * _MS
-    outside = ~poor & ((t_det < t0) | (t_det > t_last))
-    keep = ~poor & ~outside & (t_det <= cut)
-    t_det = t_det[keep]
-    z = laser_to_vehicle(d[keep, 1], d[keep, 2], opts.laser_offset)
-    truth_id = integer_values(d[keep, 5], det.line_numbers[keep], "feature index", p_det)
-    group_t, group_start = np.unique(t_det, return_index=True)
-    group_end = np.append(group_start[1:], t_det.size)
-
-    # ---- controls, cut at detection times -------------------------------------------------
+    kept = _detections(det, p_det, opts.laser_offset, (t0, t_last), cut)
+    starts, _ = time_groups(kept.t)
+    group_t = kept.t[starts] if kept.t.size else kept.t
     ends, dts, u = odometry_controls(
-        t_odo,
-        odo.values[:, 1:3],
-        group_t,
-        steering_offset=opts.steering_offset,
-        split=opts.split_at_readings,
-    )
+        t_odo, odo.values[:, 1:3], group_t,
+        steering_offset=opts.steering_offset, split=opts.split_at_readings,
+    )  # fmt: skip
     n_ctrl = int(np.searchsorted(ends, cut, side="right"))
-
-    times = np.concatenate([ends[:n_ctrl], group_t])
-    kinds = np.concatenate([np.zeros(n_ctrl, np.int8), np.ones(group_t.size, np.int8)])
-    index = np.concatenate([np.arange(n_ctrl), np.arange(group_t.size)])
-    events: list[Event] = []
-    reading_ids: list[NDArray[np.int64]] = []
-    for j in np.lexsort((kinds, times)):
-        i = int(index[j])
-        if kinds[j] == 0:
-            events.append(Control(float(ends[i]), u[i].copy(), float(dts[i])))
-        else:
-            a, b = group_start[i], group_end[i]
-            true_ids = truth_id[a:b].copy()
-            ids = true_ids.copy() if opts.identities else np.full(b - a, -1, dtype=np.int64)
-            events.append(LandmarkReadings(float(group_t[i]), z[a:b].copy(), ids))
-            reading_ids.append(true_ids)
-
-    # ---- GPS: position-only reference, as recorded ---------------------------------------
+    ids = kept.tree if opts.identities else np.full(kept.tree.size, -1, dtype=np.int64)
+    readings = reading_events(kept.t, kept.z, ids)
+    truth_ids = tuple(ev.ids.copy() for ev in reading_events(kept.t, kept.z, kept.tree))
     t_gps = gps.values[:, 0] * _MS
-    n_gps = int(np.searchsorted(t_gps, cut, side="right"))
-
-    a_off, b_off = opts.laser_offset
-    rows_used = int(np.searchsorted(t_odo[1:], cut, side="right"))
-    metadata: dict[str, Any] = {
-        "kind": "real",
-        "source": "Victoria Park, ACFR (Guivant & Nebot 2001); detections cleaned by SLSJF",
-        "files": list(VICTORIA_PARK_FILES),
-        "time_origin": "the files' clock: t = time_ms / 1000",
-        "odometry_samples": len(odo),
-        "odometry_samples_used": rows_used,
-        "controls": n_ctrl,
-        "controls_added_by_splitting": n_ctrl - rows_used,
-        "detections_in_file": len(det),
-        "detections_kept": int(t_det.size),
-        "reading_events": int(group_t.size),
-        "trees": int(np.unique(truth_id).size),
-        "dropped": {
-            "poor_feature": int(poor.sum()),
-            "outside_odometry": int(outside.sum()),
-        },
-        "gps_fixes": n_gps,
-        "vehicle": {
-            "wheelbase": opts.wheelbase,
-            "encoder_offset": opts.encoder_offset,
-            "laser_offset": [a_off, b_off],
-            "state": "rear-axle centre",
-        },
-        "cut_at_s": None if opts.max_duration_s is None else cut,
-        "options": config_to_dict(opts),
-    }
-    # The laser reaches 80 m but seldom detects a trunk beyond ~40 m: its detection range,
-    # measured from the readings (38 m from the laser on the whole run).
-    sensor = LandmarkSensorSpec(
-        kind="range-bearing",
-        noise_cov=np.diag([opts.sigma_range**2, opts.sigma_bearing**2]),
-        max_range=LASER_MAX_RANGE + float(np.hypot(a_off, b_off)),
-        fov=np.pi,
-        identities=opts.identities,
-        offset=(a_off, b_off),
-    )
+    n_gps, sensor = int(np.searchsorted(t_gps, cut, side="right")), _tree_sensor(opts)
+    events = assemble_events(control_events(ends[:n_ctrl], u[:n_ctrl], dts[:n_ctrl]), readings)
     return Dataset(
         name="victoria-park",
-        events=tuple(events),
+        events=events,
         motion=ackermann_motion(
             wheelbase=opts.wheelbase,
             encoder_offset=opts.encoder_offset,
@@ -480,12 +433,87 @@ def load_victoria_park(
         truth=GroundTruth(
             position_times=t_gps[:n_gps],
             positions=gps.values[:n_gps, 1:3].copy(),
-            reading_ids=tuple(reading_ids),
+            reading_ids=truth_ids,
         ),
-        description=(
-            "Victoria Park: truck odometry at 40 Hz (Ackermann, rear-axle centre), laser "
-            "range-bearing readings of 299 trees moved to the rear axle, ids unknown; GPS "
-            "positions as reference"
+        description=_DESCRIPTION,
+        metadata=_metadata(
+            opts, len(odo), t_odo, n_ctrl, len(det), kept, len(readings), n_gps, cut
         ),
-        metadata=metadata,
     )
+
+
+def _detections(
+    det: NumericTable,
+    path: Path,
+    laser_offset: tuple[float, float],
+    span: tuple[float, float],
+    cut: float,
+) -> _Detections:
+    """Detections of poor features (index ``-1``) and outside the odometry's ``span`` are
+    dropped and counted, those after ``cut`` left out; the rest moved to the rear axle."""
+    d = det.values
+    poor = d[:, 5] < 0
+    t_det = d[:, 0] * _MS
+    outside = ~poor & ((t_det < span[0]) | (t_det > span[1]))
+    keep = ~poor & ~outside & (t_det <= cut)
+    return _Detections(
+        t=t_det[keep],
+        z=laser_to_vehicle(d[keep, 1], d[keep, 2], laser_offset),
+        tree=integer_values(d[keep, 5], det.line_numbers[keep], "feature index", path),
+        poor=int(poor.sum()),
+        outside=int(outside.sum()),
+    )
+
+
+def _tree_sensor(opts: VictoriaParkOptions) -> LandmarkSensorSpec:
+    """The laser's tree detector seen from the rear axle (its detection range is measured
+    from the readings by the caller: the laser reaches 80 m but seldom detects a trunk
+    beyond ~40 m — 38 m from the laser on the whole run)."""
+    a_off, b_off = opts.laser_offset
+    return LandmarkSensorSpec(
+        kind="range-bearing",
+        noise_cov=np.diag([opts.sigma_range**2, opts.sigma_bearing**2]),
+        max_range=LASER_MAX_RANGE + float(np.hypot(a_off, b_off)),
+        fov=np.pi,
+        identities=opts.identities,
+        offset=(a_off, b_off),
+    )
+
+
+def _metadata(
+    opts: VictoriaParkOptions,
+    n_odo: int,
+    t_odo: FloatArray,
+    n_ctrl: int,
+    n_det: int,
+    kept: _Detections,
+    n_events: int,
+    n_gps: int,
+    cut: float,
+) -> dict[str, Any]:
+    rows_used = int(np.searchsorted(t_odo[1:], cut, side="right"))
+    a_off, b_off = opts.laser_offset
+    return {
+        "kind": "real",
+        "source": "Victoria Park, ACFR (Guivant & Nebot 2001); detections cleaned by SLSJF",
+        "files": list(VICTORIA_PARK_FILES),
+        "time_origin": "the files' clock: t = time_ms / 1000",
+        "odometry_samples": n_odo,
+        "odometry_samples_used": rows_used,
+        "controls": n_ctrl,
+        "controls_added_by_splitting": n_ctrl - rows_used,
+        "detections_in_file": n_det,
+        "detections_kept": int(kept.t.size),
+        "reading_events": n_events,
+        "trees": int(np.unique(kept.tree).size),
+        "dropped": {"poor_feature": kept.poor, "outside_odometry": kept.outside},
+        "gps_fixes": n_gps,
+        "vehicle": {
+            "wheelbase": opts.wheelbase,
+            "encoder_offset": opts.encoder_offset,
+            "laser_offset": [a_off, b_off],
+            "state": "rear-axle centre",
+        },
+        "cut_at_s": None if opts.max_duration_s is None else cut,
+        "options": config_to_dict(opts),
+    }

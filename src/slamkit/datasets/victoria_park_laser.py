@@ -91,17 +91,20 @@ steering, dead reckoning here ends 1.3 m from ``victoria-park``'s at the same in
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
+from slamkit._validation import FloatArray
 from slamkit.config import config_from_mapping, config_to_dict
+from slamkit.datasets.assemble import assemble_events, control_events, scan_events
 from slamkit.datasets.carmen_parse import beam_angles_from_geometry
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.reading import ReadingSummary, check_dropped_share
-from slamkit.datasets.stream import Control, Dataset, Event, GroundTruth, LaserScan, LaserSpec
+from slamkit.datasets.stream import Dataset, GroundTruth, LaserSpec
 from slamkit.datasets.text import NumericTable, check_times, raise_at_first, read_table
 from slamkit.datasets.victoria_park import (
     FOLDER,
@@ -227,6 +230,31 @@ def _check_sensors(
     return {"arrivals": len(table), "same_time_as_previous": ties}
 
 
+_DESCRIPTION = (
+    "Victoria Park raw laser: 361-beam scans (180°, laser 3.78 m ahead of the rear axle), "
+    "40 Hz Ackermann speed/steering, GPS positions as reference"
+)
+
+
+@dataclass(frozen=True)
+class _Use:
+    """Which scans the data set keeps (``use``), the cut, and the counts for the summary:
+    the scans dropped by reason, those kept outside the DRS samples, the readings that are
+    no return (all, the file's marker, the SICK error codes), the DRS samples used, the
+    controls and the GPS fixes."""
+
+    use: NDArray[np.bool_]
+    cut: float
+    dropped: dict[str, int]
+    kept_outside: int
+    n_far: int = 0
+    n_marker: int = 0
+    n_codes: int = 0
+    n_drs_used: int = 0
+    n_ctrl: int = 0
+    n_gps: int = 0
+
+
 def load_victoria_park_laser(
     options: Mapping[str, Any] | None = None,
     *,
@@ -256,99 +284,29 @@ def load_victoria_park_laser(
         {1: t_gps, 2: t_drs, 3: t_scan},
         {1: p_gps.name, 2: p_drs.name, 3: p_scans.name},
     )
-
-    # ---- scans outside the DRS samples: kept where the truck stands ----------------------
-    t0, t_last = float(t_drs[0]), float(t_drs[-1])
-    before, after = t_scan < t0, t_scan > t_last
-    drop_before = before & (drs.values[0, 1] != 0.0)  # a moving truck: pose unknown
-    drop_after = after & (drs.values[-1, 1] != 0.0)
-    drop = drop_before | drop_after
-    dropped_counts: dict[str, int] = {}
-    for reason, mask in (
-        ("before the first speed/steering sample, truck moving", drop_before),
-        ("after the last speed/steering sample, truck moving", drop_after),
-    ):
-        if mask.any():
-            dropped_counts[reason] = int(np.count_nonzero(mask))
-    kept_outside = int(np.count_nonzero((before | after) & ~drop))
-    check_dropped_share(p_scans, len(scans), int(np.count_nonzero(drop)))
-    cut = np.inf if opts.max_duration_s is None else t0 + opts.max_duration_s
-    use = ~drop & (t_scan <= cut)
-
-    # ---- ranges: 80 m and beyond is no return (info.txt), stored as max_range ------------
-    raw = scans.values[use, 1:]
-    far = raw >= LASER_MAX_RANGE
-    ranges = np.where(far, LASER_MAX_RANGE, raw)
-    n_marker = int(np.count_nonzero(raw >= NO_RETURN_MARKER))
-    n_codes = int(np.count_nonzero((raw >= SICK_ERROR_CODES) & (raw < NO_RETURN_MARKER)))
-    n_far = int(np.count_nonzero(far))
-    times_used = t_scan[use]
-
-    # ---- controls, cut at the scan times (as victoria-park's odometry) -------------------
+    use = _scans_used(t_scan, drs, opts.max_duration_s, p_scans)
+    raw = scans.values[use.use, 1:]
+    ranges = np.where(raw >= LASER_MAX_RANGE, LASER_MAX_RANGE, raw)  # info.txt: no return
+    times_used = t_scan[use.use]
+    # Controls cut at the scan times (as victoria-park's odometry).
     ends, dts, u = odometry_controls(
         t_drs, drs.values[:, 1:3], times_used, steering_offset=opts.steering_offset
     )
-    n_ctrl = int(np.searchsorted(ends, cut, side="right"))
-    n_drs_used = int(np.searchsorted(t_drs[1:], cut, side="right"))
-
-    times = np.concatenate([ends[:n_ctrl], times_used])
-    kinds = np.concatenate([np.zeros(n_ctrl, np.int8), np.ones(times_used.size, np.int8)])
-    index = np.concatenate([np.arange(n_ctrl), np.arange(times_used.size)])
-    events: list[Event] = []
-    for j in np.lexsort((kinds, times)):  # by time; at a tie the control (ending then) first
-        i = int(index[j])
-        if kinds[j] == 0:
-            events.append(Control(float(ends[i]), u[i].copy(), float(dts[i])))
-        else:
-            events.append(LaserScan(float(times_used[i]), ranges[i].copy()))
-
-    n_gps = int(np.searchsorted(t_gps, cut, side="right"))
-    east_north = gps.values[:n_gps, 2:0:-1].copy()  # the file's columns: north, east
-    notes = [
-        f"{n_far} readings of {LASER_MAX_RANGE:g} m or more are no return (info.txt: beyond "
-        f"8000 cm), stored as {LASER_MAX_RANGE:g} m: {n_marker} of {NO_RETURN_MARKER} m, "
-        f"{n_codes} SICK error codes ({SICK_ERROR_CODES}-{NO_RETURN_MARKER} m), "
-        f"{n_far - n_marker - n_codes} other",
-        f"{p_drs.name}: {n_drs_used} of {len(drs)} speed/steering samples used as {n_ctrl} "
-        f"controls; {p_gps.name}: {n_gps} of {len(gps)} GPS fixes",
-    ]
-    if opts.max_duration_s is not None:
-        notes.append(f"cut at {cut:g} s (max_duration_s = {opts.max_duration_s:g})")
-    repaired: dict[str, int] = {}
-    if kept_outside:
-        repaired["outside the speed/steering samples, truck standing: kept"] = kept_outside
-    reading = ReadingSummary(
-        file=SCANS_FILE,
-        records=len(scans),
-        used=int(times_used.size),
-        dropped=dropped_counts,
-        repaired=repaired,
-        notes=tuple(notes),
+    n_ctrl = int(np.searchsorted(ends, use.cut, side="right"))
+    use = replace(
+        use,
+        n_far=int(np.count_nonzero(raw >= LASER_MAX_RANGE)),
+        n_marker=int(np.count_nonzero(raw >= NO_RETURN_MARKER)),
+        n_codes=int(np.count_nonzero((raw >= SICK_ERROR_CODES) & (raw < NO_RETURN_MARKER))),
+        n_drs_used=int(np.searchsorted(t_drs[1:], use.cut, side="right")),
+        n_ctrl=n_ctrl,
+        n_gps=int(np.searchsorted(t_gps, use.cut, side="right")),
     )
     a, b = LASER_OFFSET
-    metadata: dict[str, Any] = {
-        "kind": "real",
-        "source": "Victoria Park, ACFR (Guivant & Nebot 2001), raw laser ASCII release",
-        "files": list(VICTORIA_PARK_LASER_FILES),
-        "time_origin": "seconds from the start of the log (not the clock of victoria-park)",
-        "scans_in_file": len(scans),
-        "scans_used": int(times_used.size),
-        "no_return_readings": n_far,
-        "no_return_marker_readings": n_marker,
-        "sick_error_code_readings": n_codes,
-        "drs_samples": len(drs),
-        "drs_samples_used": n_drs_used,
-        "controls": n_ctrl,
-        "controls_added_by_splitting": n_ctrl - n_drs_used,
-        "gps_fixes": n_gps,
-        "sensor_arrivals": arrivals,
-        "vehicle": {"laser_mounting": [a, b, 0.0], "state": "rear-axle centre"},
-        "cut_at_s": None if opts.max_duration_s is None else float(cut),
-        "options": config_to_dict(opts),
-    }
+    controls = control_events(ends[:n_ctrl], u[:n_ctrl], dts[:n_ctrl])
     return Dataset(
         name="victoria-park-laser",
-        events=tuple(events),
+        events=assemble_events(controls, scan_events(times_used, ranges)),
         motion=ackermann_motion(),
         laser=LaserSpec(
             beam_angles_from_geometry(N_BEAMS, 180.0, 0.5),
@@ -358,11 +316,100 @@ def load_victoria_park_laser(
         ),
         initial_pose=np.zeros(3),
         initial_cov=np.zeros((3, 3)),
-        truth=GroundTruth(position_times=t_gps[:n_gps], positions=east_north),
-        description=(
-            "Victoria Park raw laser: 361-beam scans (180°, laser 3.78 m ahead of the rear "
-            "axle), 40 Hz Ackermann speed/steering, GPS positions as reference"
+        truth=GroundTruth(
+            position_times=t_gps[: use.n_gps],
+            positions=gps.values[: use.n_gps, 2:0:-1].copy(),  # the file's columns: north, east
         ),
-        metadata=metadata,
-        reading=reading,
+        description=_DESCRIPTION,
+        metadata=_metadata(opts, use, (len(scans), len(drs)), arrivals),
+        reading=_summary(use, len(scans), (p_drs.name, len(drs)), (p_gps.name, len(gps)), opts),
     )
+
+
+def _scans_used(
+    t_scan: FloatArray, drs: NumericTable, max_duration_s: float | None, path: Path
+) -> _Use:
+    """Scans outside the DRS samples are kept where the truck stands (its pose is known)
+    and dropped where it moves; the rest up to the cut (``max_duration_s`` after the first
+    DRS sample)."""
+    t_drs = drs.values[:, 0]
+    t0, t_last = float(t_drs[0]), float(t_drs[-1])
+    before, after = t_scan < t0, t_scan > t_last
+    drop_before = before & (drs.values[0, 1] != 0.0)  # a moving truck: pose unknown
+    drop_after = after & (drs.values[-1, 1] != 0.0)
+    drop = drop_before | drop_after
+    dropped: dict[str, int] = {}
+    for reason, mask in (
+        ("before the first speed/steering sample, truck moving", drop_before),
+        ("after the last speed/steering sample, truck moving", drop_after),
+    ):
+        if mask.any():
+            dropped[reason] = int(np.count_nonzero(mask))
+    check_dropped_share(path, t_scan.size, int(np.count_nonzero(drop)))
+    cut = np.inf if max_duration_s is None else t0 + max_duration_s
+    return _Use(
+        use=~drop & (t_scan <= cut),
+        cut=float(cut),
+        dropped=dropped,
+        kept_outside=int(np.count_nonzero((before | after) & ~drop)),
+    )
+
+
+def _summary(
+    use: _Use,
+    n_scans: int,
+    drs: tuple[str, int],
+    gps: tuple[str, int],
+    opts: VictoriaParkLaserOptions,
+) -> ReadingSummary:
+    n_far, n_marker, n_codes = use.n_far, use.n_marker, use.n_codes
+    notes = [
+        f"{n_far} readings of {LASER_MAX_RANGE:g} m or more are no return (info.txt: beyond "
+        f"8000 cm), stored as {LASER_MAX_RANGE:g} m: {n_marker} of {NO_RETURN_MARKER} m, "
+        f"{n_codes} SICK error codes ({SICK_ERROR_CODES}-{NO_RETURN_MARKER} m), "
+        f"{n_far - n_marker - n_codes} other",
+        f"{drs[0]}: {use.n_drs_used} of {drs[1]} speed/steering samples used as {use.n_ctrl} "
+        f"controls; {gps[0]}: {use.n_gps} of {gps[1]} GPS fixes",
+    ]
+    if opts.max_duration_s is not None:
+        notes.append(f"cut at {use.cut:g} s (max_duration_s = {opts.max_duration_s:g})")
+    repaired: dict[str, int] = {}
+    if use.kept_outside:
+        repaired["outside the speed/steering samples, truck standing: kept"] = use.kept_outside
+    return ReadingSummary(
+        file=SCANS_FILE,
+        records=n_scans,
+        used=int(np.count_nonzero(use.use)),
+        dropped=use.dropped,
+        repaired=repaired,
+        notes=tuple(notes),
+    )
+
+
+def _metadata(
+    opts: VictoriaParkLaserOptions,
+    use: _Use,
+    sizes: tuple[int, int],
+    arrivals: dict[str, int],
+) -> dict[str, Any]:
+    a, b = LASER_OFFSET
+    return {
+        "kind": "real",
+        "source": "Victoria Park, ACFR (Guivant & Nebot 2001), raw laser ASCII release",
+        "files": list(VICTORIA_PARK_LASER_FILES),
+        "time_origin": "seconds from the start of the log (not the clock of victoria-park)",
+        "scans_in_file": sizes[0],
+        "scans_used": int(np.count_nonzero(use.use)),
+        "no_return_readings": use.n_far,
+        "no_return_marker_readings": use.n_marker,
+        "sick_error_code_readings": use.n_codes,
+        "drs_samples": sizes[1],
+        "drs_samples_used": use.n_drs_used,
+        "controls": use.n_ctrl,
+        "controls_added_by_splitting": use.n_ctrl - use.n_drs_used,
+        "gps_fixes": use.n_gps,
+        "sensor_arrivals": arrivals,
+        "vehicle": {"laser_mounting": [a, b, 0.0], "state": "rear-axle centre"},
+        "cut_at_s": None if opts.max_duration_s is None else float(use.cut),
+        "options": config_to_dict(opts),
+    }

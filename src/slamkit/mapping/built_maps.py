@@ -44,6 +44,7 @@ import numpy as np
 
 from slamkit.config import config_from_mapping, config_to_dict
 from slamkit.datasets.carmen import load_intel
+from slamkit.datasets.provenance import Provenance
 from slamkit.datasets.stream import Dataset, Event, LaserScan
 from slamkit.errors import ConfigError, InputError
 from slamkit.mapping.occupancy import OccupancyMappingConfig, build_occupancy_map
@@ -223,6 +224,5 @@ def load_intel_mcl(
         ),
         map_info=info,
     )
-    ds.metadata["carmen_config"] = ds.metadata.get("config")
-    ds.metadata["config"] = config_to_dict(opts)
-    return ds
+    ds.metadata["carmen_config"] = source.provenance.options
+    return ds.with_provenance(Provenance(options=config_to_dict(opts)))

@@ -221,13 +221,18 @@ def flatten_metrics(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, s
 
 
 def _reading_row(reading: Mapping[str, Any]) -> str:
-    """``"used of records scans, N dropped, M repaired"`` of a ``"reading"`` record."""
+    """``"used of records scans, N dropped, M repaired, K ignored"`` of a ``"reading"``
+    record."""
     try:
         summary = ReadingSummary.from_dict(reading)
     except InputError:
         return "malformed"
     text = f"{summary.used} of {summary.records} {summary.what}"
-    for verb, counts in (("dropped", summary.dropped), ("repaired", summary.repaired)):
+    for verb, counts in (
+        ("dropped", summary.dropped),
+        ("repaired", summary.repaired),
+        ("ignored", summary.ignored),
+    ):
         if counts:
             text += f", {sum(counts.values())} {verb}"
     if summary.notes:

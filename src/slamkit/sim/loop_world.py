@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from slamkit.config import config_from_mapping, config_to_dict
+from slamkit.datasets.provenance import Provenance
 from slamkit.datasets.stream import Control, Dataset, Event, GroundTruth, LaserScan, MotionSpec
 from slamkit.maps import SegmentMap
 from slamkit.models import UnicycleEuler
@@ -151,5 +152,6 @@ def _drive(
         known_grid=grid,
         truth=GroundTruth(times=times, poses=truth, walls=walls, occupancy=grid),
         description=description,
-        metadata={"kind": "simulated", "config": config_to_dict(cfg)},
+        metadata={"kind": "simulated"},
+        provenance=Provenance(options=config_to_dict(cfg)),
     )

@@ -63,6 +63,7 @@ import numpy as np
 
 from slamkit._validation import FloatArray
 from slamkit.config import Section, config_to_dict, finite_at_least, optional, setting
+from slamkit.datasets.assemble import assemble_events
 from slamkit.datasets.stream import Control, Dataset, Event, LaserScan, MotionSpec, Odometry
 from slamkit.errors import InputError
 from slamkit.geometry import wrap_angle
@@ -389,8 +390,6 @@ def _merge_events(
         readings.append(Odometry(float(times[k]), odom[k].copy()))
         if k in duplicates:
             readings.append(Odometry(float(times[k]), odom[k].copy()))
-    # A stable sort: readings before the other events at one stamp, each list's order kept.
-    tagged = [(ev.t, 0, i, ev) for i, ev in enumerate(readings)]
-    tagged += [(ev.t, 1, i, ev) for i, ev in enumerate(kept)]
-    tagged.sort(key=lambda item: (item[0], item[1], item[2]))
-    return [item[3] for item in tagged]
+    # The loader kit's merge: odometry (the motion) before the readings at one stamp, each
+    # list's order kept.
+    return list(assemble_events(readings, kept))

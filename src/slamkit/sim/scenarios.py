@@ -17,6 +17,7 @@ from typing import Any, Literal
 import numpy as np
 
 from slamkit.config import config_from_mapping, config_to_dict
+from slamkit.datasets.provenance import Provenance
 from slamkit.datasets.stream import (
     Control,
     Dataset,
@@ -306,7 +307,8 @@ def landmark_dataset(
             times=times, poses=truth, landmarks=world, reading_ids=tuple(reading_ids)
         ),
         description=description,
-        metadata={"kind": "simulated", "config": config_to_dict(cfg)},
+        metadata={"kind": "simulated"},
+        provenance=Provenance(options=config_to_dict(cfg)),
     )
 
 
@@ -443,5 +445,6 @@ def build_rooms_laser(
         known_grid=grid,
         truth=GroundTruth(times=times, poses=truth, walls=walls, occupancy=grid),
         description="laser tour of four rooms off a corridor (20 m × 12 m)",
-        metadata={"kind": "simulated", "config": config_to_dict(cfg)},
+        metadata={"kind": "simulated"},
+        provenance=Provenance(options=config_to_dict(cfg)),
     )

@@ -222,6 +222,30 @@ class _EdgeRows:
     lines: IntArray
 
 
+@dataclass
+class _Lexed:
+    """Pass 1's result: the groups of the family's tags, each tag's numbers after its ids
+    and its ids, the FIX ids with their lines, the unknown tags a lenient read skipped, and
+    the graph's dimension."""
+
+    known: dict[str, _Group]
+    raw: dict[str, FloatArray]
+    ids_of: dict[str, IntArray]
+    fixed: tuple[IntArray, IntArray]
+    skipped: dict[str, int]
+    skipped_lines: list[int]
+    dim: int
+
+
+@dataclass
+class _Decoded:
+    """Pass 2's result: vertices by tag (ids, values, lines), edges, and EQUIV pairs."""
+
+    vertex_rows: dict[str, tuple[IntArray, FloatArray, IntArray]]
+    edge_rows: list[_EdgeRows]
+    equiv: tuple[IntArray, IntArray]
+
+
 def parse_graph_text(
     text: str,
     path: Path,
@@ -244,8 +268,40 @@ def parse_graph_text(
         base = path.with_suffix("") if path.suffix == ".gz" else path
         family = detect_family(list(groups), base.suffix, base.stem)
     spec = FAMILIES[family]
+    lexed = _lexical(groups, spec, lenient, path)
+    decoded = _decode(lexed, spec, path)
+    pose_ids, poses, lm_ids, landmarks, repaired = _graph_checks(
+        decoded, lexed, spec, repair_information, path
+    )
+    if not decoded.edge_rows and not pose_ids.size and not lm_ids.size:
+        raise DatasetFormatError(f"no vertex or edge lines of a {spec.title} file", path)
+    edges, order = _edge_sets(decoded.edge_rows)
+    graph = GraphData(
+        dim=cast(Literal[2, 3], lexed.dim),
+        pose_ids=pose_ids,
+        poses=poses,
+        landmark_ids=lm_ids,
+        landmarks=landmarks,
+        edges=edges,
+        fixed_ids=lexed.fixed[0],
+        equivalences=decoded.equiv[0],
+        family=family,
+        source=str(path),
+        edge_order=order,
+    )
+    skipped_lines = sorted(lexed.skipped_lines)
+    return ParsedGraph(
+        graph,
+        family,
+        lexed.skipped,
+        tuple(skipped_lines[:MAX_REPORTED_LINES]),
+        tuple(sorted(repaired, key=lambda r: r.line)),
+    )
 
-    # ------------------------------------------------------------------ pass 1: lexical
+
+def _lexical(groups: dict[str, _Group], spec: FamilySpec, lenient: bool, path: Path) -> _Lexed:
+    """Pass 1: the family's tags (others refused, or skipped and counted when
+    ``lenient``), the dimension, and every known tag's numbers and ids."""
     problems = _Problems(path)
     skipped: dict[str, int] = {}
     skipped_lines: list[int] = []
@@ -262,13 +318,8 @@ def parse_graph_text(
                 f"unknown tag {tag!r} for a {spec.title} file (tags read: "
                 f"{', '.join(sorted(spec.known_tags))}; lenient=True skips unknown lines)",
             )
-
     dim = _graph_dim(known, spec, problems)
-
-    vertex_rows: dict[str, tuple[IntArray, FloatArray, IntArray]] = {}
-    edge_rows: list[_EdgeRows] = []
     fixed = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
-    equiv = (np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int64))
     raw: dict[str, FloatArray] = {}
     ids_of: dict[str, IntArray] = {}
     for tag, g in known.items():
@@ -289,14 +340,19 @@ def parse_graph_text(
         raw[tag] = values[:, n_ids:]
         ids_of[tag] = ids
     problems.raise_first()
+    return _Lexed(known, raw, ids_of, fixed, skipped, skipped_lines, dim)
 
-    # ----------------------------------------------- pass 2: per-tag checks, decoding
-    for tag, values in raw.items():
-        g = known[tag]
-        lines = np.asarray(g.lines, dtype=np.int64)
-        ids = ids_of[tag]
+
+def _decode(lexed: _Lexed, spec: FamilySpec, path: Path) -> _Decoded:
+    """Pass 2: each tag's checks on its raw numbers, then its decoding into slamkit's
+    conventions."""
+    problems = _Problems(path)
+    out = _Decoded({}, [], (np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int64)))
+    for tag, values in lexed.raw.items():
+        lines = np.asarray(lexed.known[tag].lines, dtype=np.int64)
+        ids = lexed.ids_of[tag]
         if tag == spec.equiv_tag:
-            equiv = (ids, lines)
+            out.equiv = (ids, lines)
             continue
         s = _tag_spec(spec, tag)
         if s.check is not None:
@@ -305,19 +361,27 @@ def parse_graph_text(
                 problems.add(int(lines[bad[0]]), f"{tag}: {bad[1]}")
                 continue
         if isinstance(s, VertexSpec):
-            vertex_rows[tag] = (ids[:, 0], s.decode(values), lines)
+            out.vertex_rows[tag] = (ids[:, 0], s.decode(values), lines)
         else:
             z, info = s.decode(values)
             j = ids[:, 1] if s.n_ids == 2 else np.full(len(ids), -1, dtype=np.int64)
-            edge_rows.append(_EdgeRows(s, ids[:, 0], j, z, info, lines))
+            out.edge_rows.append(_EdgeRows(s, ids[:, 0], j, z, info, lines))
     problems.raise_first()
+    return out
 
-    # ------------------------------------------------------------ pass 3: graph checks
-    pose_ids, poses, pose_lines = _vertices(vertex_rows, "pose", dim, spec)
-    lm_ids, landmarks, lm_lines = _vertices(vertex_rows, "landmark", dim, spec)
+
+def _graph_checks(
+    decoded: _Decoded, lexed: _Lexed, spec: FamilySpec, repair: RepairMode, path: Path
+) -> tuple[IntArray, FloatArray, IntArray, FloatArray, list[RepairedEdge]]:
+    """Pass 3: the vertices (pose ids and poses, landmark ids and positions), each edge's
+    information (repaired with ``repair="clamp"``) and references, duplicate ids, and the
+    ids FIX and EQUIV name; returns the vertices and the repaired edges."""
+    problems = _Problems(path)
+    pose_ids, poses, pose_lines = _vertices(decoded.vertex_rows, "pose", lexed.dim, spec)
+    lm_ids, landmarks, lm_lines = _vertices(decoded.vertex_rows, "landmark", lexed.dim, spec)
     repaired: list[RepairedEdge] = []
-    for e in edge_rows:
-        if repair_information == "clamp":
+    for e in decoded.edge_rows:
+        if repair == "clamp":
             repaired.extend(_repair_information(e, problems))
         _check_information(e, problems)
         _check_references(e, pose_ids, lm_ids, problems)
@@ -325,41 +389,14 @@ def parse_graph_text(
         np.concatenate([pose_ids, lm_ids]), np.concatenate([pose_lines, lm_lines]), problems
     )
     all_ids = np.concatenate([pose_ids, lm_ids])
+    fixed, equiv = lexed.fixed, decoded.equiv
     if all_ids.size:
         _check_member(fixed[0], fixed[1], all_ids, "FIX names vertex", problems)
     if pose_ids.size:
         flat = equiv[0].reshape(-1)
         _check_member(flat, np.repeat(equiv[1], 2), pose_ids, "EQUIV names pose", problems)
     problems.raise_first()
-
-    if not edge_rows and not pose_ids.size and not lm_ids.size:
-        raise DatasetFormatError(f"no vertex or edge lines of a {spec.title} file", path)
-
-    edges, order = _edge_sets(edge_rows)
-    graph = GraphData(
-        dim=cast(Literal[2, 3], dim),
-        pose_ids=pose_ids,
-        poses=poses,
-        landmark_ids=lm_ids,
-        landmarks=landmarks,
-        edges=edges,
-        fixed_ids=fixed[0],
-        equivalences=equiv[0],
-        family=family,
-        source=str(path),
-        edge_order=order,
-    )
-    skipped_lines.sort()
-    return ParsedGraph(
-        graph,
-        family,
-        skipped,
-        tuple(skipped_lines[:MAX_REPORTED_LINES]),
-        tuple(sorted(repaired, key=lambda r: r.line)),
-    )
-
-
-# ------------------------------------------------------------------------------ helpers
+    return pose_ids, poses, lm_ids, landmarks, repaired
 
 
 def _tag_spec(spec: FamilySpec, tag: str) -> VertexSpec | EdgeSpec:

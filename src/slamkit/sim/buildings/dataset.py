@@ -30,6 +30,7 @@ import numpy as np
 
 from slamkit._validation import FloatArray
 from slamkit.config import Section, config_from_mapping, config_to_dict, finite_above, setting
+from slamkit.datasets.provenance import Provenance
 from slamkit.datasets.stream import (
     Dataset,
     Event,
@@ -168,9 +169,9 @@ def build_building_dataset(
         metadata={
             "kind": "simulated",
             "building_seed": int(seed),
-            "config": config_to_dict(cfg),
             "odometry": "clean (the true poses)",
         },
+        provenance=Provenance(options=config_to_dict(cfg)),
     )
 
 
