@@ -1,9 +1,10 @@
 """``slamkit eval …``: score a trajectory file. The main app adds :data:`eval_app` as ``eval``.
 
-``slamkit eval ape|rpe REFERENCE ESTIMATE [--align se3|sim3|se2|none] [--max-diff S]
+``slamkit eval ape|rpe REFERENCE ESTIMATE [--align none|se3|sim3|scale|se2] [--max-diff S]
 [--offset S] [--delta N] [--delta-unit frames|m] [--all-pairs] [--out DIR]`` compares two
 TUM or KITTI files by evo's rules (:func:`slamkit.app.evaluate_files.evaluate_files`) and
-prints evo's statistics.
+prints evo's statistics; as evo, it aligns only when asked and writes files only with
+``--out``.
 
 ``slamkit eval relations TRAJ.tum RELATIONS [--max-gap S] [--max-duration S] [--json OUT]``
 reads a TUM trajectory (:func:`slamkit.io.read_tum`) and a ``*.relations`` file
@@ -153,14 +154,14 @@ def _pose_error_command(
     overwrite: bool,
 ) -> None:
     from slamkit.app.evaluate_files import EvalFilesRequest, evaluate_files
+    from slamkit.eval.pose_error import describe_alignment
 
-    target = out if out is not None else Path("results") / f"{kind}-{estimate.stem}"
     report = evaluate_files(
         EvalFilesRequest(
             reference, estimate, kind=kind, fmt=fmt, alignment=align,  # type: ignore[arg-type]
             n_align=n_align, max_diff=max_diff, offset=offset, delta=delta,
             delta_unit=delta_unit,  # type: ignore[arg-type]
-            all_pairs=all_pairs, pairs_from_reference=pairs_from_reference, out_dir=target,
+            all_pairs=all_pairs, pairs_from_reference=pairs_from_reference, out_dir=out,
             plots=plots, overwrite=overwrite,
         )
     )  # fmt: skip
@@ -168,13 +169,21 @@ def _pose_error_command(
     console.print(
         f"{escape(estimate.name)} against {escape(reference.name)}: {r.matched} pairs "
         f"(of {r.estimate_poses} estimated, {r.reference_poses} reference poses), "
-        f"alignment {r.alignment}"
-        + ("" if r.similarity is None else f", scale {r.similarity.scale:.6g}")
+        f"{describe_alignment(r.alignment)}"
+        + (
+            f", scale {r.similarity.scale:.6g}"
+            if r.similarity is not None and r.alignment in ("sim3", "scale")
+            else ""
+        )
         + ("" if kind == "ape" else f"; {len(r.rpe_pairs)} pairs {r.delta:g} {r.delta_unit} apart"),
         soft_wrap=True,
     )
     console.print(pose_error_table(r, kind))
-    console.print(f"wrote {', '.join(report.files)} to [bold]{escape(str(report.out_dir))}[/]")
+    if report.out_dir is not None:
+        console.print(
+            f"wrote {', '.join(report.files)} to [bold]{escape(str(report.out_dir))}[/]",
+            soft_wrap=True,
+        )
 
 
 _REF_HELP = "Reference trajectory (TUM: 'time x y z qx qy qz qw'; KITTI: 12 numbers a line)."
@@ -185,9 +194,10 @@ _FMT = typer.Option(
     help="File format: auto (KITTI when 12 numbers a line), tum, kitti.",
 )
 _ALIGN = typer.Option(
-    metavar="se3|sim3|se2|none",
-    help="Umeyama alignment of the estimate: se3, sim3 (with scale), se2 (planar: rotation "
-    "about z), none.",
+    metavar="none|se3|sim3|scale|se2",
+    help="Alignment of the estimate, none unless asked (as evo): se3 (Umeyama, evo's -a), "
+    "sim3 (with scale, -as), scale (the scale alone, -s), se2 (planar: rotation about z and "
+    "x-y translation).",
 )
 _N_ALIGN = typer.Option(help="Align on the first N pairs only (default: all).", show_default=False)
 _MAX_DIFF = typer.Option(help=escape("Largest stamp difference of a pair [s] (TUM)."))
@@ -200,7 +210,10 @@ _ALL = typer.Option(help="RPE: every pair i, i+delta (default: i = 0, delta, 2·
 _FROM_REF = typer.Option(
     help="RPE in metres: measure the path on the reference (default: on the estimate, as evo)."
 )
-_OUT = typer.Option(help="Output folder (default results/KIND-ESTIMATE).", show_default=False)
+_OUT = typer.Option(
+    help="Also write metrics.json and the plots to this folder (default: print only, as evo).",
+    show_default=False,
+)
 
 
 def _make_command(kind: str) -> None:
@@ -210,7 +223,7 @@ def _make_command(kind: str) -> None:
         reference: Annotated[Path, typer.Argument(help=_REF_HELP)],
         estimate: Annotated[Path, typer.Argument(help=_EST_HELP)],
         fmt: Annotated[str, _FMT] = "auto",
-        align: Annotated[str, _ALIGN] = "se3",
+        align: Annotated[str, _ALIGN] = "none",
         n_align: Annotated[int | None, _N_ALIGN] = None,
         max_diff: Annotated[float, _MAX_DIFF] = 0.01,
         offset: Annotated[float, _OFFSET] = 0.0,
@@ -219,7 +232,7 @@ def _make_command(kind: str) -> None:
         all_pairs: Annotated[bool, _ALL] = False,
         pairs_from_reference: Annotated[bool, _FROM_REF] = False,
         out: Annotated[Path | None, _OUT] = None,
-        plots: Annotated[bool, typer.Option(help="Write PNG plots.")] = True,
+        plots: Annotated[bool, typer.Option(help="With --out: write PNG plots.")] = True,
         overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
     ) -> None:
         _pose_error_command(
@@ -231,8 +244,9 @@ def _make_command(kind: str) -> None:
 
     command.__doc__ = (
         f"{'Absolute' if kind == 'ape' else 'Relative'} pose error of ESTIMATE against "
-        "REFERENCE, by evo's rules (stamp association, Umeyama alignment); writes "
-        f"metrics.json (APE and RPE), trajectories.png and {kind}.png."
+        "REFERENCE, by evo's rules (stamp association; alignment only when asked); prints "
+        f"the statistics, and with --out writes metrics.json (APE and RPE), trajectories.png "
+        f"and {kind}.png."
     )
 
 
