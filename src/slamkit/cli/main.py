@@ -22,6 +22,7 @@ from slamkit.cli._common import (
     command_group,
     console,
     known_errors,
+    output_folder,
     progress_bar,
     terminate,
 )
@@ -158,7 +159,7 @@ def _run(
     data = resolve_data(data, cfg)
     seed = seed if seed is not None else cfg.seed
     preset = preset if preset is not None else (cfg.preset or "auto")
-    target = out if out is not None else Path("results") / f"{estimator}-{data_label(data)}"
+    target = output_folder(out, f"{estimator}-{data_label(data)}", config=config)
     request = RunRequest(
         estimator=estimator,
         dataset=data,
@@ -233,7 +234,11 @@ def run_command(
     ] = None,
     out: Annotated[
         Path | None,
-        typer.Option(help="Output folder (default results/ESTIMATOR-DATA).", show_default=False),
+        typer.Option(
+            help="Output folder (default: a fresh results/ESTIMATOR-DATA, numbered -2, -3, … "
+            "when taken).",
+            show_default=False,
+        ),
     ] = None,
     data_root: DataRootOption = None,
     plots: Annotated[bool, typer.Option(help="Write PNG plots.")] = True,
@@ -265,8 +270,10 @@ def run_command(
         str | None,
         typer.Option(
             metavar="FILE.rrd|spawn",
-            help="Also record the run for the rerun viewer: a .rrd file (relative: inside the "
-            "output folder) or 'spawn' a viewer. Needs pip install 'slamkit[rerun]'.",
+            help=escape(
+                "Also record the run for the rerun viewer: a .rrd file (relative: inside the "
+                "output folder) or 'spawn' a viewer. Needs pip install 'slamkit[rerun]'."
+            ),
             show_default=False,
         ),
     ] = None,
