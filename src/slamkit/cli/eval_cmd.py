@@ -77,7 +77,11 @@ def relations_command(
         Path, typer.Argument(help="TUM trajectory: 'time x y z qx qy qz qw' per line.")
     ],
     relations: Annotated[
-        Path, typer.Argument(help="Relations file: 't1 t2 x y z roll pitch yaw' per line.")
+        Path,
+        typer.Argument(
+            help="Relations file: 't1 t2 x y z roll pitch yaw' per line (not found here: "
+            "looked up under the data folder, e.g. laser/relations/aces.relations)."
+        ),
     ],
     max_gap: Annotated[
         float,
@@ -99,11 +103,12 @@ def relations_command(
     """Score the trajectory in TRAJECTORY against the reference RELATIONS (the Freiburg
     benchmark's relation metric, Kümmerle et al. 2009)."""
     from slamkit.datasets import read_relations
+    from slamkit.datasets.paths import find_data_file
     from slamkit.eval import relation_errors
     from slamkit.io import write_json
 
     times, poses = _read_trajectory(trajectory)
-    reference = read_relations(relations)
+    reference = read_relations(find_data_file(relations) or relations)
     scores = relation_errors(times, poses, reference, max_gap=max_gap, max_duration=max_duration)
     console.print(f"{escape(trajectory.name)} against {escape(relations.name)}", soft_wrap=True)
     console.print(relations_table(scores))

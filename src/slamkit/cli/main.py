@@ -156,7 +156,7 @@ def _run(
     from slamkit.datasets.files import data_label
 
     cfg = apply_overrides(read_run_config(config, "estimator"), overrides or [], "estimator")
-    data = resolve_data(data, cfg)
+    data = resolve_data(data, cfg, data_root=data_root)
     seed = seed if seed is not None else cfg.seed
     preset = preset if preset is not None else (cfg.preset or "auto")
     target = output_folder(out, f"{estimator}-{data_label(data)}", config=config)
@@ -204,8 +204,9 @@ def run_command(
             metavar="NAME|PATH",
             help="Data set name (see `slamkit data list`), or the path of a laser log: ROS 1 "
             ".bag, ROS 2 bag folder, .db3, .mcap, CARMEN .clf/.log/.log.gz (reader options in "
-            r"the config file's \[dataset] table). Default: the config file's \[dataset] "
-            "name or path, else five-features.",
+            r"the config file's \[dataset] table; a relative path not found here is looked up "
+            r"under the data folder). Default: the config file's \[dataset] name or path, "
+            "else five-features.",
             show_default=False,
         ),
     ] = None,

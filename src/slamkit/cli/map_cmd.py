@@ -200,7 +200,7 @@ def _occupancy(
 
     cfg = apply_overrides(read_run_config(config, "mapping"), overrides or [], "mapping")
     mapping, ds_options, cfg_seed = dict(cfg.settings), cfg.dataset_options, cfg.seed
-    data = resolve_data(data, cfg, default="rooms-laser")
+    data = resolve_data(data, cfg, default="rooms-laser", data_root=data_root)
     if method is not None:  # options given on the command line win over the config file
         if method not in ("ray", "cell"):
             raise ConfigError(f"--method: expected 'ray' or 'cell', got {method!r}")
