@@ -147,6 +147,8 @@ def _pose_error_command(
     *,
     fmt: str,
     align: str,
+    evo_align: bool,
+    evo_scale: bool,
     n_align: int | None,
     max_diff: float,
     offset: float,
@@ -159,7 +161,13 @@ def _pose_error_command(
     overwrite: bool,
 ) -> None:
     from slamkit.app.evaluate_files import EvalFilesRequest, evaluate_files
-    from slamkit.eval.pose_error import describe_alignment
+    from slamkit.errors import ConfigError
+    from slamkit.eval.pose_error import alignment_from_evo_flags, describe_alignment
+
+    if evo_align or evo_scale:
+        if align != "none":
+            raise ConfigError(f"--align {align} and evo's -a/-s: give one of them")
+        align = alignment_from_evo_flags(evo_align, evo_scale)
 
     report = evaluate_files(
         EvalFilesRequest(
@@ -204,6 +212,8 @@ _ALIGN = typer.Option(
     "sim3 (with scale, -as), scale (the scale alone, -s), se2 (planar: rotation about z and "
     "x-y translation).",
 )
+_EVO_A = typer.Option("-a", help="As evo's -a: --align se3 (-as: sim3).", show_default=False)
+_EVO_S = typer.Option("-s", help="As evo's -s: --align scale (-as: sim3).", show_default=False)
 _N_ALIGN = typer.Option(help="Align on the first N pairs only (default: all).", show_default=False)
 _MAX_DIFF = typer.Option(help=escape("Largest stamp difference of a pair [s] (TUM)."))
 _OFFSET = typer.Option(help=escape("Added to the estimate's stamps before pairing [s]."))
@@ -229,6 +239,8 @@ def _make_command(kind: str) -> None:
         estimate: Annotated[Path, typer.Argument(help=_EST_HELP)],
         fmt: Annotated[str, _FMT] = "auto",
         align: Annotated[str, _ALIGN] = "none",
+        evo_align: Annotated[bool, _EVO_A] = False,
+        evo_scale: Annotated[bool, _EVO_S] = False,
         n_align: Annotated[int | None, _N_ALIGN] = None,
         max_diff: Annotated[float, _MAX_DIFF] = 0.01,
         offset: Annotated[float, _OFFSET] = 0.0,
@@ -241,7 +253,8 @@ def _make_command(kind: str) -> None:
         overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
     ) -> None:
         _pose_error_command(
-            kind, reference, estimate, fmt=fmt, align=align, n_align=n_align,
+            kind, reference, estimate, fmt=fmt, align=align, evo_align=evo_align,
+            evo_scale=evo_scale, n_align=n_align,
             max_diff=max_diff, offset=offset, delta=delta, delta_unit=delta_unit,
             all_pairs=all_pairs, pairs_from_reference=pairs_from_reference, out=out,
             plots=plots, overwrite=overwrite,

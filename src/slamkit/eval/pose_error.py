@@ -49,6 +49,7 @@ __all__ = [
     "PoseErrorResult",
     "absolute_pose_error",
     "align_estimate",
+    "alignment_from_evo_flags",
     "associate_stamps",
     "compare_trajectories",
     "describe_alignment",
@@ -70,6 +71,14 @@ _ALIGNMENT_WORDS = {
     "scale": "scale corrected",
     "se2": "SE(2) Umeyama alignment in x-y",
 }
+
+
+def alignment_from_evo_flags(align: bool, correct_scale: bool) -> Alignment:
+    """The alignment evo's ``-a`` (``align``) and ``-s`` (``correct_scale``) ask for:
+    neither ``"none"``, ``-a`` ``"se3"``, ``-s`` ``"scale"``, both (``-as``) ``"sim3"``."""
+    if align:
+        return "sim3" if correct_scale else "se3"
+    return "scale" if correct_scale else "none"
 
 
 def describe_alignment(alignment: str) -> str:
