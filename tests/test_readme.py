@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import re
 import shlex
+import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -149,6 +150,9 @@ def test_every_command_block_is_marked():
             assert b.arg, f"README.md line {b.line}: '{b.kind}' needs its reason, names or file"
         if b.kind in ("run", "data"):
             assert block_commands(b), f"README.md line {b.line}: a runnable block without commands"
+            # what the reader pastes is read by a shell: its syntax is checked by one
+            check = subprocess.run(["bash", "-n"], input=b.text, text=True, capture_output=True)
+            assert check.returncode == 0, f"README.md line {b.line}: {check.stderr}"
     # every eval example's files come from a run shown before it in the same runnable blocks
     shown: list[str] = []
     for b in BLOCKS:
