@@ -1,6 +1,10 @@
-"""`slamkit run --svg` and `slamkit compare DIR...`: the files, the page, the errors."""
+"""`slamkit run --svg` and `slamkit compare DIR...`: the files, the page, the table, the CSV,
+the errors."""
 
 from __future__ import annotations
+
+import csv
+import json
 
 from typer.testing import CliRunner
 
@@ -45,3 +49,33 @@ def test_compare_of_a_folder_that_is_not_a_run_is_one_line(tmp_path):
     assert res.exit_code == 1
     assert "no metrics.json" in res.output
     assert "Traceback" not in res.output
+
+
+def test_compare_prints_a_row_a_run_and_writes_every_metric_as_csv(tmp_path):
+    folders = []
+    for estimator in ("dead-reckoning", "ekf-localization"):
+        out = tmp_path / estimator
+        res = runner.invoke(app, ["run", estimator, "--out", str(out), "--no-plots"])
+        assert res.exit_code == 0, res.output
+        folders.append(out)
+    csv_path = tmp_path / "tables" / "runs.csv"
+    res = runner.invoke(
+        app,
+        ["compare", *map(str, folders), "--out", str(tmp_path / "cmp"), "--csv", str(csv_path)],
+        env={"COLUMNS": "250"},
+    )
+    assert res.exit_code == 0, res.output
+    rows = list(csv.DictReader(csv_path.open()))
+    assert [r["run"] for r in rows] == ["dead-reckoning", "ekf-localization"]
+    lines = res.output.splitlines()
+    for number, (row, folder) in enumerate(zip(rows, folders, strict=True), start=1):
+        metrics = json.loads((folder / "metrics.json").read_text())
+        assert row["estimator"] == metrics["estimator"] and row["folder"] == str(folder)
+        assert float(row["ate.rmse"]) == metrics["ate"]["rmse"]  # the file's number, exactly
+        assert float(row["runtime.total_seconds"]) == metrics["runtime"]["total_seconds"]
+        assert f"  {number}  {folder}" in lines  # the legend
+        line = next(t for t in lines if t.startswith(f"│ {number:>3} │"))
+        assert f"{metrics['ate']['rmse']:.4g}" in line  # the console row of this run
+    assert "ATE RMSE, aligned [m]" in res.output
+    # dead reckoning drifts; the EKF with landmarks does not
+    assert float(rows[0]["ate.rmse"]) > float(rows[1]["ate.rmse"])

@@ -76,6 +76,6 @@ def test_help_lists_choices_and_shows_no_type_noise():
         assert res.exit_code == 0, res.output
         assert "<bool>" not in res.output and "<str>" not in res.output, argv
     ape = runner.invoke(app, ["eval", "ape", "--help"], env={"COLUMNS": "200"}).output
-    assert "se3|sim3|se2|none" in ape and "auto|tum|kitti" in ape
+    assert "none|se3|sim3|scale|se2" in ape and "auto|tum|kitti" in ape
     opt = runner.invoke(app, ["optimize", "--help"], env={"COLUMNS": "200"}).output
     assert "lm|gn|dogleg" in opt

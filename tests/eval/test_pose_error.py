@@ -103,6 +103,27 @@ def test_a_known_rigid_motion_aligns_to_zero_error_and_rpe_ignores_it():
     assert sim.ape.max < 1e-9
 
 
+def test_no_alignment_by_default_and_scale_alone_by_hand():
+    rng = np.random.default_rng(2)
+    ref = _se3(SO3.exp(rng.normal(size=(20, 3))).as_matrix(), rng.normal(size=(20, 3)) * 4)
+    g = _se3(SO3.exp(np.array([[0.0, 0.0, 0.7]])).as_matrix(), np.array([[1.0, -2.0, 0.5]]))[0]
+    est = np.einsum("ij,njk->nik", g, ref)
+    est[:, :3, 3] *= 0.5  # the estimate: the reference moved by g, then half its size
+    default = compare_trajectories(ref, est)
+    assert default.alignment == "none" and default.similarity is None
+    raw = np.linalg.norm(est[:, :3, 3] - ref[:, :3, 3], axis=1)  # by hand: no alignment
+    np.testing.assert_allclose(default.ape_translation, raw, rtol=1e-12)
+    # sim3 undoes g and the half exactly; scale (evo's -s) only doubles the translations.
+    assert compare_trajectories(ref, est, alignment="sim3").ape.max < 1e-9
+    scaled = compare_trajectories(ref, est, alignment="scale")
+    assert scaled.similarity is not None
+    assert scaled.similarity.scale == pytest.approx(2.0, rel=1e-12)
+    np.testing.assert_allclose(scaled.similarity.rotation, np.eye(3))
+    by_hand = np.linalg.norm(2.0 * est[:, :3, 3] - ref[:, :3, 3], axis=1)
+    np.testing.assert_allclose(scaled.ape_translation, by_hand, rtol=1e-9)
+    assert scaled.ape.rmse > 1.0  # the motion g is left in
+
+
 def test_rpe_by_hand_and_rotation_angles_near_zero():
     ref = _planar(np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]))
     est = _planar(np.array([[0.0, 0, 0], [1.1, 0, 0.1], [2.0, 0.3, 0.1]]))
@@ -128,8 +149,8 @@ def _evo_numbers(ref_path, est_path, kind, alignment, *, max_diff, offset, delta
     else:
         ref = file_interface.read_kitti_poses_file(str(ref_path))
         est = file_interface.read_kitti_poses_file(str(est_path))
-    if alignment != "none":
-        est.align(ref, correct_scale=alignment == "sim3")
+    if alignment != "none":  # evo_ape's -a, -as, -s
+        est.align(ref, correct_scale=alignment == "sim3", correct_only_scale=alignment == "scale")
     out = {}
     evo_unit = metrics.Unit.frames if unit == "frames" else metrics.Unit.meters
     for name, metric in (
@@ -156,6 +177,8 @@ def _evo_numbers(ref_path, est_path, kind, alignment, *, max_diff, offset, delta
         ("kitti", "ref.kitti", "est.kitti", "sim3", 2, True, "frames"),
         ("tum", "ref.tum", "est.tum", "se3", 5.0, False, "m"),
         ("tum", "ref3.tum", "est3.tum", "sim3", 8.0, True, "m"),
+        ("tum", "ref3.tum", "est3.tum", "scale", 2, False, "frames"),
+        ("kitti", "ref.kitti", "est.kitti", "scale", 1, False, "frames"),
     ],
 )
 def test_numbers_equal_evos_on_the_same_files(

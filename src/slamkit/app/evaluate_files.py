@@ -57,7 +57,8 @@ class EvalFilesRequest:
     kind: Literal["ape", "rpe"] = "ape"
     """Which error the figures show (both are computed and written)."""
     fmt: TrajectoryFormat = "auto"
-    alignment: Alignment = "se3"
+    alignment: Alignment = "none"
+    """None by default, as evo (see :data:`slamkit.eval.pose_error.ALIGNMENTS`)."""
     n_align: int | None = None
     max_diff: float = 0.01
     offset: float = 0.0

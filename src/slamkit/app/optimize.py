@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from slamkit.config import config_from_mapping, config_to_dict
-from slamkit.datasets.paths import find_data_root
+from slamkit.datasets.paths import find_data_file, find_data_root
 from slamkit.errors import ConfigError, DataNotFoundError, InputError
 from slamkit.io import atomic_folder, write_json
 from slamkit.io.graphfiles.families import FAMILIES, LANDMARK_KINDS, POSE_PAIR_KINDS
@@ -391,15 +391,14 @@ def _figure(
 
 def find_graph_file(path: str | Path, data_root: str | Path | None = None) -> Path:
     """``path`` if it exists, else the same relative path under the data folder
-    (``SLAMKIT_DATA``, :func:`~slamkit.datasets.find_data_root`), so ``posegraph2d/intel.g2o``
-    names the shared file from anywhere; neither: :class:`~slamkit.errors.DataNotFoundError`
-    saying where it looked."""
+    (``SLAMKIT_DATA``, :func:`~slamkit.datasets.paths.find_data_file`), so
+    ``posegraph2d/intel.g2o`` names the shared file from anywhere; neither:
+    :class:`~slamkit.errors.DataNotFoundError` saying where it looked."""
+    found = find_data_file(path, data_root)
+    if found is not None:
+        return found
     p = Path(path).expanduser()
-    if p.exists():
-        return p
     root = find_data_root(data_root)
-    if not p.is_absolute() and root is not None and (root / p).exists():
-        return root / p
     where = "" if root is None or p.is_absolute() else f" (nor under the data folder {root})"
     raise DataNotFoundError(f"{p}: not found{where}")
 

@@ -133,18 +133,33 @@ def _same_data(a: str, b: str) -> bool:
     return pa.exists() and pb.exists() and pa.resolve() == pb.resolve()
 
 
-def resolve_data(cli_data: str | None, config: RunConfig, default: str = DEFAULT_DATA) -> str:
+def resolve_data(
+    cli_data: str | None,
+    config: RunConfig,
+    default: str = DEFAULT_DATA,
+    *,
+    data_root: str | Path | None = None,
+) -> str:
     """The data set a run reads: ``--data`` (``cli_data``), else the file's, else
     ``default``. Both given and different: :class:`~slamkit.errors.ConfigError`
-    (a configuration's data set is never silently replaced)."""
+    (a configuration's data set is never silently replaced). A path that is not here but is
+    under the data folder (``laser/corrected_carmen/orebro-corrected.log.gz``) becomes that
+    file's path (:func:`~slamkit.datasets.paths.find_data_file`)."""
+    from slamkit.datasets.paths import find_data_file
+    from slamkit.datasets.registry import DATASETS
+
     if cli_data is not None and config.data is not None and not _same_data(cli_data, config.data):
         raise ConfigError(
             f"--data {cli_data} conflicts with the data set {config.data!r} of "
             f"{config.source}; give one of them (or the same in both)"
         )
-    if cli_data is not None:
-        return cli_data
-    return config.data if config.data is not None else default
+    spec = cli_data if cli_data is not None else config.data
+    if spec is None:
+        return default
+    if spec in DATASETS:
+        return spec
+    found = find_data_file(spec, data_root)
+    return spec if found is None or found == Path(spec).expanduser() else str(found)
 
 
 def dataset_table(dataset: Dataset, options: Mapping[str, Any] | None = None) -> dict[str, Any]:

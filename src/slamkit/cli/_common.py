@@ -1,6 +1,6 @@
 """What every ``slamkit`` command shares: consoles, the command groups, the options several
-commands take, the known-error decorator, the progress bar and the splitting of a
-configuration file into its tables."""
+commands take, the known-error decorator, the progress bar, the default output folder and the
+splitting of a configuration file into its tables."""
 
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ __all__ = [
     "console",
     "err_console",
     "known_errors",
+    "output_folder",
     "progress_bar",
     "split_config",
     "terminate",
@@ -114,6 +115,26 @@ def known_errors(fn: Callable[P, R]) -> Callable[P, R]:
             raise typer.Exit(1) from None
 
     return wrapper
+
+
+def output_folder(out: Path | None, name: str, *, config: Path | None = None) -> Path:
+    """Where a command writes: ``--out`` as given, else a fresh ``results/NAME`` (a numbered
+    ``results/NAME-2``, … when that one is taken: :func:`slamkit.io.fresh_folder`), so a
+    command run twice with its defaults never collides. Never the folder the configuration
+    file ``config`` was read from (a re-run from a run's ``config.json`` would replace the
+    files it re-runs): an ``--out`` naming it is a :class:`~slamkit.errors.ConfigError`."""
+    from slamkit.errors import ConfigError
+    from slamkit.io import fresh_folder, same_folder
+
+    home = None if config is None else config.parent
+    if out is None:
+        return fresh_folder(Path("results") / name, avoid=home)
+    if home is not None and same_folder(out, home):
+        raise ConfigError(
+            f"--out {out}: the folder {config} was read from; a re-run writes another folder "
+            "(leave out --out for a fresh one)"
+        )
+    return out
 
 
 def split_config(

@@ -1,9 +1,10 @@
 """``slamkit eval …``: score a trajectory file. The main app adds :data:`eval_app` as ``eval``.
 
-``slamkit eval ape|rpe REFERENCE ESTIMATE [--align se3|sim3|se2|none] [--max-diff S]
+``slamkit eval ape|rpe REFERENCE ESTIMATE [--align none|se3|sim3|scale|se2] [--max-diff S]
 [--offset S] [--delta N] [--delta-unit frames|m] [--all-pairs] [--out DIR]`` compares two
 TUM or KITTI files by evo's rules (:func:`slamkit.app.evaluate_files.evaluate_files`) and
-prints evo's statistics.
+prints evo's statistics; as evo, it aligns only when asked and writes files only with
+``--out``.
 
 ``slamkit eval relations TRAJ.tum RELATIONS [--max-gap S] [--max-duration S] [--json OUT]``
 reads a TUM trajectory (:func:`slamkit.io.read_tum`) and a ``*.relations`` file
@@ -76,7 +77,11 @@ def relations_command(
         Path, typer.Argument(help="TUM trajectory: 'time x y z qx qy qz qw' per line.")
     ],
     relations: Annotated[
-        Path, typer.Argument(help="Relations file: 't1 t2 x y z roll pitch yaw' per line.")
+        Path,
+        typer.Argument(
+            help="Relations file: 't1 t2 x y z roll pitch yaw' per line (not found here: "
+            "looked up under the data folder, e.g. laser/relations/aces.relations)."
+        ),
     ],
     max_gap: Annotated[
         float,
@@ -98,11 +103,12 @@ def relations_command(
     """Score the trajectory in TRAJECTORY against the reference RELATIONS (the Freiburg
     benchmark's relation metric, Kümmerle et al. 2009)."""
     from slamkit.datasets import read_relations
+    from slamkit.datasets.paths import find_data_file
     from slamkit.eval import relation_errors
     from slamkit.io import write_json
 
     times, poses = _read_trajectory(trajectory)
-    reference = read_relations(relations)
+    reference = read_relations(find_data_file(relations) or relations)
     scores = relation_errors(times, poses, reference, max_gap=max_gap, max_duration=max_duration)
     console.print(f"{escape(trajectory.name)} against {escape(relations.name)}", soft_wrap=True)
     console.print(relations_table(scores))
@@ -141,6 +147,8 @@ def _pose_error_command(
     *,
     fmt: str,
     align: str,
+    evo_align: bool,
+    evo_scale: bool,
     n_align: int | None,
     max_diff: float,
     offset: float,
@@ -153,14 +161,20 @@ def _pose_error_command(
     overwrite: bool,
 ) -> None:
     from slamkit.app.evaluate_files import EvalFilesRequest, evaluate_files
+    from slamkit.errors import ConfigError
+    from slamkit.eval.pose_error import alignment_from_evo_flags, describe_alignment
 
-    target = out if out is not None else Path("results") / f"{kind}-{estimate.stem}"
+    if evo_align or evo_scale:
+        if align != "none":
+            raise ConfigError(f"--align {align} and evo's -a/-s: give one of them")
+        align = alignment_from_evo_flags(evo_align, evo_scale)
+
     report = evaluate_files(
         EvalFilesRequest(
             reference, estimate, kind=kind, fmt=fmt, alignment=align,  # type: ignore[arg-type]
             n_align=n_align, max_diff=max_diff, offset=offset, delta=delta,
             delta_unit=delta_unit,  # type: ignore[arg-type]
-            all_pairs=all_pairs, pairs_from_reference=pairs_from_reference, out_dir=target,
+            all_pairs=all_pairs, pairs_from_reference=pairs_from_reference, out_dir=out,
             plots=plots, overwrite=overwrite,
         )
     )  # fmt: skip
@@ -168,13 +182,21 @@ def _pose_error_command(
     console.print(
         f"{escape(estimate.name)} against {escape(reference.name)}: {r.matched} pairs "
         f"(of {r.estimate_poses} estimated, {r.reference_poses} reference poses), "
-        f"alignment {r.alignment}"
-        + ("" if r.similarity is None else f", scale {r.similarity.scale:.6g}")
+        f"{describe_alignment(r.alignment)}"
+        + (
+            f", scale {r.similarity.scale:.6g}"
+            if r.similarity is not None and r.alignment in ("sim3", "scale")
+            else ""
+        )
         + ("" if kind == "ape" else f"; {len(r.rpe_pairs)} pairs {r.delta:g} {r.delta_unit} apart"),
         soft_wrap=True,
     )
     console.print(pose_error_table(r, kind))
-    console.print(f"wrote {', '.join(report.files)} to [bold]{escape(str(report.out_dir))}[/]")
+    if report.out_dir is not None:
+        console.print(
+            f"wrote {', '.join(report.files)} to [bold]{escape(str(report.out_dir))}[/]",
+            soft_wrap=True,
+        )
 
 
 _REF_HELP = "Reference trajectory (TUM: 'time x y z qx qy qz qw'; KITTI: 12 numbers a line)."
@@ -185,10 +207,13 @@ _FMT = typer.Option(
     help="File format: auto (KITTI when 12 numbers a line), tum, kitti.",
 )
 _ALIGN = typer.Option(
-    metavar="se3|sim3|se2|none",
-    help="Umeyama alignment of the estimate: se3, sim3 (with scale), se2 (planar: rotation "
-    "about z), none.",
+    metavar="none|se3|sim3|scale|se2",
+    help="Alignment of the estimate, none unless asked (as evo): se3 (Umeyama, evo's -a), "
+    "sim3 (with scale, -as), scale (the scale alone, -s), se2 (planar: rotation about z and "
+    "x-y translation).",
 )
+_EVO_A = typer.Option("-a", help="As evo's -a: --align se3 (-as: sim3).", show_default=False)
+_EVO_S = typer.Option("-s", help="As evo's -s: --align scale (-as: sim3).", show_default=False)
 _N_ALIGN = typer.Option(help="Align on the first N pairs only (default: all).", show_default=False)
 _MAX_DIFF = typer.Option(help=escape("Largest stamp difference of a pair [s] (TUM)."))
 _OFFSET = typer.Option(help=escape("Added to the estimate's stamps before pairing [s]."))
@@ -200,7 +225,10 @@ _ALL = typer.Option(help="RPE: every pair i, i+delta (default: i = 0, delta, 2·
 _FROM_REF = typer.Option(
     help="RPE in metres: measure the path on the reference (default: on the estimate, as evo)."
 )
-_OUT = typer.Option(help="Output folder (default results/KIND-ESTIMATE).", show_default=False)
+_OUT = typer.Option(
+    help="Also write metrics.json and the plots to this folder (default: print only, as evo).",
+    show_default=False,
+)
 
 
 def _make_command(kind: str) -> None:
@@ -210,7 +238,9 @@ def _make_command(kind: str) -> None:
         reference: Annotated[Path, typer.Argument(help=_REF_HELP)],
         estimate: Annotated[Path, typer.Argument(help=_EST_HELP)],
         fmt: Annotated[str, _FMT] = "auto",
-        align: Annotated[str, _ALIGN] = "se3",
+        align: Annotated[str, _ALIGN] = "none",
+        evo_align: Annotated[bool, _EVO_A] = False,
+        evo_scale: Annotated[bool, _EVO_S] = False,
         n_align: Annotated[int | None, _N_ALIGN] = None,
         max_diff: Annotated[float, _MAX_DIFF] = 0.01,
         offset: Annotated[float, _OFFSET] = 0.0,
@@ -219,11 +249,12 @@ def _make_command(kind: str) -> None:
         all_pairs: Annotated[bool, _ALL] = False,
         pairs_from_reference: Annotated[bool, _FROM_REF] = False,
         out: Annotated[Path | None, _OUT] = None,
-        plots: Annotated[bool, typer.Option(help="Write PNG plots.")] = True,
+        plots: Annotated[bool, typer.Option(help="With --out: write PNG plots.")] = True,
         overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
     ) -> None:
         _pose_error_command(
-            kind, reference, estimate, fmt=fmt, align=align, n_align=n_align,
+            kind, reference, estimate, fmt=fmt, align=align, evo_align=evo_align,
+            evo_scale=evo_scale, n_align=n_align,
             max_diff=max_diff, offset=offset, delta=delta, delta_unit=delta_unit,
             all_pairs=all_pairs, pairs_from_reference=pairs_from_reference, out=out,
             plots=plots, overwrite=overwrite,
@@ -231,8 +262,9 @@ def _make_command(kind: str) -> None:
 
     command.__doc__ = (
         f"{'Absolute' if kind == 'ape' else 'Relative'} pose error of ESTIMATE against "
-        "REFERENCE, by evo's rules (stamp association, Umeyama alignment); writes "
-        f"metrics.json (APE and RPE), trajectories.png and {kind}.png."
+        "REFERENCE, by evo's rules (stamp association; alignment only when asked); prints "
+        f"the statistics, and with --out writes metrics.json (APE and RPE), trajectories.png "
+        f"and {kind}.png."
     )
 
 

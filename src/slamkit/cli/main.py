@@ -22,6 +22,7 @@ from slamkit.cli._common import (
     command_group,
     console,
     known_errors,
+    output_folder,
     progress_bar,
     terminate,
 )
@@ -155,10 +156,10 @@ def _run(
     from slamkit.datasets.files import data_label
 
     cfg = apply_overrides(read_run_config(config, "estimator"), overrides or [], "estimator")
-    data = resolve_data(data, cfg)
+    data = resolve_data(data, cfg, data_root=data_root)
     seed = seed if seed is not None else cfg.seed
     preset = preset if preset is not None else (cfg.preset or "auto")
-    target = out if out is not None else Path("results") / f"{estimator}-{data_label(data)}"
+    target = output_folder(out, f"{estimator}-{data_label(data)}", config=config)
     request = RunRequest(
         estimator=estimator,
         dataset=data,
@@ -203,8 +204,9 @@ def run_command(
             metavar="NAME|PATH",
             help="Data set name (see `slamkit data list`), or the path of a laser log: ROS 1 "
             ".bag, ROS 2 bag folder, .db3, .mcap, CARMEN .clf/.log/.log.gz (reader options in "
-            r"the config file's \[dataset] table). Default: the config file's \[dataset] "
-            "name or path, else five-features.",
+            r"the config file's \[dataset] table; a relative path not found here is looked up "
+            r"under the data folder). Default: the config file's \[dataset] name or path, "
+            "else five-features.",
             show_default=False,
         ),
     ] = None,
@@ -233,7 +235,11 @@ def run_command(
     ] = None,
     out: Annotated[
         Path | None,
-        typer.Option(help="Output folder (default results/ESTIMATOR-DATA).", show_default=False),
+        typer.Option(
+            help="Output folder (default: a fresh results/ESTIMATOR-DATA, numbered -2, -3, … "
+            "when taken).",
+            show_default=False,
+        ),
     ] = None,
     data_root: DataRootOption = None,
     plots: Annotated[bool, typer.Option(help="Write PNG plots.")] = True,
@@ -265,8 +271,10 @@ def run_command(
         str | None,
         typer.Option(
             metavar="FILE.rrd|spawn",
-            help="Also record the run for the rerun viewer: a .rrd file (relative: inside the "
-            "output folder) or 'spawn' a viewer. Needs pip install 'slamkit[rerun]'.",
+            help=escape(
+                "Also record the run for the rerun viewer: a .rrd file (relative: inside the "
+                "output folder) or 'spawn' a viewer. Needs pip install 'slamkit[rerun]'."
+            ),
             show_default=False,
         ),
     ] = None,

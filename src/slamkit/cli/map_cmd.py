@@ -19,7 +19,14 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from slamkit.cli._common import DataRootOption, command_group, console, known_errors, progress_bar
+from slamkit.cli._common import (
+    DataRootOption,
+    command_group,
+    console,
+    known_errors,
+    output_folder,
+    progress_bar,
+)
 
 __all__ = ["DEFAULT_MAX_RANGE", "map_app"]
 
@@ -94,7 +101,10 @@ def occupancy_command(
         typer.Option(help=escape("Cell size [m] (default: the config file's, else 0.05).")),
     ] = None,
     out: Annotated[
-        Path | None, typer.Option(help="Output folder (default results/map-DATA).")
+        Path | None,
+        typer.Option(
+            help="Output folder (default: a fresh results/map-DATA, numbered when taken)."
+        ),
     ] = None,
     config: Annotated[
         Path | None,
@@ -190,7 +200,7 @@ def _occupancy(
 
     cfg = apply_overrides(read_run_config(config, "mapping"), overrides or [], "mapping")
     mapping, ds_options, cfg_seed = dict(cfg.settings), cfg.dataset_options, cfg.seed
-    data = resolve_data(data, cfg, default="rooms-laser")
+    data = resolve_data(data, cfg, default="rooms-laser", data_root=data_root)
     if method is not None:  # options given on the command line win over the config file
         if method not in ("ray", "cell"):
             raise ConfigError(f"--method: expected 'ray' or 'cell', got {method!r}")
@@ -203,7 +213,7 @@ def _occupancy(
     if max_range is not None or "max_range" not in model:
         model["max_range"] = _usable_range(max_range)
         mapping["model"] = model
-    target = out if out is not None else Path("results") / f"map-{data_label(data)}"
+    target = output_folder(out, f"map-{data_label(data)}", config=config)
     with progress_bar(f"mapping {data}", unit="scans") as progress:
         report = occupancy_map_job(
             data,

@@ -16,7 +16,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from slamkit.cli._common import console, err_console, known_errors, progress_bar
+from slamkit.cli._common import console, err_console, known_errors, output_folder, progress_bar
 
 if TYPE_CHECKING:
     from slamkit.optim.loop import IterationInfo
@@ -55,7 +55,10 @@ def optimize_command(
     ],
     out: Annotated[
         Path | None,
-        typer.Option(help="Output folder (default results/optimize-FILE).", show_default=False),
+        typer.Option(
+            help="Output folder (default: a fresh results/optimize-FILE, numbered when taken).",
+            show_default=False,
+        ),
     ] = None,
     solver: Annotated[
         str,
@@ -116,7 +119,7 @@ def optimize_command(
 
     file = find_graph_file(file, data_root)
     stem = Path(file.name.removesuffix(".gz")).stem
-    target = out if out is not None else Path("results") / f"optimize-{stem}"
+    target = output_folder(out, f"optimize-{stem}")
     request = OptimizeRequest(
         path=file,
         out_dir=target,

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from slamkit.errors import DataNotFoundError
 
-__all__ = ["ENV_VAR", "data_root", "find_data_root", "require_file"]
+__all__ = ["ENV_VAR", "data_root", "find_data_file", "find_data_root", "require_file"]
 
 ENV_VAR = "SLAMKIT_DATA"
 
@@ -50,6 +50,22 @@ def data_root(explicit: str | os.PathLike[str] | None = None) -> Path:
             "data sets (see docs/data.md)"
         )
     return root
+
+
+def find_data_file(
+    path: str | os.PathLike[str], root: str | os.PathLike[str] | None = None
+) -> Path | None:
+    """``path`` if it exists, else the same relative path under the data folder
+    (:func:`find_data_root`) if it exists there, else ``None``: so that
+    ``laser/relations/aces.relations`` names the shared file from any folder, and a command
+    line never needs ``"$SLAMKIT_DATA/…"`` (which is ``/…`` when the variable is unset)."""
+    p = Path(path).expanduser()
+    if p.exists():
+        return p
+    folder = find_data_root(root)
+    if not p.is_absolute() and folder is not None and (folder / p).exists():
+        return folder / p
+    return None
 
 
 def require_file(relative: str, root: str | os.PathLike[str] | None = None) -> Path:

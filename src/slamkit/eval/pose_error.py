@@ -9,12 +9,14 @@ those of evo's ``evo_ape`` / ``evo_rpe`` on the same files (a test checks 1e-6):
   ``offset`` to the estimate's stamps), if within ``max_diff`` seconds; on a tie the earlier
   stamp wins. Poses of either trajectory may be used at most once from the shorter side,
   more than once from the longer (as evo).
-* **alignment** (:func:`align_estimate`): Umeyama's least-squares fit of the estimated
-  positions onto the reference ones — ``"se3"`` (rotation + translation), ``"sim3"`` (and
-  scale), ``"se2"`` (rotation about z and translation in x, y only, for planar robots),
-  ``"none"``; optionally from the first ``n_align`` pairs only. The estimate ``P_i`` becomes
-  ``S P_i`` with ``S = [sR t; 0 1]`` applied as a scaling of the translations by ``s``
-  followed by the rigid motion (evo's order).
+* **alignment** (:func:`align_estimate`): none by default, as evo; or Umeyama's
+  least-squares fit of the estimated positions onto the reference ones — ``"se3"`` (rotation
+  + translation: evo's ``-a``), ``"sim3"`` (and scale: ``-as``), ``"scale"`` (the scale of
+  the Sim(3) fit alone, applied to the translations: ``-s``), ``"se2"`` (rotation about z and
+  translation in x, y only, for planar robots; no evo flag); optionally from the first
+  ``n_align`` pairs only. The estimate ``P_i`` becomes ``S P_i`` with ``S = [sR t; 0 1]``
+  applied as a scaling of the translations by ``s`` followed by the rigid motion (evo's
+  order).
 * **APE** (:func:`absolute_pose_error`): translation ``‖t(P_i) − t(Q_i)‖`` and rotation
   angle ``∠(Q_i⁻¹ P_i)`` per pair.
 * **RPE** (:func:`relative_pose_error_se3`): for index pairs ``(i, j)`` ``Δ`` apart — in
@@ -47,16 +49,46 @@ __all__ = [
     "PoseErrorResult",
     "absolute_pose_error",
     "align_estimate",
+    "alignment_from_evo_flags",
     "associate_stamps",
     "compare_trajectories",
+    "describe_alignment",
     "path_pairs",
     "relative_pose_error_se3",
     "rotation_angles",
 ]
 
-Alignment = Literal["none", "se2", "se3", "sim3"]
+Alignment = Literal["none", "se3", "sim3", "scale", "se2"]
 DeltaUnit = Literal["frames", "m"]
-ALIGNMENTS: tuple[str, ...] = ("none", "se2", "se3", "sim3")
+ALIGNMENTS: tuple[str, ...] = ("none", "se3", "sim3", "scale", "se2")
+"""The alignments, evo's first: none (no flag), se3 (``-a``), sim3 (``-as``), scale
+(``-s``); then se2, slamkit's planar one."""
+
+_ALIGNMENT_WORDS = {
+    "none": "not aligned",
+    "se3": "SE(3) Umeyama alignment",
+    "sim3": "Sim(3) Umeyama alignment",
+    "scale": "scale corrected",
+    "se2": "SE(2) Umeyama alignment in x-y",
+}
+
+
+def alignment_from_evo_flags(align: bool, correct_scale: bool) -> Alignment:
+    """The alignment evo's ``-a`` (``align``) and ``-s`` (``correct_scale``) ask for:
+    neither ``"none"``, ``-a`` ``"se3"``, ``-s`` ``"scale"``, both (``-as``) ``"sim3"``."""
+    if align:
+        return "sim3" if correct_scale else "se3"
+    return "scale" if correct_scale else "none"
+
+
+def describe_alignment(alignment: str) -> str:
+    """The alignment in words, as titles and console lines say it ("not aligned",
+    "Sim(3) Umeyama alignment", ...)."""
+    if alignment not in _ALIGNMENT_WORDS:
+        raise ConfigError(f"alignment: expected one of {', '.join(ALIGNMENTS)}, got {alignment!r}")
+    return _ALIGNMENT_WORDS[alignment]
+
+
 IndexArray = NDArray[np.int64]
 
 
@@ -161,7 +193,8 @@ def align_estimate(
     reference: ArrayLike, estimate: ArrayLike, alignment: Alignment, n_align: int | None = None
 ) -> tuple[FloatArray, Similarity | None]:
     """The estimate ``(N, 4, 4)`` aligned onto the paired reference ``(N, 4, 4)`` and the
-    similarity used (``None`` for ``"none"``); ``n_align``: fit to the first pairs only."""
+    similarity used (``None`` for ``"none"``; for ``"scale"`` the identity motion with the
+    Sim(3) fit's scale); ``n_align``: fit to the first pairs only."""
     ref = _poses(reference, "reference poses")
     est = _poses(estimate, "estimated poses")
     if ref.shape != est.shape:
@@ -174,7 +207,11 @@ def align_estimate(
     if not 1 <= n <= ref.shape[0]:
         raise ConfigError(f"n_align: expected 1..{ref.shape[0]} pairs, got {n_align!r}")
     dims = 2 if alignment == "se2" else 3
-    fit = align_points(est[:n, :dims, 3], ref[:n, :dims, 3], with_scale=alignment == "sim3")
+    fit = align_points(
+        est[:n, :dims, 3], ref[:n, :dims, 3], with_scale=alignment in ("sim3", "scale")
+    )
+    if alignment == "scale":  # evo's -s: the scale of the Sim(3) fit, no motion
+        fit = Similarity(np.eye(3), np.zeros(3), fit.scale)
     rot = np.eye(4)
     rot[:dims, :dims] = fit.rotation
     rot[:dims, 3] = fit.translation
@@ -354,7 +391,7 @@ def compare_trajectories(
     *,
     times_ref: ArrayLike | None = None,
     times_est: ArrayLike | None = None,
-    alignment: Alignment = "se3",
+    alignment: Alignment = "none",
     n_align: int | None = None,
     max_diff: float = 0.01,
     offset: float = 0.0,
@@ -363,8 +400,8 @@ def compare_trajectories(
     delta_unit: DeltaUnit = "frames",
     pairs_from_reference: bool = False,
 ) -> PoseErrorResult:
-    """Associate (by stamps when both have them, else by index: same length needed), align,
-    and compute APE and RPE (see the module docstring)."""
+    """Associate (by stamps when both have them, else by index: same length needed), align
+    (not unless asked, as evo), and compute APE and RPE (see the module docstring)."""
     ref = _poses(reference, "reference poses")
     est = _poses(estimate, "estimated poses")
     if (times_ref is None) != (times_est is None):

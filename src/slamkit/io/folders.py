@@ -13,7 +13,14 @@ from typing import Any
 
 from slamkit.errors import InputError
 
-__all__ = ["atomic_folder", "check_output_folder", "remove_stale_partials", "write_json"]
+__all__ = [
+    "atomic_folder",
+    "check_output_folder",
+    "fresh_folder",
+    "remove_stale_partials",
+    "same_folder",
+    "write_json",
+]
 
 
 def write_json(path: str | Path, data: Any) -> None:
@@ -45,6 +52,34 @@ def check_output_folder(target: str | Path, *, overwrite: bool = False) -> Path:
         raise InputError(f"{dest}: cannot write in {dest.parent} ({exc.strerror or exc})") from exc
     os.rmdir(probe)
     return dest
+
+
+def fresh_folder(base: str | Path, *, avoid: str | Path | None = None) -> Path:
+    """A default output folder that collides with nothing: ``base`` when it does not exist
+    or is empty, else the first free ``base-2``, ``base-3``, … — so that a command run twice
+    with its defaults writes two folders instead of refusing the second time. ``avoid`` (a
+    folder, e.g. the one a ``config.json`` was read from) is never returned."""
+    first = Path(base)
+    banned = None if avoid is None else _resolved(Path(avoid))
+    candidate, n = first, 1
+    while True:
+        free = not candidate.exists() or (candidate.is_dir() and not any(candidate.iterdir()))
+        if free and (banned is None or _resolved(candidate) != banned):
+            return candidate
+        n += 1
+        candidate = first.with_name(f"{first.name}-{n}")
+
+
+def _resolved(path: Path) -> Path:
+    try:
+        return path.resolve()
+    except OSError:  # pragma: no cover - a path the system cannot resolve
+        return path.absolute()
+
+
+def same_folder(a: str | Path, b: str | Path) -> bool:
+    """Whether ``a`` and ``b`` name the same folder (after resolving links and ``..``)."""
+    return _resolved(Path(a)) == _resolved(Path(b))
 
 
 def remove_stale_partials(target: Path) -> list[Path]:

@@ -12,7 +12,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from slamkit.errors import ShapeError
-from slamkit.eval.pose_error import PoseErrorResult
+from slamkit.eval.pose_error import PoseErrorResult, describe_alignment
 from slamkit.viz.plots import new_figure
 
 __all__ = ["plot_aligned_trajectories", "plot_pose_errors_over_time", "pose_error_figures"]
@@ -24,7 +24,7 @@ def plot_aligned_trajectories(ax: Axes, result: PoseErrorResult) -> list[Artist]
     ref, est = result.reference[:, :2, 3], result.estimate[:, :2, 3]
     drawn: list[Artist] = []
     (line_e,) = ax.plot(est[:, 0], est[:, 1], color="tab:blue", lw=1.2,
-                        label=f"estimate ({result.alignment}-aligned)")  # fmt: skip
+                        label=f"estimate ({describe_alignment(result.alignment)})")  # fmt: skip
     (line_r,) = ax.plot(ref[:, 0], ref[:, 1], color="black", lw=1.0, ls="--", label="reference",
                         zorder=3)  # fmt: skip
     drawn += [line_e, line_r]
@@ -76,4 +76,5 @@ def pose_error_figures(result: PoseErrorResult, kind: str) -> dict[str, Figure]:
     plot_aligned_trajectories(top.add_subplot(), result)
     errors = new_figure(figsize=(8.0, 5.5), dpi=130)
     plot_pose_errors_over_time(errors.subplots(2, 1, sharex=True), result, kind)
+    errors.suptitle(f"{kind.upper()}, {describe_alignment(result.alignment)}", fontsize="medium")
     return {"trajectories.png": top, f"{kind}.png": errors}
