@@ -2,7 +2,8 @@
 and writing an estimator's defaults as a commented TOML file.
 
 A configuration file (TOML or JSON) has an ``[estimator]`` table (``[mapping]`` for
-``slamkit map occupancy``), a ``[dataset]`` table and top-level ``seed`` and ``preset``::
+``slamkit map occupancy``), a ``[dataset]`` table and top-level ``seed`` and ``preset`` (and,
+for a run, ``map``: the saved map it localizes in)::
 
     seed = 3
     [dataset]
@@ -74,6 +75,9 @@ class RunConfig:
     """The top-level ``preset`` (``config.json`` writes ``null`` for none: ``"none"`` here)."""
     source: str = "the configuration"
     """Where the settings came from, for messages."""
+    known_map: str | None = None
+    """The top-level ``map``: a saved ``map_server`` YAML to localize in (``slamkit run
+    --map``; ``config.json`` records it as an absolute path)."""
 
 
 def read_run_config(path: str | Path | None, main_table: str = "estimator") -> RunConfig:
@@ -84,7 +88,13 @@ def read_run_config(path: str | Path | None, main_table: str = "estimator") -> R
     if path is None:
         return RunConfig()
     raw = load_config_file(path)
-    allowed = (main_table, "dataset", "seed", "preset")
+    allowed = (
+        main_table,
+        "dataset",
+        "seed",
+        "preset",
+        *(("map",) if main_table == "estimator" else ()),
+    )
     unknown = sorted(set(raw) - set(allowed))
     if unknown:
         raise ConfigError(
@@ -107,7 +117,10 @@ def read_run_config(path: str | Path | None, main_table: str = "estimator") -> R
     settings = {k: v for k, v in tables[0].items() if k != "name"}
     ds = tables[1]
     options = {k: v for k, v in ds.items() if k not in ("name", "path")}
-    return RunConfig(settings, options, _named_data(ds, path), seed, preset, str(path))
+    known_map = raw.get("map")
+    if known_map is not None and not isinstance(known_map, str):
+        raise ConfigError(f"{path}: map must be the path of a map's YAML, got {known_map!r}")
+    return RunConfig(settings, options, _named_data(ds, path), seed, preset, str(path), known_map)
 
 
 def _named_data(table: Mapping[str, Any], path: str | Path) -> str | None:
