@@ -3,7 +3,8 @@ and writing an estimator's defaults as a commented TOML file.
 
 A configuration file (TOML or JSON) has an ``[estimator]`` table (``[mapping]`` for
 ``slamkit map occupancy``), a ``[dataset]`` table and top-level ``seed`` and ``preset`` (and,
-for a run, ``map``: the saved map it localizes in)::
+for a run, ``map``: the saved map it localizes in; for a map, ``poses``: the TUM path it is
+built along)::
 
     seed = 3
     [dataset]
@@ -78,6 +79,9 @@ class RunConfig:
     known_map: str | None = None
     """The top-level ``map``: a saved ``map_server`` YAML to localize in (``slamkit run
     --map``; ``config.json`` records it as an absolute path)."""
+    poses: str | None = None
+    """The top-level ``poses`` of a mapping configuration: the TUM path mapped along
+    (``slamkit map occupancy --poses FILE``; recorded as an absolute path)."""
 
 
 def read_run_config(path: str | Path | None, main_table: str = "estimator") -> RunConfig:
@@ -88,13 +92,8 @@ def read_run_config(path: str | Path | None, main_table: str = "estimator") -> R
     if path is None:
         return RunConfig()
     raw = load_config_file(path)
-    allowed = (
-        main_table,
-        "dataset",
-        "seed",
-        "preset",
-        *(("map",) if main_table == "estimator" else ()),
-    )
+    file_key = {"estimator": "map", "mapping": "poses"}.get(main_table)
+    allowed = (main_table, "dataset", "seed", "preset", *([file_key] if file_key else []))
     unknown = sorted(set(raw) - set(allowed))
     if unknown:
         raise ConfigError(
@@ -117,10 +116,19 @@ def read_run_config(path: str | Path | None, main_table: str = "estimator") -> R
     settings = {k: v for k, v in tables[0].items() if k != "name"}
     ds = tables[1]
     options = {k: v for k, v in ds.items() if k not in ("name", "path")}
-    known_map = raw.get("map")
-    if known_map is not None and not isinstance(known_map, str):
-        raise ConfigError(f"{path}: map must be the path of a map's YAML, got {known_map!r}")
-    return RunConfig(settings, options, _named_data(ds, path), seed, preset, str(path), known_map)
+    for key in ("map", "poses"):
+        if raw.get(key) is not None and not isinstance(raw[key], str):
+            raise ConfigError(f"{path}: {key} must be a file's path, got {raw[key]!r}")
+    return RunConfig(
+        settings,
+        options,
+        _named_data(ds, path),
+        seed,
+        preset,
+        str(path),
+        raw.get("map"),
+        raw.get("poses"),
+    )
 
 
 def _named_data(table: Mapping[str, Any], path: str | Path) -> str | None:
