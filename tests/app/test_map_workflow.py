@@ -108,7 +108,15 @@ def test_map_option_errors_are_one_line(tmp_path, saved_map):
                               str(tmp_path / "y")])  # fmt: skip
     assert res.exit_code == 1
     assert "resolution: expected a number, got '5 cm'" in " ".join(res.output.split())
-    assert not (tmp_path / "y").exists() and not (tmp_path / "x").exists()
+    res = runner.invoke(app, ["run", "mcl", "-d", "five-features", "--map", str(saved_map),
+                              "--out", str(tmp_path / "z")])  # fmt: skip
+    assert res.exit_code == 1
+    assert "'five-features' has no laser scans" in " ".join(res.output.split())
+    assert not any((tmp_path / name).exists() for name in "xyz")
+    # the help names the extras rich would otherwise swallow as markup
+    output = runner.invoke(app, ["run", "--help"]).output
+    text = "".join(ch for ch in output if not ch.isspace() and ch != "│")  # the box's border
+    assert "pipinstall'slamkit[rerun]'" in text and "pipinstall'slamkit[mcap]'" in text
 
 
 @pytest.mark.slow

@@ -16,7 +16,7 @@ from slamkit.app.runconfig import dataset_table
 from slamkit.datasets.files import load_data
 from slamkit.datasets.reading import ReadingSummary
 from slamkit.datasets.stream import Dataset
-from slamkit.errors import ConfigError
+from slamkit.errors import ConfigError, InputError
 from slamkit.eval.records import RunScores
 from slamkit.io import atomic_folder, write_json, write_tum
 from slamkit.io.folders import check_output_folder
@@ -149,6 +149,11 @@ def run_job(
         data_root=request.data_root,
     )
     if known_map is not None:  # the saved map replaces the data set's own, if it has one
+        if dataset.laser is None:
+            raise InputError(
+                f"--map: data set {dataset.name!r} has no laser scans to localize with in "
+                "an occupancy map"
+            )
         dataset = dataclasses.replace(dataset, known_grid=known_map.grid)
     timings["load the data set"] = time.perf_counter() - clock
     # twice the GIF's frames, from which it picks those where the robot moves
