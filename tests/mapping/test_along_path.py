@@ -110,3 +110,34 @@ def test_a_part_of_the_path_maps_its_scans_and_says_what_it_dropped(tmp_path, ro
     assert not (tmp_path / "other").exists()
     res = runner.invoke(app, ["map", "occupancy", "--poses", "nowhere.tum"])
     assert res.exit_code == 1 and "expected 'truth', 'odometry' or a TUM file" in res.output
+
+
+def test_scans_are_laid_from_the_laser_on_its_mounting(rooms):
+    """A laser mounted 0.3 m ahead and 0.1 m left, turned 5°, on a robot whose path is the
+    laser's path ⊕ mounting⁻¹: the map from the robot's poses (its truth, a TUM path of it, or
+    the pipeline estimator) is the map of the laser's own poses."""
+    import dataclasses
+
+    from slamkit.geometry.pose2 import compose, inverse
+    from slamkit.mapping.occupancy import OccupancyMappingConfig, build_occupancy_map
+    from slamkit.pipeline import run
+
+    mounting = (0.3, 0.1, np.deg2rad(5.0))
+    robot = compose(rooms.truth.poses, inverse(np.array(mounting)))
+    mounted = dataclasses.replace(
+        rooms,
+        laser=dataclasses.replace(rooms.laser, mounting=mounting),
+        truth=dataclasses.replace(rooms.truth, poses=robot),
+    )
+    cfg = OccupancyMappingConfig(bounds="grow")
+    want = build_occupancy_map(rooms, cfg).grid
+    for data in (mounted, dataset_on_path(mounted, rooms.truth.times, robot)[0]):
+        got = build_occupancy_map(data, cfg).grid
+        assert got.shape == want.shape
+        assert np.count_nonzero(got.prob != want.prob) <= 1e-4 * want.prob.size
+    online = run("occupancy-mapping", mounted, config={"bounds": "grow"}).output.grid
+    assert online is not None and online.shape == want.shape
+    assert np.count_nonzero(online.prob != want.prob) <= 1e-4 * want.prob.size
+    # the laser at the robot's origin instead: a different map
+    off = build_occupancy_map(dataclasses.replace(mounted, laser=rooms.laser), cfg).grid
+    assert off.shape != want.shape or np.count_nonzero(off.prob != want.prob) > 0.01 * off.prob.size

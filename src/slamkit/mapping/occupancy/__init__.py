@@ -83,6 +83,7 @@ from slamkit.mapping.occupancy.scans import (
     laser_scans,
     scan_bounds,
     scan_poses,
+    sensor_poses,
 )
 
 __all__ = [
@@ -106,4 +107,5 @@ __all__ = [
     "scan_cells_ray",
     "scan_cells_table",
     "scan_poses",
+    "sensor_poses",
 ]

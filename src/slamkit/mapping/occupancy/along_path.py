@@ -8,9 +8,9 @@ span dropped — a pose there would be the path's end held, not a pose of the ro
 counted in :class:`PathCoverage`; a path that leaves most of the scans outside its span is
 refused, since it is most likely the path of another log or on another clock.
 
-The path is a robot path; occupancy mapping with known poses takes the poses as the laser's,
-as it does the data set's own reference, so a laser mounted off the robot's origin
-(:attr:`~slamkit.datasets.LaserSpec.mounting`) shifts the map by that offset.
+The path is the robot's: each scan is laid from the path's pose composed with the laser's
+mounting (:func:`~slamkit.mapping.occupancy.scans.sensor_poses`), as the data set's own
+reference is.
 """
 
 from __future__ import annotations
