@@ -72,3 +72,49 @@ def test_run_job_writes_the_recording_inside_its_folder(tmp_path):
     assert "run.rrd" in report.files
     logged = _read(tmp_path / "out" / "run.rrd")
     assert len(logged["/world/estimate/pose"]) == len(report.result.poses)
+
+
+def _strips(path, entity):
+    """The line strips logged at ``entity`` of the ``.rrd`` file."""
+    from rerun.chunk import RrdReader
+
+    out = []
+    for chunk in RrdReader(path).stream().to_chunks():
+        if chunk.entity_path != entity:
+            continue
+        batch = chunk.to_record_batch()
+        for name in batch.schema.names:
+            if name.endswith("LineStrips2D:strips"):
+                for row in batch.column(name).to_pylist():
+                    if row is not None:
+                        out.extend(np.array(strip, float) for strip in row)
+    return out
+
+
+def test_graph_recording_holds_edges_and_loop_closures(tmp_path):
+    """graph-slam's pose graph: one segment per edge between consecutive poses and one per
+    loop closure, between the poses they join (the same as the MCAP file's /graph)."""
+    from slamkit.optim.data import loop_closures
+
+    data = load_dataset("rooms-laser", seed=0)
+    result = run("graph-slam", data, seed=0)
+    path = tmp_path / "run.rrd"
+    record_run(result, data, path)
+    graph = result.output.graph
+    closures = loop_closures(graph)
+    logged = _strips(path, "/world/graph/closures")
+    assert len(logged) == len(closures) > 10
+    np.testing.assert_allclose(logged[0], graph.poses[closures[0], :2], atol=1e-5)
+    edges = len(loop_closures(graph, min_gap=1)) - len(closures)
+    assert len(_strips(path, "/world/graph/edges")) == edges
+
+
+def test_mcl_recording_holds_the_map_it_localized_in(tmp_path):
+    data = load_dataset("rooms-laser-global", seed=0)
+    data = dataclasses.replace(data, events=data.events[:100])
+    result = run("mcl", data, seed=0)
+    assert result.output.grid is None
+    path = tmp_path / "run.rrd"
+    record_run(result, data, path)
+    occupied = int((data.known_grid.prob >= 0.65).sum())
+    assert np.concatenate(_read(path)["/world/map"]).shape[0] == occupied

@@ -31,6 +31,7 @@ from slamkit.datasets.victoria_park import (
     load_victoria_park,
 )
 from slamkit.io.posegraph import read_graph
+from slamkit.io.rosmap_read import RosMapReading, read_ros_map_reading
 from slamkit.io.tum import read_tum
 
 
@@ -244,6 +245,36 @@ def _tum_check(result: tuple[np.ndarray, np.ndarray]) -> list[str]:
     return [] if np.all(np.diff(result[0]) > 0) else ["TUM stamps not strictly increasing"]
 
 
+# ---------------------------------------------------------------------------- ROS map_server
+def rosmap_target() -> Target:
+    """A map_server pair as map_saver writes it: 0 occupied, 254 free, 205 unknown."""
+    rng = np.random.default_rng(RNG_SEED)
+    img = rng.choice(np.array([0, 205, 254], dtype=np.uint8), size=(6, 9))
+    yaml = [
+        "image: map.pgm",
+        "resolution: 0.050000",
+        "origin: [-1.000000, -2.500000, 0.000000]",
+        "negate: 0",
+        "occupied_thresh: 0.65",
+        "free_thresh: 0.196",
+    ]
+    files = {"map.yaml": _text(yaml), "map.pgm": b"P5\n# CREATOR: test\n9 6\n255\n" + img.tobytes()}
+    return Target(
+        "rosmap",
+        files,
+        lambda root: read_ros_map_reading(root / "map.yaml"),
+        binary=("map.pgm",),
+        check=_rosmap_check,
+    )
+
+
+def _rosmap_check(result: RosMapReading) -> list[str]:
+    """Occupancies in [0, 1] (the grid checks it) on a grid of a positive, finite cell."""
+    grid = result.grid
+    ok = grid.resolution > 0 and np.isfinite(grid.resolution) and grid.prob.size > 0
+    return [] if ok else [f"grid: resolution {grid.resolution!r}, shape {grid.shape}"]
+
+
 # --------------------------------------------------------------------------------- pose graphs
 def _graph_target(name: str, rel: str, lines: list[str], family: str) -> Target:
     def run(root: Path) -> Any:
@@ -406,6 +437,7 @@ def all_targets() -> list[Target]:
         isam_graph_target(),
         gtsam_target(),
         tum_target(),
+        rosmap_target(),
     ]
     for bag in (rosbag_target(), rosbag_target("rosbag_lz4", "lz4")):
         if bag is not None:

@@ -16,17 +16,22 @@ from slamkit.app.runconfig import dataset_table
 from slamkit.datasets.files import load_data
 from slamkit.datasets.reading import ReadingSummary
 from slamkit.datasets.stream import Dataset
-from slamkit.errors import ConfigError
+from slamkit.errors import ConfigError, InputError
 from slamkit.eval.records import RunScores
 from slamkit.io import atomic_folder, write_json, write_tum
 from slamkit.io.folders import check_output_folder
+from slamkit.io.rosmap_read import RosMapReading, read_ros_map_reading
 from slamkit.pipeline import Progress, Result, get_estimator_entry, run
 from slamkit.pipeline.evaluate import evaluate
 
-__all__ = ["ANIMATION_FRAMES", "RunReport", "RunRequest", "run_job"]
+__all__ = ["ANIMATION_FRAMES", "KNOWN_MAP_ESTIMATORS", "RunReport", "RunRequest", "run_job"]
 
 ANIMATION_FRAMES = 120
 """Frames of the GIF that ``animate`` writes (about 15 s at 8 frames per second)."""
+
+KNOWN_MAP_ESTIMATORS = ("mcl",)
+"""The registered estimators that localize in a known occupancy grid, so take
+:attr:`RunRequest.known_map`."""
 
 
 @dataclass(frozen=True)
@@ -59,6 +64,12 @@ class RunRequest:
     rerun: str | None = None
     """Also record the run for rerun (:mod:`slamkit.app.recording`): ``"spawn"`` a viewer,
     a relative ``.rrd`` name inside the output folder, or an absolute path."""
+    known_map: Path | None = None
+    """A saved ROS ``map_server`` map (its YAML, :mod:`slamkit.io.rosmap_read`) to localize
+    in: it replaces the data set's known grid (estimators of :data:`KNOWN_MAP_ESTIMATORS`)."""
+    mcap: Path | None = None
+    """Also write the run as an MCAP file for Foxglove (:mod:`slamkit.app.foxglove`): a
+    relative name inside the output folder, or an absolute path."""
 
 
 @dataclass(frozen=True)
@@ -75,6 +86,8 @@ class RunReport:
     """The preset's settings the run used (those the config left unset)."""
     reading: ReadingSummary | None = None
     """What reading the data file dropped and repaired (None: simulated data)."""
+    map_notes: tuple[str, ...] = ()
+    """What reading :attr:`RunRequest.known_map` read past (an origin's yaw, unknown keys)."""
 
     @property
     def metrics(self) -> dict[str, Any]:
@@ -121,7 +134,12 @@ def run_job(
         from slamkit.app.recording import require_rerun
 
         require_rerun()  # before the work
+    if request.mcap is not None:
+        from slamkit.app.foxglove import require_mcap
+
+        require_mcap()
     check_output_folder(request.out_dir, overwrite=request.overwrite)  # before the work
+    known_map = _read_known_map(entry.name, request.known_map)  # a broken map before the data
     timings: dict[str, float] = {}
     clock = time.perf_counter()
     dataset = given or load_data(
@@ -130,6 +148,13 @@ def run_job(
         options=request.dataset_options,
         data_root=request.data_root,
     )
+    if known_map is not None:  # the saved map replaces the data set's own, if it has one
+        if dataset.laser is None:
+            raise InputError(
+                f"--map: data set {dataset.name!r} has no laser scans to localize with in "
+                "an occupancy map"
+            )
+        dataset = dataclasses.replace(dataset, known_grid=known_map.grid)
     timings["load the data set"] = time.perf_counter() - clock
     # twice the GIF's frames, from which it picks those where the robot moves
     frames = 2 * ANIMATION_FRAMES if request.animate else 0
@@ -160,6 +185,8 @@ def run_job(
         "seed": request.seed,
         "preset": None if preset is None else preset.name,
     }
+    if request.known_map is not None:  # re-run from config.json in any folder
+        resolved["map"] = str(Path(request.known_map).resolve())
     with atomic_folder(request.out_dir, overwrite=request.overwrite) as tmp:
         write_tum(tmp / "trajectory.tum", result.times, result.poses)
         write_json(tmp / "metrics.json", run_metrics(evaluation.scores, dataset.reading))
@@ -197,6 +224,12 @@ def run_job(
             record_run(
                 result, dataset, "spawn" if spawn else where if where.is_absolute() else tmp / where
             )
+        if request.mcap is not None:
+            from slamkit.app.foxglove import write_mcap
+
+            say("writing the MCAP file")
+            mcap = Path(request.mcap)
+            write_mcap(result, dataset, mcap if mcap.is_absolute() else tmp / mcap)
         timings["figures and files"] = time.perf_counter() - clock
         _write_report(tmp, entry.description, dataset.description, timings)
         files = tuple(sorted(p.name for p in tmp.iterdir()))
@@ -210,7 +243,20 @@ def run_job(
         None if preset is None else preset.name,
         used,
         dataset.reading,
+        () if known_map is None else known_map.notes,
     )
+
+
+def _read_known_map(estimator: str, path: Path | None) -> RosMapReading | None:
+    """The saved map of :attr:`RunRequest.known_map`, for an estimator that can use one."""
+    if path is None:
+        return None
+    if estimator not in KNOWN_MAP_ESTIMATORS:
+        raise ConfigError(
+            f"--map: {estimator} does not localize in a known map; "
+            f"{', '.join(KNOWN_MAP_ESTIMATORS)} does"
+        )
+    return read_ros_map_reading(path)
 
 
 def _write_report(folder: Path, estimator: str, dataset: str, timings: Mapping[str, float]) -> None:

@@ -9,7 +9,12 @@ Writes, into one folder that appears completely or not at all:
 * ``quality.json`` — occupied/free/unknown fractions, entropy, the agreement of the maps of
   the even and the odd scans, precision/recall against the true occupancy where the data set
   has one, and the mapping statistics (cells updated, seconds, grid bytes);
-* ``config.json`` — the resolved mapping configuration, the data set and its options, seed.
+* ``config.json`` — the resolved mapping configuration, the data set and its options, seed,
+  and ``poses``, the path mapped along when one was given.
+
+With ``poses_file`` (a TUM trajectory, e.g. a run's ``trajectory.tum``) the known poses are
+that path's (:func:`slamkit.mapping.occupancy.dataset_on_path`: interpolated to the scan
+stamps, scans outside its span dropped and counted in ``quality.json`` under ``path``).
 """
 
 from __future__ import annotations
@@ -25,7 +30,7 @@ from slamkit.config import config_from_mapping, config_to_dict
 from slamkit.datasets import Dataset
 from slamkit.datasets.files import load_data
 from slamkit.datasets.reading import ReadingSummary
-from slamkit.io import atomic_folder, write_json
+from slamkit.io import atomic_folder, read_tum, write_json
 from slamkit.io.rosmap import write_ros_map
 from slamkit.mapping import (
     OccupancyMappingConfig,
@@ -34,6 +39,7 @@ from slamkit.mapping import (
     map_quality,
     occupied_precision_recall,
 )
+from slamkit.mapping.occupancy import PathCoverage, dataset_on_path
 from slamkit.maps import OccupancyGrid
 
 __all__ = [
@@ -83,6 +89,8 @@ class OccupancyMapReport:
     grid: OccupancyGrid
     reading: ReadingSummary | None = None
     """What reading the data file dropped and repaired (None: simulated data)."""
+    path: PathCoverage | None = None
+    """How the given path covered the scans (None: the data set's own poses)."""
 
 
 def _config(
@@ -111,6 +119,7 @@ def occupancy_map_job(
     overwrite: bool = False,
     progress: Callable[[int, int], None] | None = None,
     plots: bool = True,
+    poses_file: str | Path | None = None,
 ) -> OccupancyMapReport:
     """Build the occupancy map of ``dataset`` (a registered name, a log's path, or a loaded
     :class:`Dataset`) at ``resolution`` metres (None: the config's) and write the files of
@@ -119,14 +128,22 @@ def occupancy_map_job(
     ``config`` holds the :class:`~slamkit.mapping.OccupancyMappingConfig` settings (a
     mapping such as a config file's ``[mapping]`` table, or the object); ``resolution``
     overrides its ``resolution``. ``agreement`` also builds the even-scan and odd-scan maps
-    (doubling the work) for the agreement number.
+    (doubling the work) for the agreement number. ``poses_file``: map along this TUM path
+    (module docstring) instead of the config's ``pose_source``.
     """
     cfg = _config(config, resolution)  # a bad config fails before the data set is loaded
+    path = None
+    if poses_file is not None:  # a broken path file fails before the data set is loaded too
+        path = read_tum(poses_file)
+        cfg = dataclasses.replace(cfg, pose_source="truth")  # the path is the reference
     ds_options = dict(dataset_options or {})
     if isinstance(dataset, Dataset):
         data = dataset
     else:
         data = load_data(dataset, seed=seed, options=ds_options, data_root=data_root)
+    coverage = None
+    if path is not None:
+        data, coverage = dataset_on_path(data, *path, source=str(poses_file))
     result = build_occupancy_map(data, cfg, progress)
     quality: dict[str, Any] = {"map": map_quality(result.grid).as_dict()}
     if agreement:
@@ -141,11 +158,14 @@ def occupancy_map_job(
     stats["grid_shape"] = list(result.grid.shape)
     stats["grid_bytes"] = result.log_odds.nbytes
     stats["bounds"] = None if result.bounds is None else list(result.bounds)
-    resolved = {
+    resolved: dict[str, Any] = {
         "mapping": config_to_dict(cfg),
         "dataset": dataset_table(data, ds_options),
         "seed": seed,
     }
+    if coverage is not None:
+        quality["path"] = {"file": str(Path(str(poses_file)).resolve()), **coverage.as_dict()}
+        resolved["poses"] = quality["path"]["file"]
     from slamkit.viz.maps import save_map_image  # plotting only in the app layer
 
     with atomic_folder(out_dir, overwrite=overwrite) as tmp:
@@ -157,7 +177,9 @@ def occupancy_map_job(
         write_json(tmp / "quality.json", {**quality, "stats": stats, **reading})
         write_json(tmp / "config.json", resolved)
         files = tuple(sorted(p.name for p in tmp.iterdir()))
-    return OccupancyMapReport(Path(out_dir), files, quality, stats, result.grid, data.reading)
+    return OccupancyMapReport(
+        Path(out_dir), files, quality, stats, result.grid, data.reading, coverage
+    )
 
 
 def _save_map_view(grid: OccupancyGrid, poses: Any, name: str, path: Path) -> None:

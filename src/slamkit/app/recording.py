@@ -10,8 +10,14 @@ Entities (all in metres, the world frame):
   ``world/landmarks/covariance``; ``world/truth/landmarks`` the true ones;
 * ``world/scan`` — each laser scan's end points at the pose of its time;
 * ``world/particles`` — the particle snapshots of a particle filter;
-* ``world/map`` — the occupancy grid's occupied cells (``OCCUPIED_THRESHOLD``), static
+* ``world/graph/edges`` and ``world/graph/closures`` — the pose graph of an estimator that
+  kept one: its edges between consecutive poses and its loop closures
+  (:func:`~slamkit.optim.data.loop_closures`), static line segments (grey, red);
+* ``world/map`` — the occupied cells (``OCCUPIED_THRESHOLD``) of the occupancy grid the run
+  built, or else of the one it localized in (``Dataset.known_grid``: ``--map``), static
   points at the cell centres of radius half a cell.
+
+The same run as an MCAP file for Foxglove: :mod:`slamkit.app.foxglove`.
 
 rerun is imported only here, and only when a recording is made.
 """
@@ -27,6 +33,7 @@ from slamkit.datasets.stream import Dataset, LaserScan
 from slamkit.errors import InputError
 from slamkit.geometry.pose2 import compose, interpolate_poses, transform_points
 from slamkit.maps import OCCUPIED_THRESHOLD
+from slamkit.optim.data import loop_closures
 from slamkit.pipeline import Result
 from slamkit.scanmatch.result import scan_points
 
@@ -125,7 +132,21 @@ def record_run(result: Result, dataset: Dataset, target: str | Path) -> None:
     for snap in result.output.particle_snapshots:
         rec.set_time(TIMELINE, duration=float(snap.t))
         rec.log("world/particles", rr.Points2D(snap.particles[:, :2], radii=0.02))
-    grid = result.output.grid
+    graph = result.output.graph
+    if graph is not None and len(graph.poses):
+        xy = graph.poses[:, :2]
+        every = loop_closures(graph, min_gap=1)
+        far = np.abs(every[:, 0] - every[:, 1]) >= 2
+        for name, pairs, colour in (
+            ("edges", every[~far], [140, 140, 140]),
+            ("closures", every[far], [220, 30, 30]),
+        ):
+            rec.log(
+                f"world/graph/{name}",
+                rr.LineStrips2D(xy[pairs], colors=[colour]),
+                static=True,
+            )
+    grid = result.output.grid if result.output.grid is not None else dataset.known_grid
     if grid is not None:
         rows, cols_ = np.nonzero(grid.prob >= OCCUPIED_THRESHOLD)
         centres = grid.origin_xy + (np.column_stack([cols_, rows]) + 0.5) * grid.resolution

@@ -2,7 +2,9 @@
 and writing an estimator's defaults as a commented TOML file.
 
 A configuration file (TOML or JSON) has an ``[estimator]`` table (``[mapping]`` for
-``slamkit map occupancy``), a ``[dataset]`` table and top-level ``seed`` and ``preset``::
+``slamkit map occupancy``), a ``[dataset]`` table and top-level ``seed`` and ``preset`` (and,
+for a run, ``map``: the saved map it localizes in; for a map, ``poses``: the TUM path it is
+built along)::
 
     seed = 3
     [dataset]
@@ -74,6 +76,12 @@ class RunConfig:
     """The top-level ``preset`` (``config.json`` writes ``null`` for none: ``"none"`` here)."""
     source: str = "the configuration"
     """Where the settings came from, for messages."""
+    known_map: str | None = None
+    """The top-level ``map``: a saved ``map_server`` YAML to localize in (``slamkit run
+    --map``; ``config.json`` records it as an absolute path)."""
+    poses: str | None = None
+    """The top-level ``poses`` of a mapping configuration: the TUM path mapped along
+    (``slamkit map occupancy --poses FILE``; recorded as an absolute path)."""
 
 
 def read_run_config(path: str | Path | None, main_table: str = "estimator") -> RunConfig:
@@ -84,7 +92,8 @@ def read_run_config(path: str | Path | None, main_table: str = "estimator") -> R
     if path is None:
         return RunConfig()
     raw = load_config_file(path)
-    allowed = (main_table, "dataset", "seed", "preset")
+    file_key = {"estimator": "map", "mapping": "poses"}.get(main_table)
+    allowed = (main_table, "dataset", "seed", "preset", *([file_key] if file_key else []))
     unknown = sorted(set(raw) - set(allowed))
     if unknown:
         raise ConfigError(
@@ -107,7 +116,19 @@ def read_run_config(path: str | Path | None, main_table: str = "estimator") -> R
     settings = {k: v for k, v in tables[0].items() if k != "name"}
     ds = tables[1]
     options = {k: v for k, v in ds.items() if k not in ("name", "path")}
-    return RunConfig(settings, options, _named_data(ds, path), seed, preset, str(path))
+    for key in ("map", "poses"):
+        if raw.get(key) is not None and not isinstance(raw[key], str):
+            raise ConfigError(f"{path}: {key} must be a file's path, got {raw[key]!r}")
+    return RunConfig(
+        settings,
+        options,
+        _named_data(ds, path),
+        seed,
+        preset,
+        str(path),
+        raw.get("map"),
+        raw.get("poses"),
+    )
 
 
 def _named_data(table: Mapping[str, Any], path: str | Path) -> str | None:

@@ -150,6 +150,8 @@ def _run(
     formats: list[str] | None = None,
     svg: bool = False,
     rerun: str | None = None,
+    known_map: Path | None = None,
+    mcap: Path | None = None,
 ) -> None:
     from slamkit.app import RunRequest, run_job
     from slamkit.app.runconfig import apply_overrides, read_run_config, resolve_data
@@ -175,6 +177,8 @@ def _run(
         formats=tuple(f for f in (formats or []) if f != "tum"),
         svg=svg,
         rerun=rerun,
+        known_map=known_map if known_map is not None else _config_map(cfg.known_map),
+        mcap=mcap,
     )
     with progress_bar(f"{estimator} on {data}") as progress:
         report = run_job(request, progress, progress.stage)
@@ -184,12 +188,18 @@ def _run(
     if report.reading is not None and not report.reading.clean:
         for line in report.reading.lines():
             console.print(escape(line))
+    for note in report.map_notes:
+        console.print(f"map: {escape(note)}")
     console.print(_render_metrics(report.scores))
     for warning in report.scores.warnings:  # the consistency monitor (slamkit.eval.monitor)
         console.print(f"[bold yellow]warning:[/] {escape(warning.message)}")
     console.print(f"wrote {', '.join(report.files)} to [bold]{report.out_dir}[/]")
     if "report.html" in report.files:
         console.print(f"report: [bold]{report.out_dir / 'report.html'}[/] (open it in a browser)")
+
+
+def _config_map(text: str | None) -> Path | None:
+    return None if text is None else Path(text)
 
 
 @app.command("run")
@@ -278,6 +288,30 @@ def run_command(
             show_default=False,
         ),
     ] = None,
+    known_map: Annotated[
+        Path | None,
+        typer.Option(
+            "--map",
+            metavar="MAP.yaml",
+            help="Localize in this saved ROS map_server map (YAML + PGM, as `slamkit map "
+            "occupancy` and every mapping run write them); mcl only. Without a prior pose in "
+            "the data (or with --set start.uniform=true) the particles start spread over the "
+            "map's free space (global localization).",
+            show_default=False,
+        ),
+    ] = None,
+    mcap: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="FILE.mcap",
+            help=escape(
+                "Also write the run for Foxglove: scans, path, pose graph with its loop "
+                "closures, map (relative: inside the output folder). Needs pip install "
+                "'slamkit[mcap]'."
+            ),
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """Run ESTIMATOR on a data set; write trajectory, metrics, config, plots and report.html."""
     _run(
@@ -295,6 +329,8 @@ def run_command(
         formats=formats,
         svg=svg,
         rerun=rerun,
+        known_map=known_map,
+        mcap=mcap,
     )
 
 

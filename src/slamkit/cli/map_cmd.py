@@ -143,8 +143,10 @@ def occupancy_command(
     poses: Annotated[
         str | None,
         typer.Option(
-            metavar="truth|odometry",
-            help="Known poses: 'truth' (default) or 'odometry' (logs without truth).",
+            metavar="truth|odometry|FILE.tum",
+            help="Known poses: 'truth' (default), 'odometry' (logs without truth), or a TUM "
+            "trajectory file such as a run's trajectory.tum (interpolated to the scan stamps; "
+            "scans outside its time span are dropped and counted).",
         ),
     ] = None,
     seed: Annotated[int | None, typer.Option(help="Seed (simulated data, odometry noise).")] = None,
@@ -205,10 +207,16 @@ def _occupancy(
         if method not in ("ray", "cell"):
             raise ConfigError(f"--method: expected 'ray' or 'cell', got {method!r}")
         mapping["method"] = method
-    if poses is not None:
-        if poses not in ("truth", "odometry"):
-            raise ConfigError(f"--poses: expected 'truth' or 'odometry', got {poses!r}")
+    poses_file = None if cfg.poses is None else Path(cfg.poses)
+    if poses in ("truth", "odometry"):
         mapping["pose_source"] = poses
+        poses_file = None
+    elif poses is not None:
+        poses_file = Path(poses)
+        if not poses_file.is_file():
+            raise ConfigError(
+                f"--poses: expected 'truth', 'odometry' or a TUM file, got {poses!r} (no such file)"
+            )
     model = dict(mapping.get("model", {}))
     if max_range is not None or "max_range" not in model:
         model["max_range"] = _usable_range(max_range)
@@ -226,9 +234,12 @@ def _occupancy(
             agreement=agreement,
             overwrite=overwrite,
             progress=progress,
+            poses_file=poses_file,
         )
     if report.reading is not None and not report.reading.clean:
         for line in report.reading.lines():
             console.print(escape(line))
+    if report.path is not None:
+        console.print(escape(report.path.line()))
     console.print(_table(report.quality, report.stats))
     console.print(f"wrote {', '.join(report.files)} to [bold]{report.out_dir}[/]")

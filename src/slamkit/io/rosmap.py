@@ -30,25 +30,24 @@ under any thresholds with ``free < 0.498 < occupied``. The comparisons differ on
 thresholds themselves (``p >= occupied`` and ``p <= free`` in slamkit, strict in
 ``map_server``), which no trinary pixel decodes to.
 
-The YAML written and read here is the flat ``key: value`` subset map files use (no YAML
-library needed); an origin with a non-zero yaw is rejected, since :class:`OccupancyGrid` has
-no rotation.
+The YAML written here is the flat ``key: value`` subset map files use (no YAML library
+needed). Reading (``trinary``, ``scale`` and ``raw`` modes, ``P5`` and ``P2`` images, the quirks
+read past and said) is :mod:`slamkit.io.rosmap_read`; :func:`read_ros_map` is re-exported here.
 """
 
 from __future__ import annotations
 
-import math
 import os
-import re
 import uuid
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from slamkit.errors import DatasetFormatError, InputError
+from slamkit.errors import InputError
+from slamkit.io.rosmap_read import read_ros_map
 from slamkit.mapping.quality import FREE_THRESHOLD, OCCUPIED_THRESHOLD, check_thresholds
-from slamkit.maps import UNKNOWN, OccupancyGrid
+from slamkit.maps import OccupancyGrid
 
 __all__ = ["FREE_PIXEL", "OCCUPIED_PIXEL", "UNKNOWN_PIXEL", "read_ros_map", "write_ros_map"]
 
@@ -127,122 +126,3 @@ def write_ros_map(
     _atomic_write(pgm, header.encode("ascii") + img.tobytes())
     _atomic_write(yml, text.encode("utf-8"))
     return pgm, yml
-
-
-# --------------------------------------------------------------------------------------------
-# reading
-# --------------------------------------------------------------------------------------------
-
-
-def _read_yaml(path: Path) -> dict[str, tuple[str, int]]:
-    """``key -> (raw value, line)`` of a flat ``key: value`` file (comments dropped)."""
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except OSError as exc:
-        raise DatasetFormatError(f"cannot read the map description ({exc.strerror})", path) from exc
-    out: dict[str, tuple[str, int]] = {}
-    for number, line in enumerate(lines, start=1):
-        body = line.split("#", 1)[0].strip()
-        if not body:
-            continue
-        key, sep, value = body.partition(":")
-        if not sep or not key.strip():
-            raise DatasetFormatError(f"expected 'key: value', got {line.strip()!r}", path, number)
-        out[key.strip()] = (value.strip().strip("'\""), number)
-    return out
-
-
-def _number(fields: dict[str, tuple[str, int]], key: str, path: Path, default: float) -> float:
-    if key not in fields:
-        return default
-    raw, line = fields[key]
-    try:
-        value = float(raw)
-    except ValueError:
-        raise DatasetFormatError(f"{key}: expected a number, got {raw!r}", path, line) from None
-    if not math.isfinite(value):
-        raise DatasetFormatError(f"{key}: expected a finite number, got {raw!r}", path, line)
-    return value
-
-
-def _read_pgm(path: Path) -> NDArray[np.uint8]:
-    """A binary 8-bit PGM (``P5``, maxval <= 255) as ``(rows, cols)`` uint8, top row first."""
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise DatasetFormatError(f"cannot read the map image ({exc.strerror})", path) from exc
-    # Header: magic, width, height, maxval, separated by whitespace and '#' comments.
-    tokens: list[bytes] = []
-    pos = 0
-    token = re.compile(rb"\s*(?:#[^\n]*\n\s*)*(\S+)")
-    while len(tokens) < 4:
-        m = token.match(data, pos)
-        if m is None:
-            raise DatasetFormatError("truncated PGM header", path)
-        tokens.append(m.group(1))
-        pos = m.end()
-    if tokens[0] != b"P5":
-        raise DatasetFormatError(f"expected a binary PGM ('P5'), got {tokens[0]!r}", path)
-    try:
-        cols, rows, maxval = (int(t) for t in tokens[1:])
-    except ValueError:
-        raise DatasetFormatError(
-            "PGM header: width, height and maxval must be integers", path
-        ) from None
-    if cols < 1 or rows < 1 or not 0 < maxval <= 255:
-        raise DatasetFormatError(
-            f"PGM header: expected an 8-bit image of at least 1 × 1, got {cols} × {rows}, "
-            f"maxval {maxval}",
-            path,
-        )
-    pixels = data[pos + 1 :]  # exactly one whitespace byte ends the header
-    if len(pixels) != rows * cols:
-        raise DatasetFormatError(
-            f"PGM: expected {rows * cols} pixel bytes for {cols} × {rows}, got {len(pixels)}",
-            path,
-        )
-    img = np.frombuffer(pixels, dtype=np.uint8).reshape(rows, cols)
-    if maxval != 255:
-        img = np.round(img.astype(np.float64) * (255.0 / maxval)).astype(np.uint8)
-    return img
-
-
-def read_ros_map(yaml_path: str | Path) -> OccupancyGrid:
-    """Read a ``map_server`` YAML and its image into an :class:`OccupancyGrid` of 1
-    (occupied), 0 (free) and :data:`~slamkit.maps.UNKNOWN` (module docstring)."""
-    yml = Path(yaml_path)
-    fields = _read_yaml(yml)
-    if "image" not in fields:
-        raise DatasetFormatError("missing 'image'", yml)
-    if "resolution" not in fields:
-        raise DatasetFormatError("missing 'resolution'", yml)
-    resolution = _number(fields, "resolution", yml, math.nan)
-    if not resolution > 0:
-        raise DatasetFormatError(
-            f"resolution: expected a number > 0, got {resolution}", yml, fields["resolution"][1]
-        )
-    origin_raw, origin_line = fields.get("origin", ("[0, 0, 0]", 0))
-    parts = origin_raw.strip("[]").split(",")
-    try:
-        origin = [float(v) for v in parts]
-    except ValueError:
-        origin = []
-    if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
-        raise DatasetFormatError(
-            f"origin: expected [x, y, yaw], got {origin_raw!r}", yml, origin_line
-        )
-    if origin[2] != 0.0:
-        raise DatasetFormatError(
-            f"origin: a rotated map (yaw {origin[2]}) is not supported", yml, origin_line
-        )
-    negate = int(_number(fields, "negate", yml, 0.0))
-    occ_t = _number(fields, "occupied_thresh", yml, OCCUPIED_THRESHOLD)
-    free_t = _number(fields, "free_thresh", yml, FREE_THRESHOLD)
-    image = Path(fields["image"][0])
-    img = _read_pgm(image if image.is_absolute() else yml.parent / image)
-    v = img[::-1].astype(np.float64)  # grid rows run upwards
-    p = v / 255.0 if negate else (255.0 - v) / 255.0
-    prob = np.full(v.shape, UNKNOWN)
-    prob[p > occ_t] = 1.0
-    prob[p < free_t] = 0.0
-    return OccupancyGrid(prob, resolution, np.array(origin[:2]))

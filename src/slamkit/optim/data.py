@@ -87,3 +87,19 @@ class GraphData:
     @property
     def n_edges(self) -> int:
         return sum(len(e) for e in self.edges)
+
+
+def loop_closures(graph: GraphData, min_gap: int = 2) -> IntArray:
+    """The pose-to-pose edges of ``graph`` between poses at least ``min_gap`` apart in the
+    graph's order (the loop closures; 2: every edge but the consecutive ones), as ``(E, 2)``
+    rows into ``graph.poses``; ``min_gap=1``: every pose-to-pose edge."""
+    row = {int(pid): k for k, pid in enumerate(graph.pose_ids)}
+    pairs = []
+    for edges in graph.edges:
+        if edges.kind not in ("se2", "se3"):
+            continue
+        for i, j in zip(edges.i, edges.j, strict=True):
+            a, b = row.get(int(i)), row.get(int(j))
+            if a is not None and b is not None and abs(a - b) >= min_gap:
+                pairs.append((a, b))
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2)

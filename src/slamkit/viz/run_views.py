@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 from matplotlib.collections import LineCollection, PathCollection
 
+from slamkit.optim.data import loop_closures
 from slamkit.viz.layout import (
     add_scale_bar,
     legend_outside,
@@ -33,7 +34,6 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from slamkit.datasets import Dataset
-    from slamkit.optim.data import GraphData
     from slamkit.pipeline.runner import Result
 
 __all__ = ["loop_closures", "loop_figure", "map_figure", "particle_figure"]
@@ -57,22 +57,6 @@ def map_figure(result: Result, dataset: Dataset) -> Figure:
     ax.set_title(f"{result.estimator} on {result.dataset}: occupancy grid")
     legend_outside(ax)
     return fig
-
-
-def loop_closures(graph: GraphData, min_gap: int = 2) -> np.ndarray:
-    """The pose-to-pose edges of ``graph`` between poses at least ``min_gap`` apart in the
-    graph's order (the loop closures; 2: every edge but the consecutive ones), as ``(E, 2)``
-    rows into ``graph.poses``."""
-    row = {int(pid): k for k, pid in enumerate(graph.pose_ids)}
-    pairs = []
-    for edges in graph.edges:
-        if edges.kind not in ("se2", "se3"):
-            continue
-        for i, j in zip(edges.i, edges.j, strict=True):
-            a, b = row.get(int(i)), row.get(int(j))
-            if a is not None and b is not None and abs(a - b) >= min_gap:
-                pairs.append((a, b))
-    return np.array(pairs, dtype=np.int64).reshape(-1, 2)
 
 
 def loop_figure(result: Result, dataset: Dataset) -> Figure:

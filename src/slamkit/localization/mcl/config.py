@@ -170,8 +170,11 @@ class LaserConfig(Section):
     cells, same pose error): untempered, every scan collapses the set onto one or a few
     particles, which then drift off the true pose and lose it. The default was chosen for a
     consistent NEES after convergence (measurements in docs/estimators/mcl.md)."""
-    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    """Pose of the laser in the robot frame: (forward [m], left [m], yaw [rad])."""
+    offset: tuple[float, float, float] | None = None
+    """Pose of the laser in the robot frame: (forward [m], left [m], yaw [rad]); ``None``: the
+    data set's :attr:`~slamkit.datasets.LaserSpec.mounting` (a bag's base-to-laser
+    transform), so that scans land where the mapping estimators, which use it too, put the
+    walls of a saved map."""
 
     def __post_init__(self) -> None:
         super().__post_init__()

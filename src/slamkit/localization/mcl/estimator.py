@@ -235,11 +235,16 @@ class MonteCarloLocalization(EstimatorShell):
         self._Q_root = control_noise_root(self._Q)
 
         self._field: LikelihoodField | None = None
+        self._laser_offset: FloatArray | None = None
         self._beam_angles: FloatArray | None = None
         if use_laser:
             assert dataset.laser is not None
             self._field = _laser_field(dataset, config)
             self._beam_angles = dataset.laser.beam_angles
+            mounting = config.laser.offset
+            if mounting is None:
+                mounting = dataset.laser.mounting
+            self._laser_offset = np.asarray(mounting, dtype=np.float64) if any(mounting) else None
         self._landmarks: LandmarkMap | None = None
         if use_landmarks:
             assert dataset.landmark_sensor is not None and dataset.known_landmarks is not None
@@ -279,7 +284,7 @@ class MonteCarloLocalization(EstimatorShell):
             return
         field_, angles = self._field, self._beam_angles
         cfg = self._cfg
-        offset = cfg.laser.offset if any(cfg.laser.offset) else None
+        offset = self._laser_offset
         exponent = 1.0
         if cfg.laser.independent_beams is not None:
             used = usable_beams(field_, event.ranges, angles, cfg.laser.beam_stride)

@@ -59,9 +59,12 @@ The package:
   scans, the update paths) and :class:`MappingStats`;
 * :mod:`~slamkit.mapping.occupancy.build` — :func:`build_occupancy_map` over a data set;
 * :mod:`~slamkit.mapping.occupancy.estimator` — the pipeline estimator
-  :class:`OccupancyMapping`.
+  :class:`OccupancyMapping`;
+* :mod:`~slamkit.mapping.occupancy.along_path` — :func:`dataset_on_path`: the known poses
+  from any trajectory (a run's TUM file), scans outside its span dropped and counted.
 """
 
+from slamkit.mapping.occupancy.along_path import PathCoverage, dataset_on_path
 from slamkit.mapping.occupancy.build import OccupancyMapResult, Progress, build_occupancy_map
 from slamkit.mapping.occupancy.cells import (
     PolarTable,
@@ -80,6 +83,7 @@ from slamkit.mapping.occupancy.scans import (
     laser_scans,
     scan_bounds,
     scan_poses,
+    sensor_poses,
 )
 
 __all__ = [
@@ -88,11 +92,13 @@ __all__ = [
     "OccupancyMapper",
     "OccupancyMapping",
     "OccupancyMappingConfig",
+    "PathCoverage",
     "PolarTable",
     "Progress",
     "build_occupancy_map",
     "check_ranges",
     "data_bounds",
+    "dataset_on_path",
     "known_pose_at",
     "laser_scans",
     "polar_table",
@@ -101,4 +107,5 @@ __all__ = [
     "scan_cells_ray",
     "scan_cells_table",
     "scan_poses",
+    "sensor_poses",
 ]

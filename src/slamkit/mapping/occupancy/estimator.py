@@ -9,6 +9,7 @@ from slamkit.datasets.stream import Dataset, Event, KnownPose, LaserScan, Odomet
 from slamkit.errors import InputError
 from slamkit.estimation.contract import EstimatorOutput, PoseEstimate
 from slamkit.estimation.shell import EstimatorShell
+from slamkit.geometry.pose2 import compose
 from slamkit.mapping.occupancy.config import OccupancyMappingConfig
 from slamkit.mapping.occupancy.mapper import OccupancyMapper
 
@@ -24,6 +25,8 @@ class OccupancyMapping(EstimatorShell):
     scan falls between true poses); the estimator never reads ``truth``. Its
     :meth:`estimate` reports the known pose (its trajectory error is zero by construction);
     its product is the map, returned by :meth:`finish` as ``EstimatorOutput(grid=...)``.
+    Each scan is laid from the laser's pose, the robot's composed with
+    :attr:`~slamkit.datasets.LaserSpec.mounting`.
     With ``pose_source="odometry"`` it uses the odometry readings instead and reports those
     (a map that shows the odometry's drift).
     """
@@ -49,6 +52,14 @@ class OccupancyMapping(EstimatorShell):
         start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
         self._odometry: FloatArray = np.asarray(start, dtype=np.float64)
         self._known: FloatArray | None = None
+        mounting = dataset.laser.mounting
+        self._mounting = np.asarray(mounting, dtype=np.float64) if any(mounting) else None
+
+    def _laser_pose(self) -> FloatArray:
+        """The laser's pose now: the robot's ⊕ the laser's mounting."""
+        if self._mounting is None:
+            return self._pose()
+        return np.asarray(compose(self._pose(), self._mounting), dtype=np.float64)
 
     def _pose(self) -> FloatArray:
         if self._source == "truth" and self._known is not None:
@@ -70,7 +81,7 @@ class OccupancyMapping(EstimatorShell):
                 f"t={event.t} (run it through slamkit.pipeline.run on a data set with a true "
                 "trajectory, or give KnownPose events)"
             )
-        self._mapper.offer(self._pose(), event.ranges)
+        self._mapper.offer(self._laser_pose(), event.ranges)
 
     def estimate(self) -> PoseEstimate:
         return PoseEstimate(self._pose())

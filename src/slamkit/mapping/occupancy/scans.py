@@ -2,7 +2,8 @@
 from a data set, and the box of world coordinates a set of scans reaches.
 
 Known poses are the data set's true trajectory, interpolated at the scan times
-(:func:`known_pose_at`), or its odometry readings (the latest at or before each scan).
+(:func:`known_pose_at`), or its odometry readings (the latest at or before each scan): the
+robot's poses, composed with the laser's mounting into the sensor's (:func:`sensor_poses`).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from numpy.typing import ArrayLike
 from slamkit._validation import FloatArray, as_array
 from slamkit.datasets.stream import Dataset, LaserScan, Odometry
 from slamkit.errors import InputError, NonFiniteError, ShapeError
+from slamkit.geometry.pose2 import compose
 from slamkit.geometry.pose2 import interpolate_poses as known_pose_at
 from slamkit.mapping.inverse_model import ResolvedModel, ray_extents
 from slamkit.mapping.occupancy.config import OccupancyMappingConfig
@@ -26,6 +28,7 @@ __all__ = [
     "laser_scans",
     "scan_bounds",
     "scan_poses",
+    "sensor_poses",
 ]
 
 
@@ -128,17 +131,30 @@ def _odometry_at(dataset: Dataset, times: FloatArray) -> FloatArray:
 
 
 def scan_poses(dataset: Dataset, times: FloatArray, source: str) -> FloatArray:
-    """Known sensor poses ``(S, 3)`` at the scan ``times``: the true trajectory (mapping with
-    known poses) or the odometry (see :class:`OccupancyMappingConfig.pose_source`)."""
+    """Known sensor poses ``(S, 3)`` at the scan ``times``: the robot's poses from the true
+    trajectory (mapping with known poses) or the odometry (see
+    :class:`OccupancyMappingConfig.pose_source`), each composed with the laser's mounting
+    (:attr:`~slamkit.datasets.LaserSpec.mounting`: laser = robot ⊕ mounting)."""
     if source == "odometry":
-        return _odometry_at(dataset, times)
-    truth = dataset.truth
-    if truth.times is None or truth.poses is None:
-        raise InputError(
-            f"occupancy mapping with known poses needs the true trajectory, which data set "
-            f"{dataset.name!r} does not have (use pose_source='odometry')"
-        )
-    return known_pose_at(truth.times, truth.poses, times)
+        robot = _odometry_at(dataset, times)
+    else:
+        truth = dataset.truth
+        if truth.times is None or truth.poses is None:
+            raise InputError(
+                f"occupancy mapping with known poses needs the true trajectory, which data set "
+                f"{dataset.name!r} does not have (use pose_source='odometry')"
+            )
+        robot = known_pose_at(truth.times, truth.poses, times)
+    return sensor_poses(robot, dataset)
+
+
+def sensor_poses(robot: FloatArray, dataset: Dataset) -> FloatArray:
+    """The laser's poses ``(S, 3)`` for robot poses ``(S, 3)`` (or one ``(3,)``):
+    ``robot ⊕ mounting``; the poses themselves when the laser sits at the robot's origin."""
+    mounting = (0.0, 0.0, 0.0) if dataset.laser is None else dataset.laser.mounting
+    if not any(mounting):
+        return robot
+    return np.asarray(compose(robot, np.asarray(mounting, dtype=np.float64)), dtype=np.float64)
 
 
 def data_bounds(
