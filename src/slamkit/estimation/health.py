@@ -22,22 +22,31 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from slamkit._validation import FloatArray
+from slamkit.datasets.stream import Control, Dataset, MotionSpec, Odometry
 from slamkit.estimation.contract import RunWarning
 
 __all__ = [
     "LOST_SHARE",
     "OVERRIDES_SHOWN",
+    "STILL_ODOMETRY",
     "UNMATCHED_TRAVEL",
     "UnmatchedStretch",
     "override_rows",
+    "still_odometry_warning",
     "tracking_warnings",
+    "usable_motion",
 ]
 
 LOST_SHARE = 0.01
 """Lost scans above this share of the scans make a warning."""
 UNMATCHED_TRAVEL = 2.0
 """[m] the wheels carry the robot through an unmatched stretch before it is a warning."""
+STILL_ODOMETRY = (1e-3, 1e-3)
+"""Odometry that moves the robot no farther than this [m] and turns it no more [rad] over
+the whole log says nothing of the motion."""
 OVERRIDES_SHOWN = 20
 """The diagnostics list this many overridden glitches (the first ones); all are counted."""
 
@@ -115,3 +124,34 @@ def tracking_warnings(
             )
         )
     return found
+
+
+def usable_motion(dataset: Dataset) -> tuple[MotionSpec | None, str | None]:
+    """The data set's motion, or None and why, when it says nothing: the odometry poses
+    never move (or there are none), or every control is zero, over the whole log
+    (:data:`STILL_ODOMETRY`). A laser tracker then runs on the laser alone instead of
+    holding the robot still against what the scans show, and says so."""
+    motion = dataset.motion
+    if motion is None:
+        return None, None
+    if motion.source == "odometry":
+        poses = np.array([e.pose for e in dataset.events if isinstance(e, Odometry)])
+        if poses.shape[0] == 0:
+            return None, "the data set has no odometry readings"
+        travel = float(np.hypot(*(poses[:, :2] - poses[0, :2]).T).max())
+        turn = float(np.abs(np.angle(np.exp(1j * (poses[:, 2] - poses[0, 2])))).max())
+        what = f"the odometry never moves ({len(poses)} readings)"
+    else:
+        controls = [e.u for e in dataset.events if isinstance(e, Control)]
+        if not controls:
+            return None, "the data set has no controls"
+        travel = turn = float(np.abs(np.asarray(controls)).max())
+        what = f"every control is zero ({len(controls)} controls)"
+    if travel <= STILL_ODOMETRY[0] and turn <= STILL_ODOMETRY[1]:
+        return None, what
+    return motion, None
+
+
+def still_odometry_warning(reason: str) -> RunWarning:
+    """The warning of a run whose data set's motion said nothing (:func:`usable_motion`)."""
+    return RunWarning("no_odometry", f"{reason}: the scans were tracked by the laser alone")

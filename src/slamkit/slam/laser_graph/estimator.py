@@ -29,7 +29,12 @@ from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset, Event, LaserScan
 from slamkit.errors import InputError, MatchError
 from slamkit.estimation.contract import EstimatorOutput, PoseEstimate, SmoothedTrajectory
-from slamkit.estimation.health import UnmatchedStretch, override_rows
+from slamkit.estimation.health import (
+    UnmatchedStretch,
+    override_rows,
+    still_odometry_warning,
+    usable_motion,
+)
 from slamkit.estimation.shell import EstimatorShell
 from slamkit.geometry.pose2 import between, compose, transform_points
 from slamkit.mapping.inverse_model import InverseSensorModel
@@ -52,7 +57,7 @@ from slamkit.slam.laser_graph.frontend import (
     floored_information,
     local_map,
 )
-from slamkit.slam.laser_graph.health import run_warnings
+from slamkit.slam.laser_graph.health import laser_unusable, run_warnings
 from slamkit.slam.laser_graph.loops import (
     LoopMatch,
     SubmapCache,
@@ -86,7 +91,8 @@ class LaserGraphSlam(EstimatorShell):
         self._mounting = np.asarray(mounting, dtype=np.float64)
         start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
         self._start: FloatArray = np.array(start, dtype=np.float64)
-        motion = dataset.motion
+        # Odometry that never moves says nothing: the laser alone then, and the run says so.
+        motion, self._no_motion = usable_motion(dataset)
         self._tracker = Tracker(
             None if motion is None else motion.model,
             None if motion is None else motion.noise_cov,
@@ -133,7 +139,8 @@ class LaserGraphSlam(EstimatorShell):
             self._offsets.append(offset)
 
     def on_control(self, u: FloatArray, dt: float) -> None:
-        self._tracker.predict(u, dt)
+        if self._tracker.model is not None:  # (None: the data set's motion said nothing)
+            self._tracker.predict(u, dt)
 
     def on_scan(self, event: LaserScan) -> None:
         self._counts["scans"] += 1
@@ -163,6 +170,8 @@ class LaserGraphSlam(EstimatorShell):
         return PoseEstimate(compose(self._base(), self._tracker.offset))
 
     def finish(self) -> EstimatorOutput:
+        if not self._keys or not (self._counts["scans"] <= 1 or self._tracker.counts["matched"]):
+            raise MatchError(laser_unusable(self._counts, self._tracker.counts), "laser_unusable")
         if len(self._graph) > 1:
             self._optimize()
         poses = self._graph.poses
@@ -193,6 +202,8 @@ class LaserGraphSlam(EstimatorShell):
             self._stretch,
             self._graph.loop_chi2(),
         )
+        if self._no_motion is not None:
+            warnings = (still_odometry_warning(self._no_motion), *warnings)
         return EstimatorOutput(
             grid=grid,
             diagnostics=diagnostics,

@@ -13,10 +13,15 @@ A wrong map looks like a right one unless the run says what it saw. The front en
   with its own evidence, when they are more than :data:`STRAINED_SHARE` of the closures
   and at least :data:`STRAINED_AT_LEAST` (Intel's good run, 0.017 m, keeps one such edge
   of 1,750).
+
+A run whose laser gave nothing to match — no scan with enough points to start a map, or
+none matched after the first — is not a result but a dead-reckoning path under a SLAM
+name: it ends with one line saying why (:func:`laser_unusable`).
 """
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -30,6 +35,7 @@ __all__ = [
     "STRAINED_AT_LEAST",
     "STRAINED_CHI2",
     "STRAINED_SHARE",
+    "laser_unusable",
     "run_warnings",
 ]
 
@@ -77,3 +83,20 @@ def run_warnings(
             )
         )
     return tuple(found)
+
+
+def laser_unusable(counts: Counter[str], tracker_counts: Counter[str]) -> str:
+    """The one line that ends a run whose laser gave nothing to match, from the
+    estimator's and the front end's counts (keyframes refused and matches failed, by
+    reason)."""
+    scans = counts["scans"]
+    refused = {k.split(":", 1)[1]: v for k, v in counts.items() if k.startswith("keyframe_")}
+    failed = {k.split(":", 1)[1]: v for k, v in tracker_counts.items() if k.startswith("failed:")}
+    why = ", ".join(
+        f"{n} {reason.replace('_', ' ')}" for reason, n in {**refused, **failed}.items()
+    )
+    return (
+        f"graph SLAM: the laser gave nothing to match in {scans} scans"
+        + (f" ({why})" if why else "")
+        + ": check the laser's range limits (min_range, max_range) and its beam angles"
+    )
