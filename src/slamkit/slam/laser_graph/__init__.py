@@ -3,20 +3,16 @@ correlative matching in a search region grown with the path travelled and verifi
 the pose graph optimised by :func:`slamkit.optim.optimize` (see
 ``docs/estimators/laser_graph.md``).
 
-* :mod:`~slamkit.slam.laser_graph.config`: :class:`LaserGraphConfig` and its sections.
+* :mod:`~slamkit.slam.laser_graph.config`: :class:`LaserGraphConfig` and its sections (the
+  few settings a new robot may need; every other number is a constant beside its code).
 * :mod:`~slamkit.slam.laser_graph.frontend`: scan-to-keyframe tracking, neighbour edges.
 * :mod:`~slamkit.slam.laser_graph.loops`: candidates, submaps, verification.
 * :mod:`~slamkit.slam.laser_graph.backend`: the pose graph and its optimisation.
 * :mod:`~slamkit.slam.laser_graph.estimator`: :class:`LaserGraphSlam` on the shell.
 """
 
-from slamkit.slam.laser_graph.backend import PoseGraph, edge_chi2
-from slamkit.slam.laser_graph.config import (
-    FrontEndSettings,
-    LaserGraphConfig,
-    LoopSettings,
-    default_optimizer,
-)
+from slamkit.slam.laser_graph.backend import PoseGraph, default_optimizer, edge_chi2
+from slamkit.slam.laser_graph.config import FrontEndSettings, LaserGraphConfig, LoopSettings
 from slamkit.slam.laser_graph.estimator import NO_ODOMETRY, LaserGraphSlam
 from slamkit.slam.laser_graph.frontend import Keyframe, Tracker, floored_information
 from slamkit.slam.laser_graph.loops import (

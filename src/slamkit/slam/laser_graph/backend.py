@@ -20,18 +20,42 @@ from slamkit.errors import ConvergenceError, ShapeError
 from slamkit.geometry.angles import wrap_angle
 from slamkit.geometry.pose2 import between
 from slamkit.optim.data import EdgeSet, GraphData
-from slamkit.optim.settings import OptimizerConfig
+from slamkit.optim.settings import OptimizerConfig, RobustConfig, StoppingConfig
 from slamkit.optim.solvers import optimize
 
 __all__ = [
+    "MAX_CHI2",
+    "MAX_EDGE_CHI2",
     "EdgeKind",
     "OptimizationRecord",
     "PoseGraph",
     "RefusedClosure",
+    "default_optimizer",
     "edge_chi2",
     "optimize_consistent",
     "rejudge",
 ]
+
+# Constants that were settings until 2026-12-07 (docs/estimators/laser_graph.md, "Settings").
+# The consistency check (optimize_consistent, rejudge): optimising the graph with new closures
+# may raise its total Σ eᵀ Ω e by at most MAX_CHI2 per closure (generous: the front end's edges
+# are treated as independent, so a long chain looks surer than it is), and may move no earlier
+# edge's residual by more than MAX_EDGE_CHI2 in its own metric, Δeᵀ Ω Δe (10 standard
+# deviations).
+MAX_CHI2 = 100.0
+MAX_EDGE_CHI2 = 100.0
+
+
+def default_optimizer() -> OptimizerConfig:
+    """The back end's optimiser: Levenberg-Marquardt on plain least squares (closures are
+    checked for consistency instead, which a robust kernel would blur: it gives a correct
+    closure that must pull a long drift too little weight to close the loop), at most 20
+    iterations from the warm start."""
+    return OptimizerConfig(
+        robust=RobustConfig(kernel="none"),
+        stopping=StoppingConfig(max_iterations=20, relative_tolerance=1e-5),
+    )
+
 
 EdgeKind = Literal["odometry", "loop"]
 """Where an edge came from: the scan match to the previous keyframe (or the wheels when it

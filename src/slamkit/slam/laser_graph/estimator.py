@@ -45,13 +45,17 @@ from slamkit.scanmatch.normal_icp import NormalCloud
 from slamkit.scanmatch.point_map import ScanNormals, scan_normals
 from slamkit.scanmatch.result import scan_points
 from slamkit.slam.laser_graph.backend import (
+    MAX_CHI2,
+    MAX_EDGE_CHI2,
     PoseGraph,
     RefusedClosure,
+    default_optimizer,
     optimize_consistent,
     rejudge,
 )
 from slamkit.slam.laser_graph.config import LaserGraphConfig
 from slamkit.slam.laser_graph.frontend import (
+    NORMAL_ICP,
     Keyframe,
     Tracker,
     floored_information,
@@ -59,6 +63,7 @@ from slamkit.slam.laser_graph.frontend import (
 )
 from slamkit.slam.laser_graph.health import laser_unusable, run_warnings
 from slamkit.slam.laser_graph.loops import (
+    PAIR_KEYFRAMES,
     LoopMatch,
     SubmapCache,
     consistent_partners,
@@ -71,6 +76,18 @@ __all__ = ["NO_ODOMETRY", "LaserGraphSlam"]
 
 NO_ODOMETRY = "none: scan matching alone (constant-velocity prediction)"
 """What the diagnostics say of a run on a log without odometry."""
+
+# Constants that were settings until 2026-12-07 (docs/estimators/laser_graph.md, "Settings").
+# A closure's (floored) match covariance is multiplied by this: its reference is a submap of
+# several keyframes whose relative poses carry errors of their own.
+CLOSURE_COV_SCALE = 4.0
+# The graph is optimised after the keyframe that brings new closures, at most every this many
+# keyframes (closures wait in between).
+OPTIMIZE_EVERY = 1
+# The occupancy map of the optimised keyframes leaves out readings beyond this [m] (long rays
+# through doors and windows fill a grid with free space that a short-range view does not
+# contradict).
+MAP_MAX_RANGE = 30.0
 
 
 class LaserGraphSlam(EstimatorShell):
@@ -97,15 +114,13 @@ class LaserGraphSlam(EstimatorShell):
             None if motion is None else motion.model,
             None if motion is None else motion.noise_cov,
             config.frontend,
-            config.plicp,
-            config.normal_icp,
         )
         reference = config.frontend.reference
         if reference == "auto":
             reference = "keyframe" if motion is None else "map"
         self._reference = reference  # what the front end tracks against (resolved)
         self._local: NormalCloud | None = None  # the local map in the keyframe's frame
-        self._graph = PoseGraph(config.optimizer)
+        self._graph = PoseGraph(default_optimizer())
         self._keys: list[Keyframe] = []
         self._ranges: list[FloatArray] = []
         self._normals: dict[int, ScanNormals] = {}  # each keyframe's, once in a submap
@@ -183,13 +198,13 @@ class LaserGraphSlam(EstimatorShell):
         path = SmoothedTrajectory(np.asarray(self._stamps), compose(bases, offsets))
         grid = None
         diagnostics = self._diagnostics()
-        if self._cfg.map.enabled and len(self._graph):
+        if len(self._graph):
             mapper = OccupancyMapper(
                 self._laser,
                 OccupancyMappingConfig(
-                    resolution=self._cfg.map.resolution,
+                    resolution=self._cfg.map_resolution,
                     bounds="grow",
-                    model=InverseSensorModel(max_range=self._cfg.map.max_range),
+                    model=InverseSensorModel(max_range=MAP_MAX_RANGE),
                 ),
                 None,
             )
@@ -257,13 +272,12 @@ class LaserGraphSlam(EstimatorShell):
         self._tracker.reset()
         if self._cfg.loops.enabled and k > 0:
             self._close_loops(k)
-        if self._pending and k - self._last_solve >= self._cfg.loops.optimize_every:
+        if self._pending and k - self._last_solve >= OPTIMIZE_EVERY:
             self._optimize()
-        f = self._cfg.frontend
         if self._reference == "map":
             self._local = local_map(
-                self._graph.poses, [kf.points for kf in self._keys], k, f.map_keyframes,
-                f.voxel, self._scan_normals,
+                self._graph.poses, [kf.points for kf in self._keys], k,
+                scan_normals=self._scan_normals,
             )  # fmt: skip
 
     def _close_loops(self, k: int) -> None:
@@ -277,7 +291,7 @@ class LaserGraphSlam(EstimatorShell):
             ref_points, cloud, reference = self._submaps.get(poses, points, j)
             found = verify_closure(
                 ref_points, cloud, self._keys[k].points, between(poses[j], poses[k]),
-                window, s, self._cfg.normal_icp, reference=reference,
+                window, s, NORMAL_ICP, reference=reference,
             )  # fmt: skip
             if isinstance(found, str):
                 self._counts[f"loop_rejected:{found}"] += 1
@@ -295,16 +309,15 @@ class LaserGraphSlam(EstimatorShell):
     def _confirm(self, poses: FloatArray, new: tuple[int, int, LoopMatch]) -> None:
         """Add ``new`` and its waiting partners once one agrees with it (pairwise
         consistency, :func:`~slamkit.slam.laser_graph.loops.pair_consistent`)."""
-        s = self._cfg.loops
         j, k, found = new
-        self._waiting = [w for w in self._waiting if k - w[1] <= s.pair_keyframes]
+        self._waiting = [w for w in self._waiting if k - w[1] <= PAIR_KEYFRAMES]
         near = [
             w
             for w in [*self._waiting, *self._confirmed]
-            if abs(w[0] - j) <= s.pair_keyframes and 0 < k - w[1] <= s.pair_keyframes
+            if abs(w[0] - j) <= PAIR_KEYFRAMES and 0 < k - w[1] <= PAIR_KEYFRAMES
         ]
         agree = consistent_partners(
-            poses, (j, k, found.pose), [(w[0], w[1], w[2].pose) for w in near], s
+            poses, (j, k, found.pose), [(w[0], w[1], w[2].pose) for w in near]
         )
         partners = [w for w, ok in zip(near, agree, strict=True) if ok]
         if not partners:
@@ -313,26 +326,25 @@ class LaserGraphSlam(EstimatorShell):
         for w in [*partners, new]:
             if w in self._confirmed:
                 continue
-            info = floored_information(w[2].cov, self._cfg.frontend, scale=s.cov_scale)
+            info = floored_information(w[2].cov, scale=CLOSURE_COV_SCALE)
             self._graph.add_edge(w[0], w[1], w[2].pose, info, "loop")
             self._counts["loops_added"] += 1
             self._pending += 1
             if w in self._waiting:
                 self._waiting.remove(w)
-        self._confirmed = [*self._confirmed[-4 * s.pair_keyframes :], *partners, new]
+        self._confirmed = [*self._confirmed[-4 * PAIR_KEYFRAMES :], *partners, new]
 
     def _optimize(self) -> None:
         kinds = self._graph.edge_kinds()
         pending = [e for e in range(len(kinds)) if kinds[e] == "loop"][-self._pending :]
         if not self._pending:
             pending = []
-        s = self._cfg.loops
         # The pending closures as they are, for re-judging (the check removes refused ones).
         offered: dict[int, RefusedClosure] = {}
-        if pending and s.rejudge:
+        if pending:
             i, j, z, info = self._graph.edges()
             offered = {e: RefusedClosure(int(i[e]), int(j[e]), z[e], info[e]) for e in pending}
-        removed = optimize_consistent(self._graph, pending, s.max_chi2, s.max_edge_chi2)
+        removed = optimize_consistent(self._graph, pending, MAX_CHI2, MAX_EDGE_CHI2)
         self._counts["loop_rejected:chi2"] += len(removed)
         self._counts["solves"] += 1
         self._pending = 0
@@ -340,12 +352,12 @@ class LaserGraphSlam(EstimatorShell):
         if removed and offered:
             # Refused closures wait, while their newer end is recent, for a majority
             # against the closures that refused them (backend.rejudge).
-            window = 2 * s.pair_keyframes
+            window = 2 * PAIR_KEYFRAMES
             newest = len(self._graph) - 1
             self._refused = [c for c in self._refused if newest - c.j <= window]
             self._refused += [offered[e] for e in removed]
             self._refused, readmitted, reversed_ = rejudge(
-                self._graph, self._refused, window, s.max_chi2, s.max_edge_chi2
+                self._graph, self._refused, window, MAX_CHI2, MAX_EDGE_CHI2
             )
             self._counts["loops_readmitted"] += readmitted
             self._counts["loops_reversed"] += reversed_

@@ -50,11 +50,36 @@ from slamkit.slam.laser_graph.config import FrontEndSettings
 
 __all__ = [
     "COAST_SEARCH",
+    "COV_FLOOR_DEG",
+    "COV_FLOOR_XY",
+    "LOCAL_MAP_KEYFRAMES",
+    "LOCAL_MAP_VOXEL",
+    "MIN_OVERLAP",
+    "NORMAL_ICP",
+    "PLICP",
     "Keyframe",
     "Tracker",
+    "cov_floor",
     "floored_information",
     "local_map",
 ]
+
+# Constants that were settings until 2026-12-07 (docs/estimators/laser_graph.md, "Settings").
+# The map reference: the local map holds the last LOCAL_MAP_KEYFRAMES keyframes, one point per
+# square cell of LOCAL_MAP_VOXEL [m] (the map against the keyframe: "How it works").
+LOCAL_MAP_KEYFRAMES = 20
+LOCAL_MAP_VOXEL = 0.05
+# A scan also becomes a keyframe when its match paired less than this fraction of its points.
+MIN_OVERLAP = 0.6
+# The standard deviations added (in quadrature) to a match's covariance in x and y [m] and in
+# heading [deg] before it weights an edge or a prior: scan matchers' own covariances ignore
+# the map's systematic errors.
+COV_FLOOR_XY = 0.01
+COV_FLOOR_DEG = 0.25
+# The scan matchers: point-to-line ICP against the keyframe, point-to-normal ICP against the
+# local map, the relocation's refinement and the loop closures' refinement (their defaults).
+PLICP = PlIcpConfig()
+NORMAL_ICP = NormalIcpConfig()
 
 
 COAST_SEARCH = CorrelativeConfig(
@@ -78,13 +103,17 @@ class Keyframe:
     travelled: float
 
 
-def floored_information(
-    cov: FloatArray, settings: FrontEndSettings, scale: float = 1.0
-) -> FloatArray:
+def cov_floor() -> FloatArray:
+    """The floor ``F = diag(σ_xy², σ_xy², σ_θ²)`` (:data:`COV_FLOOR_XY`,
+    :data:`COV_FLOOR_DEG`) added to a match's covariance ``(3, 3)``."""
+    s_xy, s_t = COV_FLOOR_XY, math.radians(COV_FLOOR_DEG)
+    return np.diag([s_xy**2, s_xy**2, s_t**2])
+
+
+def floored_information(cov: FloatArray, scale: float = 1.0) -> FloatArray:
     """The information ``(scale Σ + F)⁻¹`` of a match covariance ``Σ (3, 3)`` with the floor
-    ``F = diag(σ_xy², σ_xy², σ_θ²)`` of ``settings`` (symmetrised)."""
-    s_xy, s_t = settings.cov_floor_xy, math.radians(settings.cov_floor_deg)
-    c = scale * np.asarray(cov, dtype=np.float64) + np.diag([s_xy**2, s_xy**2, s_t**2])
+    ``F`` (:func:`cov_floor`, symmetrised)."""
+    c = scale * np.asarray(cov, dtype=np.float64) + cov_floor()
     c = 0.5 * (c + c.T)
     info = np.linalg.solve(c, np.eye(3))
     return 0.5 * (info + info.T)
@@ -111,8 +140,8 @@ class Tracker:
         model: MotionModel | None,
         noise_cov: FloatArray | None,
         settings: FrontEndSettings,
-        plicp_config: PlIcpConfig,
-        normal_icp_config: NormalIcpConfig,
+        plicp_config: PlIcpConfig = PLICP,
+        normal_icp_config: NormalIcpConfig = NORMAL_ICP,
     ) -> None:
         self.model = model
         self.normal_icp = normal_icp_config
@@ -190,8 +219,7 @@ class Tracker:
         try:
             start = self.offset if self.velocity is None else self._search(reference, points)
             if isinstance(reference, NormalCloud):
-                s_xy, s_t = self.settings.cov_floor_xy, math.radians(self.settings.cov_floor_deg)
-                prior = self.odometry_cov + np.diag([s_xy**2, s_xy**2, s_t**2])
+                prior = self.odometry_cov + cov_floor()
                 result = normal_icp(
                     reference, points, start, self.normal_icp,
                     prior_information=np.linalg.solve(prior, np.eye(3)),
@@ -218,8 +246,7 @@ class Tracker:
         outside the gate, the wheels glitched: the step is overridden (counted, and the
         correction kept in ``last_override``) and the wheels' offset starts again from the
         laser's pose, so the glitch does not pull later priors back."""
-        s_xy, s_t = self.settings.cov_floor_xy, math.radians(self.settings.cov_floor_deg)
-        prior = self.odometry_cov + np.diag([s_xy**2, s_xy**2, s_t**2])
+        prior = self.odometry_cov + cov_floor()
         result: MatchResult | None = None
         try:
             result = normal_icp(
@@ -296,23 +323,23 @@ class Tracker:
         return (
             math.hypot(o[0], o[1]) >= s.keyframe_distance
             or abs(o[2]) >= math.radians(s.keyframe_angle_deg)
-            or self.overlap < s.min_overlap
+            or self.overlap < MIN_OVERLAP
         )
 
     def edge(self) -> tuple[FloatArray, FloatArray, bool]:
         """The edge from the keyframe to the current scan: measurement, information, and
         whether it came from the scan match (else the odometry)."""
         if self.match_cov is not None:
-            return self.offset.copy(), floored_information(self.match_cov, self.settings), True
-        return self.offset.copy(), floored_information(self.odometry_cov, self.settings), False
+            return self.offset.copy(), floored_information(self.match_cov), True
+        return self.offset.copy(), floored_information(self.odometry_cov), False
 
 
 def local_map(
     poses: FloatArray,
     points: list[FloatArray],
     k: int,
-    count: int,
-    voxel: float,
+    count: int = LOCAL_MAP_KEYFRAMES,
+    voxel: float = LOCAL_MAP_VOXEL,
     scan_normals: Callable[[int], ScanNormals] | None = None,
 ) -> NormalCloud:
     """The points of keyframes ``k - count + 1, ..., k`` (``points[i]`` in keyframe ``i``'s

@@ -24,15 +24,15 @@ true place and its aliases score alike, and which one wins depends on noise and 
 the estimate has drifted; the window is widened because the true place may lie just
 outside it when the drift is near the window's size. The optimum is
 refined by point-to-normal ICP against the same submap, which must pair
-``min_inliers`` of the scan and may move the optimum only a few cells (a refinement that
+:data:`MIN_INLIERS` of the scan and may move the optimum only a few cells (a refinement that
 walks away means the correlative peak was not a real alignment). The back end then checks
 consistency (:mod:`slamkit.slam.laser_graph.backend`: a closure whose residual stays large
 after optimisation is removed).
 
 **Pairwise consistency.** A verified closure enters the graph only once another closure
-nearby (both ends within ``pair_keyframes`` keyframes of its own) agrees with it: the cycle
+nearby (both ends within :data:`PAIR_KEYFRAMES` keyframes of its own) agrees with it: the cycle
 ``T_j_k`` vs ``T_j_j' ⊕ T_j'_k' ⊕ T_k'_k`` (the short chains from the current estimate)
-must close within ``pair_xy`` / ``pair_deg``. Aliased matches in a corridor or between
+must close within :data:`PAIR_XY` / :data:`PAIR_DEG`. Aliased matches in a corridor or between
 look-alike rooms land at poses that do not agree from one keyframe to the next.
 """
 
@@ -93,10 +93,35 @@ class LoopMatch:
     inliers: float
 
 
+# Constants that were settings until 2026-12-07 (docs/estimators/laser_graph.md, "Settings").
+# The search region at zero travel: radius [m] and rotation half-window [deg] (grown with the
+# path by LoopSettings.radius_per_metre and .angle_per_metre_deg).
+SEARCH_RADIUS = 0.5
+SEARCH_ANGLE_DEG = 10.0
+# Candidates tried per new keyframe, nearest first, at least SUBMAP_KEYFRAMES apart; a
+# candidate's submap is its own scan and those of SUBMAP_KEYFRAMES // 2 keyframes either side.
+MAX_CANDIDATES = 2
+SUBMAP_KEYFRAMES = 11
+# The correlative lookup grid: cell [m] and smear [m].
+GRID_RESOLUTION = 0.05
+GRID_SIGMA = 0.05
+# Verification: the refining point-to-normal ICP must pair this fraction of the scan and may
+# move the correlative optimum at most this far [m] and turn it at most this much [deg].
+MIN_INLIERS = 0.6
+MAX_REFINEMENT_XY = 0.25
+MAX_REFINEMENT_DEG = 3.0
+# Pairwise consistency: a verified closure waits for a partner whose ends both lie within
+# PAIR_KEYFRAMES keyframes of its own and which closes the cycle with it within PAIR_XY [m]
+# and PAIR_DEG [deg].
+PAIR_KEYFRAMES = 10
+PAIR_XY = 0.1
+PAIR_DEG = 1.5
+
+
 def search_window(travel: float, settings: LoopSettings) -> tuple[float, float]:
     """The search radius [m] and rotation half-window [rad] after ``travel`` metres."""
-    r = min(settings.radius + settings.radius_per_metre * travel, settings.max_radius)
-    a = min(settings.angle_deg + settings.angle_per_metre_deg * travel, settings.max_angle_deg)
+    r = min(SEARCH_RADIUS + settings.radius_per_metre * travel, settings.max_radius)
+    a = min(SEARCH_ANGLE_DEG + settings.angle_per_metre_deg * travel, settings.max_angle_deg)
     return r, math.radians(a)
 
 
@@ -108,23 +133,23 @@ def loop_candidates(
 ) -> list[int]:
     """The candidates for keyframe ``k``: keyframes ``j < k`` with ``travelled[k] -
     travelled[j] ≥ min_travel`` within the search radius of ``positions[k]`` (``(K, 2)``
-    estimated positions, ``(K,)`` path lengths), nearest first, at most ``max_candidates``,
-    at least ``submap_keyframes`` apart in index. The radius grows with the path travelled
-    since ``j``, the distance a front end drifts over."""
+    estimated positions, ``(K,)`` path lengths), nearest first, at most
+    :data:`MAX_CANDIDATES`, at least :data:`SUBMAP_KEYFRAMES` apart in index. The radius
+    grows with the path travelled since ``j``, the distance a front end drifts over."""
     travel = travelled[k] - travelled[:k]
     eligible = np.flatnonzero(travel >= settings.min_travel)
     if eligible.size == 0:
         return []
     d = np.hypot(*(positions[eligible] - positions[k]).T)
     s = travel[eligible]
-    radius = np.minimum(settings.radius + settings.radius_per_metre * s, settings.max_radius)
+    radius = np.minimum(SEARCH_RADIUS + settings.radius_per_metre * s, settings.max_radius)
     inside = d <= radius
     order = eligible[inside][np.argsort(d[inside], kind="stable")]
     chosen: list[int] = []
     for j in order:
-        if all(abs(int(j) - c) >= settings.submap_keyframes for c in chosen):
+        if all(abs(int(j) - c) >= SUBMAP_KEYFRAMES for c in chosen):
             chosen.append(int(j))
-            if len(chosen) == settings.max_candidates:
+            if len(chosen) == MAX_CANDIDATES:
                 break
     return chosen
 
@@ -171,7 +196,7 @@ class SubmapCache:
     ) -> tuple[FloatArray, NormalCloud, CorrelativeReference | None]:
         """Candidate ``j``'s submap points, cloud and reference (None: no points, which
         :func:`verify_closure` reports) at ``poses (K, 3)``."""
-        half = self.settings.submap_keyframes // 2
+        half = SUBMAP_KEYFRAMES // 2
         lo, hi = max(j - half, 0), min(j + half + 1, len(points))
         key = (lo, hi, np.ascontiguousarray(poses[lo:hi]).tobytes())
         found = self._used.get(j) or self._last.get(j)
@@ -199,8 +224,8 @@ def _search_config(settings: LoopSettings, window: tuple[float, float]) -> Corre
     return CorrelativeConfig(
         window_xy=radius,
         window_theta=angle,
-        resolution=settings.resolution,
-        sigma=settings.sigma,
+        resolution=GRID_RESOLUTION,
+        sigma=GRID_SIGMA,
         levels=5,
         min_score=settings.min_score,
     )
@@ -250,33 +275,29 @@ def verify_closure(
         fine: MatchResult = normal_icp(reference_cloud, points, coarse.pose, icp_config)
     except MatchError as exc:
         return f"refine:{exc.reason}"
-    if fine.inlier_fraction < settings.min_inliers:
+    if fine.inlier_fraction < MIN_INLIERS:
         return "inliers"
     step = between(coarse.pose, fine.pose)
-    if math.hypot(step[0], step[1]) > settings.max_refinement_xy or abs(
+    if math.hypot(step[0], step[1]) > MAX_REFINEMENT_XY or abs(
         wrap_angle_float(float(step[2]))
-    ) > math.radians(settings.max_refinement_deg):
+    ) > math.radians(MAX_REFINEMENT_DEG):
         return "refinement"
     return LoopMatch(fine.pose, fine.cov, coarse.score, fine.inlier_fraction)
 
 
 def pair_consistent(
-    poses: FloatArray,
-    a: tuple[int, int, FloatArray],
-    b: tuple[int, int, FloatArray],
-    settings: LoopSettings,
+    poses: FloatArray, a: tuple[int, int, FloatArray], b: tuple[int, int, FloatArray]
 ) -> bool:
     """Whether closures ``a = (j, k, T_j_k)`` and ``b = (j', k', T_j'_k')`` agree: the cycle
     ``between(T_j_k, T_j_j' ⊕ T_j'_k' ⊕ T_k'_k)`` (chains at ``poses (K, 3)``) within
-    ``pair_xy`` [m] and ``pair_deg``."""
-    return consistent_partners(poses, a, [b], settings)[0]
+    :data:`PAIR_XY` [m] and :data:`PAIR_DEG`."""
+    return consistent_partners(poses, a, [b])[0]
 
 
 def consistent_partners(
     poses: FloatArray,
     a: tuple[int, int, FloatArray],
     others: list[tuple[int, int, FloatArray]],
-    settings: LoopSettings,
 ) -> list[bool]:
     """:func:`pair_consistent` of ``a`` with each of ``others``, the cycles composed for all
     of them at once (the same numbers as one at a time)."""
@@ -288,9 +309,8 @@ def consistent_partners(
     z2 = np.array([o[2] for o in others], dtype=np.float64).reshape(-1, 3)
     via = compose(compose(between(poses[j], poses[j2]), z2), between(poses[k2], poses[k]))
     e = between(z, via)
-    limit = math.radians(settings.pair_deg)
+    limit = math.radians(PAIR_DEG)
     return [
-        math.hypot(float(x), float(y)) <= settings.pair_xy
-        and abs(wrap_angle_float(float(t))) <= limit
+        math.hypot(float(x), float(y)) <= PAIR_XY and abs(wrap_angle_float(float(t))) <= limit
         for x, y, t in e.tolist()
     ]
