@@ -105,10 +105,8 @@ def test_needs_a_laser_and_odometry_and_validates_its_settings() -> None:
         LaserOdometryConfig(voxel=0.0)
     with pytest.raises(ConfigError, match="reference"):
         config_from_mapping(LaserOdometryConfig, {"reference": "scan"})
-    cfg = config_from_mapping(
-        LaserOdometryConfig, {"plicp": {"max_gap": 0.3}, "map": {"resolution": 0.1}}
-    )
-    assert cfg.plicp.max_gap == 0.3 and cfg.map.resolution == 0.1
+    cfg = config_from_mapping(LaserOdometryConfig, {"map": {"resolution": 0.1}})
+    assert cfg.map.resolution == 0.1
 
 
 # Published "scan matching" (Kümmerle et al., Autonomous Robots 2009; DATA.md) [m].
