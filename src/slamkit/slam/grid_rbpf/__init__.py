@@ -11,7 +11,7 @@ from slamkit.slam.grid_rbpf.estimator import (
     TILE_CELLS,
     GridRbpf,
 )
-from slamkit.slam.grid_rbpf.guard import contradiction, map_fit, relocate_on_map
+from slamkit.slam.grid_rbpf.guard import map_fit, relocate_on_map
 from slamkit.slam.grid_rbpf.maps import TiledMap, TilePool, scan_cells
 from slamkit.slam.grid_rbpf.proposal import (
     MODE_NOISE,
@@ -43,7 +43,6 @@ __all__ = [
     "Scan",
     "TilePool",
     "TiledMap",
-    "contradiction",
     "gaussian_proposal",
     "map_fit",
     "mode_proposal",

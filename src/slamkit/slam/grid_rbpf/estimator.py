@@ -8,7 +8,11 @@ of travel or ``update_angle_deg`` of turning since the last update, summed step 
 robot that backs up and drives on has travelled the whole way, whatever its net motion; the
 scans between are not used; the odometry accumulates into one motion ``Δ`` in the frame of
 the last update, whose noise grows with that travel).
-At an update, for every particle:
+At an update the guard (:mod:`.guard`) first weighs the laser against the wheels on the best
+particle's map: where the map refutes the wheels' step (an odometry glitch) and the scan
+fits it elsewhere, ``Δ`` becomes the laser's step for every particle, and the glitch is
+counted, listed and warned about (:mod:`slamkit.estimation.health`). Then, for every
+particle:
 
 1. predict ``x̂ = x' ⊕ Δ``;
 2. build the likelihood field of the particle's own map over the box of the scan's end
@@ -70,7 +74,7 @@ from slamkit.scanmatch.relocate import TRUSTED_FIT, WINDOW_XY, judge
 from slamkit.scanmatch.result import MatchResult, scan_points
 from slamkit.scanmatch.to_map import MapMatchConfig, match_to_map
 from slamkit.slam.grid_rbpf.config import GridRbpfConfig
-from slamkit.slam.grid_rbpf.guard import contradiction, map_fit, relocate_on_map
+from slamkit.slam.grid_rbpf.guard import map_fit, relocate_on_map
 from slamkit.slam.grid_rbpf.maps import TiledMap, TilePool, scan_cells
 from slamkit.slam.grid_rbpf.proposal import (
     Scan,
@@ -161,11 +165,10 @@ class GridRbpf(EstimatorShell):
             ("field", "match", "proposal", "integrate", "guard"), 0.0
         )
         self._snapshots = SpreadSnapshots(cfg.snapshots)
-        # The guard's record (:mod:`.guard`): overridden glitches (stamp, T_wheels_laser),
-        # the longest unmatched stretch, and the best particle's contradiction per update.
+        # The guard's record (:mod:`.guard`): overridden glitches (stamp, T_wheels_laser)
+        # and the longest unmatched stretch.
         self._overrides: list[tuple[float, FloatArray]] = []
         self._stretch = UnmatchedStretch()
-        self._contradiction: list[tuple[float, float]] = []
         self._last_t = dataset.start_time
 
     # -- the Estimator protocol ---------------------------------------------------------
@@ -259,7 +262,6 @@ class GridRbpf(EstimatorShell):
             "odometry_overridden": len(self._overrides),
             "odometry_overrides": override_rows(self._overrides),
             "lost": c["lost"],
-            "contradiction": [list(x) for x in self._contradiction],
             "neff_mean": float(neff.mean()) if neff.size else None,
             "neff_min": float(neff.min()) if neff.size else None,
             "maps": self._pool.stats(),
@@ -356,7 +358,6 @@ class GridRbpf(EstimatorShell):
             delta = self._guard(event.t, points, delta)
         n = len(self._maps)
         drawn = np.empty((n, 3))
-        contradicted = np.zeros(n)
         for k in range(n):
             predicted = compose(self._poses[k], delta)
             if not (finite_motion and np.isfinite(predicted).all()):
@@ -399,8 +400,6 @@ class GridRbpf(EstimatorShell):
                     )
             self._seconds["proposal"] += time.perf_counter() - tic
             drawn[k] = pose
-            if field is not None:
-                contradicted[k] = contradiction(field, points, pose)
             if not (np.isfinite(pose).all() and math.isfinite(factor)):
                 self._counts["dead"] += 1
                 self._logw[k] = -math.inf
@@ -408,7 +407,6 @@ class GridRbpf(EstimatorShell):
             self._logw[k] += factor
         # Normalise (ConvergenceError when every particle died), then map from the draws.
         logw, _ = normalize_log_weights(self._logw)
-        self._contradiction.append((float(event.t), float(contradicted[int(np.argmax(logw))])))
         for k in range(n):
             if np.isfinite(logw[k]):
                 self._integrate(k, drawn[k], event.ranges)

@@ -20,10 +20,7 @@ are moved, the best particle's scan is therefore checked on its own map:
 3. when the laser wins, every particle's step is the laser's instead of the wheels' (the
    estimator's ``_update``); a correction beyond the gate is an overridden glitch.
 
-:func:`contradiction` measures the other failure a particle filter has: a loop whose drift
-is larger than the particles' spread is not closed; the scan then sees walls where the
-map, from the first visit, holds free space. The share of end points landing on cells the
-map is sure are free (:data:`FREE_PROBABILITY`) is that contradiction.
+Measured: ``docs/estimators/grid_rbpf.md``, "Odometry glitches".
 """
 
 from __future__ import annotations
@@ -42,19 +39,13 @@ from slamkit.scanmatch.to_map import MapMatchConfig, match_to_map
 
 __all__ = [
     "FIT_TOLERANCE",
-    "FREE_PROBABILITY",
     "MAP_SEARCH",
-    "contradiction",
     "map_fit",
     "relocate_on_map",
 ]
 
 FIT_TOLERANCE = 0.05
 """[m] an end point this near a wall cell's centre lies on the map (surface_fit's 5 cm)."""
-
-FREE_PROBABILITY = 0.1
-"""A cell whose occupancy probability is below this is free for sure (seen through many
-times); an end point there contradicts the map."""
 
 MAP_SEARCH = replace(RELOCATE_SEARCH, levels=5)
 """The relocation's search (every heading, ±1.5 m) on a likelihood field, whose grid is the
@@ -86,16 +77,3 @@ def relocate_on_map(
     except MatchError:
         return None
     return Relocation(refined, map_fit(field, points, refined.pose))
-
-
-def contradiction(field: LikelihoodField, points: FloatArray, pose: FloatArray) -> float:
-    """The share of the end points ``points (K, 2)`` that ``pose`` puts on cells of
-    ``field``'s map whose occupancy probability is below :data:`FREE_PROBABILITY` (free
-    for sure): walls the scan sees where the map says there are none. 0 for no points."""
-    if points.shape[0] == 0:
-        return 0.0
-    grid = field.grid
-    cells = grid.world_to_cell(transform_points(pose, points))
-    inside = grid.contains(cells)
-    p = grid.prob[cells[inside, 0], cells[inside, 1]]
-    return float(np.count_nonzero(p < FREE_PROBABILITY)) / points.shape[0]
