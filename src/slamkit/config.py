@@ -300,6 +300,38 @@ RENAMED: dict[str, str] = {
     "relocated over every heading and judged against the wheels (scanmatch.relocate)",
     "recovery_span_deg": "laser odometry: removed; the relocation searches every heading",
     "recovery_step_deg": "laser odometry: removed; the relocation searches every heading",
+    # laser odometry, 2026-12-07: 45 settings to 15 (docs/estimators/laser_odometry.md).
+    "matcher": "laser odometry: removed 2026-12-07; the keyframe reference matches by "
+    "point-to-line ICP (point-to-point ICP was never measured better)",
+    "odometry_prior": "laser odometry: removed 2026-12-07; the map reference always holds the "
+    "match to the odometry's prediction (without it ACES and Freiburg 079 lost: 0.154 m and "
+    "1.74 m against 0.106 m and 0.689 m, and the rooms' corridors slid)",
+    "plicp": "laser odometry: removed 2026-12-07; the matchers' settings are the constants "
+    "PLICP and NORMAL_ICP (never tuned but for the 60 ICP steps)",
+    "normal_icp": "laser odometry: removed 2026-12-07; the matchers' settings are the "
+    "constants PLICP and NORMAL_ICP (never tuned but for the 60 ICP steps)",
+    "icp": "laser odometry: removed 2026-12-07 with point-to-point ICP (never measured better)",
+    # grid RBPF, 2026-12-07: 34 settings to 19 (docs/estimators/grid_rbpf.md, "Settings").
+    "map_range": "grid RBPF: now max_range, one limit for mapping and matching",
+    "match_range": "grid RBPF: now max_range, one limit for mapping and matching",
+    "tile_cells": "grid RBPF: removed 2026-12-07; tiles are 64 cells a side (TILE_CELLS)",
+    "match_iterations": "grid RBPF: removed 2026-12-07; never tuned, now the constant MATCH",
+    "match_tolerance_xy": "grid RBPF: removed 2026-12-07; never tuned, now the constant MATCH",
+    "match_tolerance_deg": "grid RBPF: removed 2026-12-07; never tuned, now the constant MATCH",
+    "proposal_temperature": "grid RBPF: removed 2026-12-07; the proposal uses the likelihood "
+    "untempered (a temperature of 10 there lost on the simulated rooms)",
+    "stencil_sigmas": "grid RBPF: removed 2026-12-07; never tuned (STENCIL_SIGMAS = 1.5)",
+    "mode_noise_xy": "grid RBPF: removed 2026-12-07; never tuned (MODE_NOISE, 1 cm and 0.3°)",
+    "mode_noise_deg": "grid RBPF: removed 2026-12-07; never tuned (MODE_NOISE, 1 cm and 0.3°)",
+    "motion_floor_xy": "grid RBPF: removed 2026-12-07; never tuned (MOTION_FLOOR, 1 cm, 0.5°)",
+    "motion_floor_deg": "grid RBPF: removed 2026-12-07; never tuned (MOTION_FLOOR, 1 cm, 0.5°)",
+    "recovery_window_xy": "grid RBPF: removed 2026-12-07; the recovery searches ±0.5 m, ±30° "
+    "(RECOVERY_SEARCH); a larger error is the guard's relocation over every heading",
+    "recovery_window_deg": "grid RBPF: removed 2026-12-07; the recovery searches ±0.5 m, ±30° "
+    "(RECOVERY_SEARCH); a larger error is the guard's relocation over every heading",
+    "resample_threshold": "grid RBPF: removed 2026-12-07; it resamples when N_eff < N/2 "
+    "(RESAMPLE_SHARE, Grisetti et al. 2007)",
+    "max_updates": "grid RBPF: removed 2026-12-07; never used (cut the data set instead)",
 }
 """Settings that were renamed or removed, with what to write instead (named in the error).
 A key ``"SECTION.name"`` applies to ``name`` in the sections whose ``SECTION`` is that (so a

@@ -114,7 +114,7 @@ def test_gaussian_proposal_normaliser_on_a_flat_likelihood() -> None:
     weights 1.5σ N(.; 0, σ²), (1 + 2 e^(-1.125)) · 1.5 / √(2π) = 0.98697, cubed."""
     grid = OccupancyGrid(np.full((40, 40), 0.2), 0.1)
     field = LikelihoodField.from_grid(grid, 0.05, max_range=10.0)
-    cfg = GridRbpfConfig(likelihood_temperature=10.0, proposal_temperature=1.0)
+    cfg = GridRbpfConfig(likelihood_temperature=10.0)
     scan = Scan(np.array([1.0, 1.5]), np.array([0.0, 0.5]), np.zeros(3))
     pose = np.array([2.0, 2.0, 0.1])
     cov = np.diag([0.02**2, 0.03**2, 0.01**2])

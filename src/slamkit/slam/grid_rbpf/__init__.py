@@ -3,10 +3,22 @@ particles with their own occupancy grids (tiles shared, copied on write), the im
 proposal from scan matching, adaptive resampling."""
 
 from slamkit.slam.grid_rbpf.config import GridRbpfConfig
-from slamkit.slam.grid_rbpf.estimator import FIELD_MARGIN, GridRbpf
+from slamkit.slam.grid_rbpf.estimator import (
+    FIELD_MARGIN,
+    MATCH,
+    RECOVERY_SEARCH,
+    RESAMPLE_SHARE,
+    TILE_CELLS,
+    GridRbpf,
+)
+from slamkit.slam.grid_rbpf.guard import map_fit, relocate_on_map
 from slamkit.slam.grid_rbpf.maps import TiledMap, TilePool, scan_cells
 from slamkit.slam.grid_rbpf.proposal import (
+    MODE_NOISE,
+    MOTION_FLOOR,
+    PROPOSAL_TEMPERATURE,
     STENCIL,
+    STENCIL_SIGMAS,
     Scan,
     gaussian_proposal,
     mode_proposal,
@@ -17,16 +29,26 @@ from slamkit.slam.grid_rbpf.proposal import (
 
 __all__ = [
     "FIELD_MARGIN",
+    "MATCH",
+    "MODE_NOISE",
+    "MOTION_FLOOR",
+    "PROPOSAL_TEMPERATURE",
+    "RECOVERY_SEARCH",
+    "RESAMPLE_SHARE",
     "STENCIL",
+    "STENCIL_SIGMAS",
+    "TILE_CELLS",
     "GridRbpf",
     "GridRbpfConfig",
     "Scan",
     "TilePool",
     "TiledMap",
     "gaussian_proposal",
+    "map_fit",
     "mode_proposal",
     "motion_covariance",
     "motion_log_density",
     "motion_proposal",
+    "relocate_on_map",
     "scan_cells",
 ]

@@ -1,4 +1,11 @@
-"""Settings of the grid-based Rao-Blackwellized particle filter (:mod:`.estimator`)."""
+"""Settings of the grid-based Rao-Blackwellized particle filter (:mod:`.estimator`).
+
+Twenty at most (issue 32): what a user of another laser, another robot or another building
+may need to change. The constants that needed no tuning live beside the code that uses them
+(the match's steps and tolerances, the stencil, the mode proposal's noise, the motion
+floors, the recovery's window, the tiles, the resampling rule); the settings removed on
+2026-12-07 are named in :data:`slamkit.config.RENAMED`, with
+``docs/estimators/grid_rbpf.md`` ("Settings") saying why."""
 
 from __future__ import annotations
 
@@ -11,7 +18,6 @@ from slamkit.config import (
     finite_at_least,
     fraction,
     int_at_least,
-    optional,
     setting,
 )
 
@@ -30,7 +36,7 @@ class GridRbpfConfig(Section):
     """``"gaussian"``: the improved proposal of Grisetti et al. (2007) — a Gaussian fitted
     to ``p(z | x, m) p(x | x', u)`` at a stencil of poses around the scan-match mode, the
     weight multiplied by its normaliser ``η``; ``"mode"``: GMapping's released behaviour —
-    the mode plus small noise (``mode_noise_*``), weighted by the likelihood there."""
+    the mode plus small noise (1 cm, 0.3°), weighted by the likelihood there."""
     update_distance: float = setting(0.5, finite_at_least(0.0), "a finite number >= 0")
     """The filter updates once the odometry reports this much travel since the last
     update [m] ..."""
@@ -38,39 +44,21 @@ class GridRbpfConfig(Section):
     """... or this much turning [deg]; scans in between are not used."""
     resolution: float = setting(0.05, finite_above(0.0), "a finite number > 0")
     """Grid cell side [m]."""
-    tile_cells: int = setting(64, int_at_least(1), "a power of two")
-    """Cells per side of a shared map tile."""
-    map_range: float = setting(20.0, finite_above(0.0), "a finite number > 0")
-    """Readings beyond this [m] (and max-range readings) clear free space only up to it."""
-    match_range: float = setting(20.0, finite_above(0.0), "a finite number > 0")
-    """Readings beyond this [m] are left out of matching and weighting; the likelihood field
-    of a particle's map is built over the box of the remaining end points (+ 1 m)."""
+    max_range: float = setting(20.0, finite_above(0.0), "a finite number > 0")
+    """Readings beyond this [m] are left out of matching and weighting, and (with max-range
+    readings) clear free space only up to it; the likelihood field of a particle's map is
+    built over the box of the remaining end points (+ 1 m)."""
     sigma_hit: float = setting(0.05, finite_above(0.0), "a finite number > 0")
     """Standard deviation of an end point's distance to the nearest wall [m] (likelihood
     field, for the match and the weights)."""
-    match_iterations: int = setting(10, int_at_least(1), "an integer >= 1")
-    """Most Gauss-Newton steps of a particle's scan match (it stops earlier once a step
-    moves less than ``match_tolerance_xy`` and turns less than ``match_tolerance_deg``)."""
-    match_tolerance_xy: float = setting(1e-3, finite_at_least(0.0), "a finite number >= 0")
-    """[m]; a fiftieth of a 5 cm cell: far below the proposal's own spread."""
-    match_tolerance_deg: float = setting(0.02, finite_at_least(0.0), "a finite number >= 0")
-    """[deg]."""
     likelihood_temperature: float = setting(10.0, finite_at_least(1.0), "a number >= 1")
-    """``log p(z | x, m)`` is divided by this in the weights and the proposal: the beams of
-    one scan are far from independent (neighbouring beams see the same wall), and without
-    tempering one particle takes all the weight at every update."""
-    proposal_temperature: float = setting(1.0, finite_at_least(1.0), "a number >= 1")
-    """The same for the Gaussian fitted as the proposal (1: the likelihood as it is, so the
-    draws stay as close to the match as the scan allows)."""
+    """``log p(z | x, m)`` is divided by this in the weights (and in the recovery's choice):
+    the beams of one scan are far from independent (neighbouring beams see the same wall),
+    and without tempering one particle takes all the weight at every update. The Gaussian
+    fitted as the proposal uses the likelihood as it is, so that the draws stay as close to
+    the match as the scan allows."""
     beam_stride: int = setting(2, int_at_least(1), "an integer >= 1")
     """Every this-th beam is used for matching and weighting."""
-    stencil_sigmas: float = setting(1.5, finite_above(0.0), "a finite number > 0")
-    """Gaussian proposal: the 3 × 3 × 3 stencil spans ± this many standard deviations of
-    the predicted proposal along each of its principal axes."""
-    mode_noise_xy: float = setting(0.01, finite_at_least(0.0), "a finite number >= 0")
-    """Mode proposal: standard deviation of the noise added to the match [m] ..."""
-    mode_noise_deg: float = setting(0.3, finite_at_least(0.0), "a finite number >= 0")
-    """... and to its heading [deg]."""
     motion_trans_per_m: float = setting(0.1, finite_at_least(0.0), "a finite number >= 0")
     """Motion model: position std per metre travelled [m/m] ..."""
     motion_trans_per_rad: float = setting(0.05, finite_at_least(0.0), "a finite number >= 0")
@@ -78,11 +66,8 @@ class GridRbpfConfig(Section):
     motion_rot_per_m: float = setting(0.05, finite_at_least(0.0), "a finite number >= 0")
     """heading std per metre travelled [rad/m] ..."""
     motion_rot_per_rad: float = setting(0.1, finite_at_least(0.0), "a finite number >= 0")
-    """... per radian turned [rad/rad];"""
-    motion_floor_xy: float = setting(0.01, finite_above(0.0), "a finite number > 0")
-    """plus these floors [m] ..."""
-    motion_floor_deg: float = setting(0.5, finite_above(0.0), "a finite number > 0")
-    """... [deg]."""
+    """... per radian turned [rad/rad] (plus floors of 1 cm and 0.5°,
+    :data:`~slamkit.slam.grid_rbpf.proposal.MOTION_FLOOR`)."""
     max_correction_xy: float = setting(0.5, finite_above(0.0), "a finite number > 0")
     """A match farther than this from the particle's prediction [m] counts as failed (the
     motion model is sampled instead) ..."""
@@ -92,21 +77,14 @@ class GridRbpfConfig(Section):
     """A match whose score (mean per-beam likelihood relative to a perfect hit) is below
     this, or that failed or was gated, may have stopped in a local optimum near a wrong
     prediction (wheels that slipped): the scan is then also registered by a correlative
-    search of ``± recovery_window_xy``, ``± recovery_window_deg`` around the prediction
-    (refined by the same Gauss-Newton match), and whichever of the two poses has the larger
+    search of ± 0.5 m, ± 30° around the prediction (``RECOVERY_SEARCH`` of
+    :mod:`slamkit.slam.grid_rbpf.estimator`, refined by the same Gauss-Newton match), and
+    whichever of the two poses has the larger
     ``log p(z | x, m) / likelihood_temperature + log p(x | x', u)`` is the proposal's mode;
     0: never."""
-    recovery_window_xy: float = setting(0.5, finite_above(0.0), "a finite number > 0")
-    """[m] ..."""
-    recovery_window_deg: float = setting(30.0, finite_above(0.0), "a finite number > 0")
-    """... [deg]: Freiburg 079's wheels err by up to 26° between two updates."""
-    resample_threshold: float = setting(0.5, fraction(), "a fraction in [0, 1]")
-    """Resample (low variance) when ``N_eff < threshold · N``."""
     min_range: float = setting(0.05, finite_at_least(0.0), "a finite number >= 0")
     """Readings at or below this [m] are dropped."""
     mounting: tuple[float, float, float] | None = None
     """The laser's pose in the robot frame; None: the data set's."""
     snapshots: int = setting(10, int_at_least(0), "an integer >= 0")
     """Particle snapshots kept for plots (spread over the run)."""
-    max_updates: int | None = setting(None, optional(int_at_least(1)), "None or an integer >= 1")
-    """Stop updating after this many filter updates (the odometry carries on); None: never."""

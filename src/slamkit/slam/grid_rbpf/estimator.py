@@ -8,7 +8,11 @@ of travel or ``update_angle_deg`` of turning since the last update, summed step 
 robot that backs up and drives on has travelled the whole way, whatever its net motion; the
 scans between are not used; the odometry accumulates into one motion ``Δ`` in the frame of
 the last update, whose noise grows with that travel).
-At an update, for every particle:
+At an update the guard (:mod:`.guard`) first weighs the laser against the wheels on the best
+particle's map: where the map refutes the wheels' step (an odometry glitch) and the scan
+fits it elsewhere, ``Δ`` becomes the laser's step for every particle, and the glitch is
+counted, listed and warned about (:mod:`slamkit.estimation.health`). Then, for every
+particle:
 
 1. predict ``x̂ = x' ⊕ Δ``;
 2. build the likelihood field of the particle's own map over the box of the scan's end
@@ -21,7 +25,7 @@ At an update, for every particle:
 4. integrate the scan into the particle's map from the drawn pose.
 
 Weights are kept as logarithms and normalised with log-sum-exp; when ``N_eff = 1/Σ w²``
-drops below ``resample_threshold · N`` the set is resampled (low variance), which only
+drops below :data:`RESAMPLE_SHARE` ``· N`` the set is resampled (low variance), which only
 shares map tiles and copies poses. Paths are a parent-pointer tree: each update stores the
 drawn poses and, per particle, the slot of its ancestor at the previous update, so
 resampling copies nothing and the best particle's path is read back at the end.
@@ -37,6 +41,7 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -51,6 +56,7 @@ from slamkit.estimation.contract import (
     SmoothedTrajectory,
     SpreadSnapshots,
 )
+from slamkit.estimation.health import UnmatchedStretch, override_rows, tracking_warnings
 from slamkit.estimation.shell import EstimatorShell
 from slamkit.geometry.angles import wrap_angle_float
 from slamkit.geometry.pose2 import between, compose, transform_points
@@ -64,9 +70,11 @@ from slamkit.mapping.inverse_model import InverseSensorModel
 from slamkit.mapping.logodds import expit
 from slamkit.maps import OccupancyGrid
 from slamkit.scanmatch.correlative import CorrelativeConfig, CorrelativeReference
+from slamkit.scanmatch.relocate import TRUSTED_FIT, WINDOW_XY, judge
 from slamkit.scanmatch.result import MatchResult, scan_points
 from slamkit.scanmatch.to_map import MapMatchConfig, match_to_map
 from slamkit.slam.grid_rbpf.config import GridRbpfConfig
+from slamkit.slam.grid_rbpf.guard import map_fit, relocate_on_map
 from slamkit.slam.grid_rbpf.maps import TiledMap, TilePool, scan_cells
 from slamkit.slam.grid_rbpf.proposal import (
     Scan,
@@ -77,11 +85,33 @@ from slamkit.slam.grid_rbpf.proposal import (
     motion_proposal,
 )
 
-__all__ = ["FIELD_MARGIN", "GridRbpf"]
+__all__ = ["FIELD_MARGIN", "MATCH", "RECOVERY_SEARCH", "RESAMPLE_SHARE", "TILE_CELLS", "GridRbpf"]
 
 FIELD_MARGIN = 1.0
 """The likelihood field covers the box of the predicted end points plus this [m] on each
 side (more than the match gate, so a matched scan stays on the field)."""
+
+MATCH = MapMatchConfig(
+    max_iterations=10, step_tolerance_xy=1e-3, step_tolerance_theta=math.radians(0.02)
+)
+"""A particle's scan match (its ``sigma_hit`` is the setting's): at most 10 Gauss-Newton
+steps, stopping once a step moves less than 1 mm (a fiftieth of a 5 cm cell) and turns less
+than 0.02°, both far below the proposal's own spread."""
+
+RECOVERY_SEARCH = CorrelativeConfig(
+    window_xy=0.5, window_theta=math.radians(30.0), max_flatness=None
+)
+"""The recovery's correlative search (``GridRbpfConfig.recovery_score``): ± 0.5 m and
+± 30° around the prediction, wide enough for Freiburg 079's wheels, which err by up to 26°
+between two updates (``docs/estimators/grid_rbpf.md``)."""
+
+RESAMPLE_SHARE = 0.5
+"""Resample (low variance) when ``N_eff`` falls below this share of the particles: the rule
+of Grisetti et al. (2007), ``N_eff < N/2``."""
+
+TILE_CELLS = 64
+"""Cells per side of a shared map tile (a power of two; :class:`.maps.TilePool`): 64 × 64
+float32 cells are 16 kB, small enough that copy-on-write copies little."""
 
 
 class GridRbpf(EstimatorShell):
@@ -104,20 +134,11 @@ class GridRbpf(EstimatorShell):
         self._laser_max = float(laser.max_range)
         mounting = laser.mounting if cfg.mounting is None else cfg.mounting
         self._mounting = np.asarray(mounting, dtype=np.float64)
-        self._ism = InverseSensorModel(max_range=cfg.map_range).resolve(
+        self._ism = InverseSensorModel(max_range=cfg.max_range).resolve(
             cfg.resolution, self._angles, self._laser_max
         )
-        self._match_cfg = MapMatchConfig(
-            sigma_hit=cfg.sigma_hit,
-            max_iterations=cfg.match_iterations,
-            step_tolerance_xy=cfg.match_tolerance_xy,
-            step_tolerance_theta=math.radians(cfg.match_tolerance_deg),
-        )
-        self._wide_cfg = CorrelativeConfig(
-            window_xy=cfg.recovery_window_xy,
-            window_theta=math.radians(cfg.recovery_window_deg),
-            max_flatness=None,
-        )
+        self._match_cfg = replace(MATCH, sigma_hit=cfg.sigma_hit)
+        self._wide_cfg = RECOVERY_SEARCH
         start = dataset.initial_pose if dataset.initial_pose is not None else np.zeros(3)
         n = cfg.particles
         self._odom: FloatArray = np.array(start, dtype=np.float64)  # dead-reckoned
@@ -127,7 +148,7 @@ class GridRbpf(EstimatorShell):
         self._turn = 0.0
         self._poses: FloatArray = np.tile(self._odom, (n, 1))
         self._logw: FloatArray = np.full(n, -math.log(n))
-        self._pool = TilePool(cfg.resolution, cfg.tile_cells, self._ism.l0)
+        self._pool = TilePool(cfg.resolution, TILE_CELLS, self._ism.l0)
         self._maps: list[TiledMap] = [self._pool.new_map() for _ in range(n)]
         # The path tree: poses (P, 3) of every update, each particle's ancestor slot.
         self._hist_poses: list[FloatArray] = [self._poses.copy()]
@@ -141,9 +162,13 @@ class GridRbpf(EstimatorShell):
         self._counts: Counter[str] = Counter()
         self._neff: list[float] = []
         self._seconds: dict[str, float] = dict.fromkeys(
-            ("field", "match", "proposal", "integrate"), 0.0
+            ("field", "match", "proposal", "integrate", "guard"), 0.0
         )
         self._snapshots = SpreadSnapshots(cfg.snapshots)
+        # The guard's record (:mod:`.guard`): overridden glitches (stamp, T_wheels_laser)
+        # and the longest unmatched stretch.
+        self._overrides: list[tuple[float, FloatArray]] = []
+        self._stretch = UnmatchedStretch()
         self._last_t = dataset.start_time
 
     # -- the Estimator protocol ---------------------------------------------------------
@@ -179,7 +204,7 @@ class GridRbpf(EstimatorShell):
         moved = self._travel >= cfg.update_distance or self._turn >= math.radians(
             cfg.update_angle_deg
         )
-        if not moved or (cfg.max_updates is not None and self.updates >= cfg.max_updates):
+        if not moved:
             return
         self._update(event, delta)
 
@@ -232,6 +257,11 @@ class GridRbpf(EstimatorShell):
                 k[len("failed:") :]: v for k, v in c.items() if k.startswith("failed:")
             },
             "dead_particles": c["dead"],
+            "relocation_tried": c["relocation_tried"],
+            "relocated": c["relocated"],
+            "odometry_overridden": len(self._overrides),
+            "odometry_overrides": override_rows(self._overrides),
+            "lost": c["lost"],
             "neff_mean": float(neff.mean()) if neff.size else None,
             "neff_min": float(neff.min()) if neff.size else None,
             "maps": self._pool.stats(),
@@ -243,6 +273,9 @@ class GridRbpf(EstimatorShell):
             diagnostics=diagnostics,
             particle_snapshots=self._snapshots.pick(snapshot),
             trajectory=SmoothedTrajectory(times, poses),
+            warnings=tuple(
+                tracking_warnings(self.updates, c["lost"], self._overrides, self._stretch)
+            ),
         )
 
     # -- steps ----------------------------------------------------------------------------
@@ -275,11 +308,24 @@ class GridRbpf(EstimatorShell):
 
     def _field(self, tiled: TiledMap, predicted: FloatArray, points: FloatArray) -> LikelihoodField:
         """The likelihood field of ``tiled`` over the end points seen from ``predicted``."""
-        tic = time.perf_counter()
         world = transform_points(predicted, points)
+        return self._field_over(tiled, world.min(axis=0), world.max(axis=0))
+
+    def _wide_field(
+        self, tiled: TiledMap, around: FloatArray, points: FloatArray
+    ) -> LikelihoodField:
+        """The likelihood field of ``tiled`` over the scan seen from anywhere within the
+        relocation's window around ``around`` (every heading, ± ``WINDOW_XY``)."""
+        reach = float(np.sqrt(np.einsum("ij,ij->i", points, points).max())) + WINDOW_XY
+        return self._field_over(tiled, around[:2] - reach, around[:2] + reach)
+
+    def _field_over(self, tiled: TiledMap, low: FloatArray, high: FloatArray) -> LikelihoodField:
+        """The likelihood field of ``tiled`` over the box ``low``-``high`` [m] (+ the
+        margin)."""
+        tic = time.perf_counter()
         res = self._cfg.resolution
-        lo = lattice_cells(world.min(axis=0) - FIELD_MARGIN, res)
-        hi = lattice_cells(world.max(axis=0) + FIELD_MARGIN, res)
+        lo = lattice_cells(low - FIELD_MARGIN, res)
+        hi = lattice_cells(high + FIELD_MARGIN, res)
         rows, cols = int(hi[0] - lo[0]) + 1, int(hi[1] - lo[1]) + 1
         window = tiled.window(int(lo[0]), int(lo[1]), rows, cols)
         grid = OccupancyGrid(
@@ -288,7 +334,7 @@ class GridRbpf(EstimatorShell):
         # Every cell that is not an obstacle counts as free: the distance to the nearest wall
         # is what the match descends, also across cells the particle has not seen yet.
         field = LikelihoodField.from_grid(
-            grid, self._cfg.sigma_hit, max_range=self._cfg.match_range, free_threshold=1.0
+            grid, self._cfg.sigma_hit, max_range=self._cfg.max_range, free_threshold=1.0
         )
         self._seconds["field"] += time.perf_counter() - tic
         return field
@@ -298,19 +344,20 @@ class GridRbpf(EstimatorShell):
         stride = cfg.beam_stride
         ranges = event.ranges[::stride].copy()
         angles = self._angles[::stride]
-        reach = min(cfg.match_range, self._laser_max)
+        reach = min(cfg.max_range, self._laser_max)
         # Too short, no return, or beyond the match range: set to the field's max range,
         # which the likelihood field skips.
-        ranges[(ranges <= cfg.min_range) | (ranges >= reach)] = cfg.match_range
+        ranges[(ranges <= cfg.min_range) | (ranges >= reach)] = cfg.max_range
         scan = Scan(ranges, angles, self._mounting)
         points = scan_points(event.ranges[::stride], angles, reach, min_range=cfg.min_range)
         if self._mounting.any():
             points = transform_points(self._mounting, points)
         motion_cov = motion_covariance(delta, cfg, (self._travel, self._turn))
         finite_motion = bool(np.isfinite(motion_cov).all() and np.isfinite(delta).all())
+        if finite_motion and points.shape[0]:
+            delta = self._guard(event.t, points, delta)
         n = len(self._maps)
         drawn = np.empty((n, 3))
-        gate_xy, gate_th = cfg.max_correction_xy, math.radians(cfg.max_correction_deg)
         for k in range(n):
             predicted = compose(self._poses[k], delta)
             if not (finite_motion and np.isfinite(predicted).all()):
@@ -326,11 +373,9 @@ class GridRbpf(EstimatorShell):
                     result = match_to_map(field, points, predicted, self._match_cfg)
                 except MatchError as exc:
                     self._counts[f"failed:{exc.reason}"] += 1
-            if result is not None:
-                corr = between(predicted, result.pose)
-                if math.hypot(corr[0], corr[1]) > gate_xy or abs(corr[2]) > gate_th:
-                    self._counts["failed:gated"] += 1
-                    result = None
+            if result is not None and not self._within_gate(predicted, result.pose):
+                self._counts["failed:gated"] += 1
+                result = None
             poor = result is None or result.score < cfg.recovery_score
             if field is not None and cfg.recovery_score > 0 and poor:
                 result = self._recover(field, scan, points, predicted, motion_cov, result)
@@ -367,6 +412,52 @@ class GridRbpf(EstimatorShell):
                 self._integrate(k, drawn[k], event.ranges)
         self._logw = logw
         self._store(drawn, event.t)
+
+    def _within_gate(self, predicted: FloatArray, pose: FloatArray) -> bool:
+        """Whether ``pose`` lies within the match gate around ``predicted``."""
+        corr = between(predicted, pose)
+        return math.hypot(corr[0], corr[1]) <= self._cfg.max_correction_xy and abs(
+            wrap_angle_float(float(corr[2]))
+        ) <= math.radians(self._cfg.max_correction_deg)
+
+    def _guard(self, t: float, points: FloatArray, delta: FloatArray) -> FloatArray:
+        """The step every particle takes at this update: the wheels' ``delta``, or the
+        laser's where the best particle's map refutes the wheels (:mod:`.guard`). Counts
+        the verdict, an overridden glitch with its stamp and correction, and whether the
+        scan matched (the unmatched stretch's)."""
+        best = int(np.argmax(self._logw))
+        start = self._poses[best]
+        predicted = compose(start, delta)
+        tiled = self._maps[best]
+        tic = time.perf_counter()
+        wheels, matched = predicted, False
+        near = self._field(tiled, predicted, points)
+        try:
+            found = match_to_map(near, points, predicted, self._match_cfg)
+            if self._within_gate(predicted, found.pose):
+                wheels, matched = found.pose, True
+        except MatchError:
+            pass
+        step = delta
+        if not matched or map_fit(near, points, wheels) < TRUSTED_FIT:
+            self._counts["relocation_tried"] += 1
+            field = self._wide_field(tiled, predicted, points)
+            wheels_fit = map_fit(field, points, wheels)
+            laser = relocate_on_map(field, points, predicted, self._match_cfg)
+            overrides = laser is not None and not self._within_gate(predicted, laser.match.pose)
+            verdict = judge(wheels_fit, laser, overrides)
+            if verdict == "laser":
+                assert laser is not None
+                if overrides:
+                    self._overrides.append((float(t), between(predicted, laser.match.pose)))
+                else:
+                    self._counts["relocated"] += 1
+                step, matched = between(start, laser.match.pose), True
+            elif verdict == "lost":
+                self._counts["lost"] += 1
+        self._stretch.add(float(t), matched, self._travel)
+        self._seconds["guard"] += time.perf_counter() - tic
+        return step
 
     def _recover(
         self,
@@ -421,7 +512,7 @@ class GridRbpf(EstimatorShell):
         w = self._weights()
         neff = float(1.0 / np.sum(w * w))
         self._neff.append(neff)
-        if neff < self._cfg.resample_threshold * n:
+        if neff < RESAMPLE_SHARE * n:
             idx = low_variance_resample_unchecked(w, self._rng, n)
             maps = [self._maps[int(i)].share() for i in idx]
             for m in self._maps:

@@ -1,0 +1,79 @@
+"""The grid RBPF's guard against its odometry: the laser weighed against the wheels on the
+best particle's map, as every laser tracker does (:mod:`slamkit.scanmatch.relocate`).
+
+A particle filter spreads its particles around the wheels' prediction by the motion noise
+(a few centimetres and degrees per update) and each particle's scan match starts there: a
+heading jump of 30-90° in one odometry step (an encoder or gyro fault) puts every particle
+where no match can reach, and the filter carries the jump for ever. Before the particles
+are moved, the best particle's scan is therefore checked on its own map:
+
+1. its match from the wheels' prediction (or the prediction itself, when the match fails
+   or lands beyond the gate) is scored by :func:`map_fit`, the share of the scan's end
+   points within :data:`FIT_TOLERANCE` of the map's walls: the grid's twin of
+   :func:`~slamkit.scanmatch.normal_icp.surface_fit`, so the shared thresholds of
+   :func:`~slamkit.scanmatch.relocate.judge` mean the same;
+2. where that fit is below :data:`~slamkit.scanmatch.relocate.TRUSTED_FIT`, the scan is
+   searched for over every heading and :data:`~slamkit.scanmatch.relocate.WINDOW_XY`
+   around the prediction (:func:`relocate_on_map`: Olson's correlative search on the
+   particle's likelihood field, refined by the same Gauss-Newton match), and
+   :func:`~slamkit.scanmatch.relocate.judge` keeps the laser's pose or the wheels';
+3. when the laser wins, every particle's step is the laser's instead of the wheels' (the
+   estimator's ``_update``); a correction beyond the gate is an overridden glitch.
+
+Measured: ``docs/estimators/grid_rbpf.md``, "Odometry glitches".
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from slamkit._validation import FloatArray
+from slamkit.errors import MatchError
+from slamkit.geometry.pose2 import transform_points
+from slamkit.localization.likelihood_field import LikelihoodField, interpolate_distance
+from slamkit.scanmatch.correlative import CorrelativeReference, correlative_match
+from slamkit.scanmatch.relocate import RELOCATE_SEARCH, Relocation
+from slamkit.scanmatch.to_map import MapMatchConfig, match_to_map
+
+__all__ = [
+    "FIT_TOLERANCE",
+    "MAP_SEARCH",
+    "map_fit",
+    "relocate_on_map",
+]
+
+FIT_TOLERANCE = 0.05
+"""[m] an end point this near a wall cell's centre lies on the map (surface_fit's 5 cm)."""
+
+MAP_SEARCH = replace(RELOCATE_SEARCH, levels=5)
+"""The relocation's search (every heading, ±1.5 m) on a likelihood field, whose grid is the
+map's (5 cm by default, half the point relocation's 10 cm): one more level keeps the branch
+and bound's coarsest nodes as large."""
+
+
+def map_fit(field: LikelihoodField, points: FloatArray, pose: FloatArray) -> float:
+    """The share of the scan's end points ``points (K, 2)`` (robot frame) that ``pose``
+    puts within :data:`FIT_TOLERANCE` of a wall of ``field``'s map (its distance map,
+    interpolated): 0 for no points."""
+    if points.shape[0] == 0:
+        return 0.0
+    d, _ = interpolate_distance(field, transform_points(pose, points))
+    return float(np.count_nonzero(d <= FIT_TOLERANCE)) / points.shape[0]
+
+
+def relocate_on_map(
+    field: LikelihoodField, points: FloatArray, around: FloatArray, match: MapMatchConfig
+) -> Relocation | None:
+    """The scan ``points (K, 2)`` found on ``field`` over every heading and ±1.5 m around
+    ``around`` (:data:`MAP_SEARCH`), refined by :func:`~slamkit.scanmatch.to_map.
+    match_to_map` without a prior, with its :func:`map_fit`; None when either step finds
+    nothing. ``field`` must cover the scan seen from anywhere in the window."""
+    try:
+        ref = CorrelativeReference.from_likelihood_field(field, MAP_SEARCH)
+        coarse = correlative_match(ref, points, around, MAP_SEARCH)
+        refined = match_to_map(field, points, coarse.pose, match)
+    except MatchError:
+        return None
+    return Relocation(refined, map_fit(field, points, refined.pose))
