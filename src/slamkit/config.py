@@ -261,10 +261,12 @@ RENAMED: dict[str, str] = {
     "closures are always judged again (it won on ACES; docs/estimators/laser_graph.md)",
     "optimizer": "graph SLAM: removed 2026-12-07 (issue 32's budget of settings); the back end "
     "builds its optimiser inside (slamkit.slam.laser_graph.backend.default_optimizer)",
-    "plicp": "graph SLAM: removed 2026-12-07 (issue 32's budget of settings); now the constant "
-    "slamkit.slam.laser_graph.frontend.PLICP (PlIcpConfig's defaults)",
-    "normal_icp": "graph SLAM: removed 2026-12-07 (issue 32's budget of settings); now the "
-    "constant slamkit.slam.laser_graph.frontend.NORMAL_ICP (NormalIcpConfig's defaults)",
+    "plicp": "graph SLAM and laser odometry: removed 2026-12-07 (issue 32's budget of "
+    "settings); now the constants PLICP of slamkit.slam.laser_graph.frontend (PlIcpConfig's "
+    "defaults) and of laser odometry (never tuned but for the 60 ICP steps)",
+    "normal_icp": "graph SLAM and laser odometry: removed 2026-12-07 (issue 32's budget of "
+    "settings); now the constants NORMAL_ICP of slamkit.slam.laser_graph.frontend "
+    "(NormalIcpConfig's defaults) and of laser odometry",
     "map": "graph SLAM: removed 2026-12-07 (issue 32's budget of settings); the map's cell is "
     "now map_resolution, the map is always built, its range is the constant "
     "slamkit.slam.laser_graph.estimator.MAP_MAX_RANGE (30 m)",
@@ -306,10 +308,6 @@ RENAMED: dict[str, str] = {
     "odometry_prior": "laser odometry: removed 2026-12-07; the map reference always holds the "
     "match to the odometry's prediction (without it ACES and Freiburg 079 lost: 0.154 m and "
     "1.74 m against 0.106 m and 0.689 m, and the rooms' corridors slid)",
-    "plicp": "laser odometry: removed 2026-12-07; the matchers' settings are the constants "
-    "PLICP and NORMAL_ICP (never tuned but for the 60 ICP steps)",
-    "normal_icp": "laser odometry: removed 2026-12-07; the matchers' settings are the "
-    "constants PLICP and NORMAL_ICP (never tuned but for the 60 ICP steps)",
     "icp": "laser odometry: removed 2026-12-07 with point-to-point ICP (never measured better)",
     # grid RBPF, 2026-12-07: 34 settings to 19 (docs/estimators/grid_rbpf.md, "Settings").
     "map_range": "grid RBPF: now max_range, one limit for mapping and matching",

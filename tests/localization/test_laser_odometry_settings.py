@@ -53,7 +53,7 @@ def test_the_settings_keep_to_the_budget() -> None:
 
 @pytest.mark.parametrize("name", REMOVED)
 def test_a_removed_setting_is_named_in_the_error(name: str) -> None:
-    with pytest.raises(ConfigError, match=rf"{name} \(laser odometry: removed"):
+    with pytest.raises(ConfigError, match=rf"{name} \(.*laser odometry: removed"):
         config_from_mapping(LaserOdometryConfig, {name: 1})
 
 
