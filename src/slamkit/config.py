@@ -204,10 +204,10 @@ def _coerce(value: Any, annotation: Any, where: str) -> Any:
 
 
 RENAMED: dict[str, str] = {
-    "near_window": "graph SLAM: removed 2026-12-07; a closure must now have no rival in its "
-    "whole search window (slamkit.slam.laser_graph.loops.RIVAL_SEPARATION)",
+    "near_window": "graph SLAM: removed 2026-12-07; now the constant "
+    "slamkit.slam.laser_graph.loops.NEAR_WINDOW (0.3)",
     "ambiguity_ratio": "graph SLAM: removed 2026-12-07; now the constant "
-    "slamkit.slam.laser_graph.loops.RIVAL_RATIO",
+    "slamkit.slam.laser_graph.loops.AMBIGUITY_RATIO (0.95)",
     "neighbour_edges": "graph SLAM: removed 2026-12-07 (off by default; it lost Intel and "
     "Freiburg 079: the matches share their scans with the chain's, so they are not "
     "independent evidence)",

@@ -66,16 +66,17 @@ def test_a_reference_seen_once_has_no_rival(seed: int) -> None:
 
 @pytest.mark.parametrize("seed", range(2))
 def test_the_rival_is_the_same_from_every_search(seed: int) -> None:
-    # A low bar, so that every search finds one: the best pose outside the box scores the
-    # same in the exhaustive search, the NumPy rounds and the compiled depth-first search.
-    ref, cur, _ = _case(seed, None)
-    small = CorrelativeConfig(window_xy=0.6, window_theta=0.1, angular_step=0.02, levels=3)
+    # A reference repeated 1.2 m along x, so that a rival exists: it scores the same in the
+    # exhaustive search, the NumPy rounds and the compiled depth-first search, and an
+    # optimum's own flank (the best pose just outside the left-out square) is never it.
+    ref, cur, _ = _case(seed, (1.2, 0.0))
+    small = CorrelativeConfig(window_xy=1.5, window_theta=0.1, angular_step=0.02, levels=4)
     reference = CorrelativeReference.from_points(ref, small)
     best = correlative_match(reference, cur, np.zeros(3), small)
-    args = (reference, cur, np.zeros(3), best, 0.2, 0.3)
+    args = (reference, cur, np.zeros(3), best, 0.2, 0.8)
     fast = correlative_rival(*args, small)
     with compiled.use_numpy():
         slow = correlative_rival(*args, small)
     exhaustive = correlative_rival(*args, replace(small, search="exhaustive"))
     assert fast is not None and fast == slow == exhaustive
-    assert 0.3 * best.score <= fast < best.score
+    assert 0.8 * best.score <= fast <= best.score

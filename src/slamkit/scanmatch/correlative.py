@@ -669,7 +669,10 @@ def correlative_rival(
 ) -> float | None:
     """The best score, over the window of :func:`correlative_match` (same arguments), of a
     pose whose translation lies more than ``separation`` [m] from ``match``'s along x or y
-    (any rotation), when it reaches ``ratio · match.score``; None when no pose does.
+    (any rotation), when it reaches ``ratio · match.score`` and is a peak of its own; None
+    when no pose does. A best pose outside that lies on the left-out square's edge is the
+    optimum's own peak, broad along some direction; the square is then doubled and the
+    search repeated, while it fits in the window.
 
     A match is unique in its window when it has no rival: in a corridor of identical doors
     or a row of look-alike rooms the true place and its aliases score alike, and whichever
@@ -682,21 +685,27 @@ def correlative_rival(
         return None  # a table without misses scores every pose alike
     bi = round((float(match.pose[1]) - w.guess[1]) / res)
     bj = round((float(match.pose[0]) - w.guess[0]) / res)
-    c = _cells(separation, res)
-    box: Box = (bi - c, bi + c, bj - c, bj + c)
     # The sum S of a pose scoring exactly the bar: 1 - S / (N log f) = ratio · score.
     bar = (1.0 - ratio * match.score) * w.points.shape[0] * w.lookup.floor
     n_k = w.thetas.size
     start = _Optimum(n_k, w.n + 1, w.n + 1, bar, 0)  # past every leaf: a tie goes to a leaf
-    if w.config.search == "exhaustive" or w.lookup.levels == 1:
-        opt = _exhaustive(w.lookup, w.cells, w.n, box)
-        if opt.score < bar:
-            return None
-    else:
-        opt = _branch_and_bound(w.lookup, w.cells, w.n, start, box)
-        if opt.k == n_k:
-            return None
-    return w.normalised(opt.score)
+    c = _cells(separation, res)
+    while c <= w.n:
+        box: Box = (bi - c, bi + c, bj - c, bj + c)
+        if w.config.search == "exhaustive" or w.lookup.levels == 1:
+            opt = _exhaustive(w.lookup, w.cells, w.n, box)
+            if opt.score < bar:
+                return None
+        else:
+            opt = _branch_and_bound(w.lookup, w.cells, w.n, start, box)
+            if opt.k == n_k:
+                return None
+        if max(abs(opt.i - bi), abs(opt.j - bj)) > c + 1:
+            return w.normalised(opt.score)
+        # On the box's edge: the optimum's own peak, broad along some direction (a
+        # corridor), not a peak of its own. Look farther out.
+        c *= 2
+    return None
 
 
 def correlative_match(

@@ -14,15 +14,10 @@ candidates, nearest first.
 
 **Verification.** The new keyframe's scan is matched against the candidate's submap (its
 scan and its neighbours', in its frame) by Olson's correlative search over the window
-``±r(j)``, ``±α(j)`` around the current estimate; the match must reach ``min_score``. It
-must also be the only good explanation of the scan: no pose farther than
-:data:`RIVAL_SEPARATION` from the optimum (along x or y) within the window widened
-:data:`RIVAL_WINDOW` times may score :data:`RIVAL_RATIO` of it
-(:func:`~slamkit.scanmatch.correlative.correlative_rival`). Along a corridor of identical
-doors, at one of a building's many look-alike corners or between look-alike rooms, the
-true place and its aliases score alike, and which one wins depends on noise and on how far
-the estimate has drifted; the window is widened because the true place may lie just
-outside it when the drift is near the window's size. The optimum is
+``±r(j)``, ``±α(j)`` around the current estimate; the match must reach ``min_score``. The
+optimum, when it lies farther than :data:`NEAR_WINDOW` from the estimate, must also score
+clearly better (by ``1 / AMBIGUITY_RATIO``) than the best pose within :data:`NEAR_WINDOW`:
+an aliased match along a corridor scores about as well as the true one. The optimum is
 refined by point-to-normal ICP against the same submap, which must pair
 :data:`MIN_INLIERS` of the scan and may move the optimum only a few cells (a refinement that
 walks away means the correlative peak was not a real alignment). The back end then checks
@@ -49,12 +44,7 @@ from slamkit._validation import FloatArray
 from slamkit.errors import MatchError
 from slamkit.geometry.angles import wrap_angle_float
 from slamkit.geometry.pose2 import between, compose, transform_points
-from slamkit.scanmatch.correlative import (
-    CorrelativeConfig,
-    CorrelativeReference,
-    correlative_match,
-    correlative_rival,
-)
+from slamkit.scanmatch.correlative import CorrelativeConfig, CorrelativeReference, correlative_match
 from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp
 from slamkit.scanmatch.point_map import PointMap, ScanNormals
 from slamkit.scanmatch.result import MatchResult
@@ -73,13 +63,11 @@ __all__ = [
 ]
 
 
-RIVAL_SEPARATION = 0.3
-"""A rival of a closure's optimum lies farther than this from it along x or y [m]: nearer
-poses are the optimum's own peak (the smear of the lookup grid is 5 cm)."""
-RIVAL_RATIO = 0.95
-"""A rival scoring this fraction of the optimum makes the closure ambiguous."""
-RIVAL_WINDOW = 1.0
-"""The rivals are searched for in the closure's window widened this many times."""
+NEAR_WINDOW = 0.3
+"""Ambiguity: a correlative optimum farther than this from the estimate [m] ..."""
+AMBIGUITY_RATIO = 0.95
+"""... is refused (``"ambiguous"``) when the best pose within ``NEAR_WINDOW`` of the
+estimate, away from that window's edge, scores at least this fraction of it."""
 
 
 @dataclass(frozen=True)
@@ -262,15 +250,23 @@ def verify_closure(
         coarse = correlative_match(reference, points, initial, cfg)
     except MatchError as exc:
         return exc.reason
-    # The optimum must be the only good explanation in the window: along a corridor of
-    # identical doors or between look-alike rooms the true place and its aliases score
-    # alike, and which one wins depends on noise and on how far the estimate has drifted.
-    wide = dataclasses.replace(cfg, window_xy=RIVAL_WINDOW * cfg.window_xy)
-    rival = correlative_rival(
-        reference, points, initial, coarse, RIVAL_SEPARATION, RIVAL_RATIO, wide
-    )
-    if rival is not None:
-        return "ambiguous"
+    shift = between(initial, coarse.pose)
+    if math.hypot(shift[0], shift[1]) > NEAR_WINDOW:
+        # A far optimum must beat the best pose near the estimate clearly: along a corridor
+        # or between look-alike rooms the two score alike (an aliased match).
+        near = dataclasses.replace(cfg, window_xy=NEAR_WINDOW, min_score=0.0)
+        try:
+            close: MatchResult | None = correlative_match(reference, points, initial, near)
+        except MatchError:
+            close = None
+        # A near optimum on the window's edge is the far peak's flank, not a peak of its own.
+        inner = NEAR_WINDOW - 2.0 * GRID_RESOLUTION
+        if (
+            close is not None
+            and np.abs(close.pose[:2] - initial[:2]).max() < inner
+            and close.score >= AMBIGUITY_RATIO * coarse.score
+        ):
+            return "ambiguous"
     try:
         fine: MatchResult = normal_icp(reference_cloud, points, coarse.pose, icp_config)
     except MatchError as exc:
