@@ -10,7 +10,10 @@ random walk: its uncertainty grows as ``σ_v dt`` per axis, so the prediction's 
 ``diag((σ_xy dt)², (σ_xy dt)², (σ_θ dt)²)``. Accelerations of up to ``σ_xy`` per second are
 thus one standard deviation — generous for an indoor robot, which keeps the scan matcher's
 search region large enough to find the match after a start or a stop. A failed match keeps the
-velocity (in a featureless corridor, where matches fail, the robot mostly keeps going).
+velocity's translation (in a featureless corridor, where matches fail, the robot mostly keeps
+going) but not its turn rate (:meth:`ConstantVelocity.lose_turn`): turns end, and a turn rate
+held past its end spins every later prediction away from the scans, so that no later match
+finds them again.
 """
 
 from __future__ import annotations
@@ -70,6 +73,18 @@ class ConstantVelocity:
         J = np.vstack([J, [0.0, 0.0, 1.0]])
         R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         return moved, J @ cov @ J.T + R @ inc_cov @ R.T
+
+    def lose_turn(self) -> None:
+        """A failed match: the translation is held, the turn rate dropped (module
+        docstring)."""
+        self.velocity = np.array([self.velocity[0], self.velocity[1], 0.0])
+
+    def observe_turn(self, turn: float, dt: float) -> None:
+        """A match that fixed the heading but not the translation (a corridor, where the
+        translation is the prediction's): the turn ``turn`` [rad] over ``dt`` seconds
+        becomes the turn rate, the translation is held."""
+        if dt > 0:
+            self.velocity = np.array([self.velocity[0], self.velocity[1], turn / float(dt)])
 
     def observe(self, increment: FloatArray | None, dt: float) -> None:
         """The matched motion ``increment = between(x_prev, x_cur)`` over ``dt`` seconds
