@@ -50,7 +50,7 @@ from slamkit.slam.laser_graph.config import FrontEndSettings
 
 __all__ = [
     "COAST_SEARCH",
-    "COAST_WINDOW_MAX",
+    "COAST_WINDOW_MAX_THETA",
     "COV_FLOOR_DEG",
     "COV_FLOOR_XY",
     "LOCAL_MAP_KEYFRAMES",
@@ -90,23 +90,24 @@ COAST_SEARCH = CorrelativeConfig(
 """Without odometry, each scan is first placed by this correlative search around the
 constant-velocity prediction, then refined by point-to-line ICP. Its window is the narrowest
 one (±0.2 m, ±15°: about two standard deviations of the prediction at the velocity's random
-walk of 0.5 m/s² and 45°/s² over a fifth of a second); a longer interval between scans widens
-it to two standard deviations of the prediction over that interval, up to
-:data:`COAST_WINDOW_MAX` (:func:`coast_window`)."""
+walk of 0.5 m/s² and 45°/s² over a fifth of a second). A longer interval between scans
+widens the heading window to two standard deviations of the prediction over that interval, up
+to :data:`COAST_WINDOW_MAX_THETA` (:func:`coast_window`): turns start and stop between scans.
+The translation window stays: a robot's speed changes slowly, and a wider one lets the
+optimum settle on a look-alike place along a corridor, whose velocity is then held."""
 
-COAST_WINDOW_MAX = (1.0, math.radians(60.0))
-"""The widest correlative search without odometry: ±1 m, ±60° (a wider window costs little,
-the search is branch and bound, but lets more look-alike places compete)."""
+COAST_WINDOW_MAX_THETA = math.radians(60.0)
+"""The widest heading window of the correlative search without odometry [rad] (a wider
+window costs little, the search is branch and bound, but lets more look-alikes compete)."""
 
 
 def coast_window(prediction_cov: FloatArray) -> CorrelativeConfig:
-    """:data:`COAST_SEARCH` with its half-widths two standard deviations of the prediction
-    ``(3, 3)`` (its largest in x and y, and in heading), within :data:`COAST_SEARCH`'s and
-    :data:`COAST_WINDOW_MAX`."""
-    d = np.sqrt(np.maximum(np.diag(prediction_cov), 0.0))
-    xy = min(max(2.0 * float(max(d[0], d[1])), COAST_SEARCH.window_xy), COAST_WINDOW_MAX[0])
-    theta = min(max(2.0 * float(d[2]), COAST_SEARCH.window_theta), COAST_WINDOW_MAX[1])
-    return replace(COAST_SEARCH, window_xy=xy, window_theta=theta)
+    """:data:`COAST_SEARCH` with its heading half-width two standard deviations of the
+    prediction ``(3, 3)``, within :data:`COAST_SEARCH`'s and
+    :data:`COAST_WINDOW_MAX_THETA`."""
+    d = math.sqrt(max(float(prediction_cov[2, 2]), 0.0))
+    theta = min(max(2.0 * d, COAST_SEARCH.window_theta), COAST_WINDOW_MAX_THETA)
+    return replace(COAST_SEARCH, window_theta=theta)
 
 
 @dataclass(frozen=True)
@@ -291,16 +292,31 @@ class Tracker:
     ) -> MatchResult:
         """Point-to-normal ICP of ``points`` against the keyframe's points (their normals
         as the local map's, :func:`local_map`) from ``start``, with the prior
-        ``N(prediction, Σ + F)`` (the coasted offset and its covariance, floored)."""
+        ``N(prediction, Σ + F)`` (the coasted offset and its covariance, floored); then the
+        position along the direction the scan holds least is the prediction's.
+
+        That direction is the weakest eigenvector ``e`` of the scan's own information
+        ``H = C⁻¹ − Λ`` (``C`` the match's posterior covariance, ``Λ`` the prior's
+        information) in x, y: ``p ← p + e eᵀ (p̂ − p)``. The prior alone does not hold it:
+        along a uniform corridor the current scan's points fall back onto the keyframe's
+        own samples at zero offset, a pull toward the keyframe that outweighs a prior of a
+        few tenths of a metre (generated building 1: the estimate stood still while the
+        robot drove 6 m)."""
         if self._keyframe_cloud is None or self._keyframe_cloud[0] is not reference:
             cloud = PointMap(LOCAL_MAP_VOXEL)
             cloud.insert(np.zeros(3), reference.points)
             self._keyframe_cloud = (reference, NormalCloud.build(*cloud.arrays()))
-        prior = self.odometry_cov + cov_floor()
-        return normal_icp(
+        prior_info = np.linalg.solve(self.odometry_cov + cov_floor(), np.eye(3))
+        result = normal_icp(
             self._keyframe_cloud[1], points, start, self.normal_icp,
-            prior_information=np.linalg.solve(prior, np.eye(3)), prior_pose=self.offset,
+            prior_information=prior_info, prior_pose=self.offset,
         )  # fmt: skip
+        scan_info = np.linalg.solve(result.cov, np.eye(3)) - prior_info
+        _, vectors = np.linalg.eigh(0.5 * (scan_info[:2, :2] + scan_info[:2, :2].T))
+        e = vectors[:, 0]  # (eigh sorts ascending: the weakest first)
+        pose = result.pose.copy()
+        pose[:2] += e * float(e @ (self.offset[:2] - pose[:2]))
+        return replace(result, pose=pose)
 
     def _match_map(self, reference: NormalCloud, points: FloatArray) -> bool:
         """The local-map match with the wheels: point-to-normal ICP held to the wheels'
