@@ -471,17 +471,27 @@ def test_a_generated_building_without_odometry_is_mapped() -> None:
     assert evaluate(result, data).scores.ate.rmse < 1.2
 
 
-def test_the_held_velocity_drops_its_turn_after_a_failed_match() -> None:
+def test_the_held_velocity_drops_its_turn_and_disbelieves_a_jump_in_speed() -> None:
     """A failed match keeps the translation and drops the turn rate; a degenerate match's
-    turn alone is observed; the correlative window's heading half-width is two standard
-    deviations of the prediction over the interval, within COAST_SEARCH's and the cap."""
+    turn alone is observed; a speed beyond GATE σ_xy T of the held one (T: the time since
+    the translation was last observed) is not taken, its turn is; the correlative window's
+    heading half-width is two standard deviations of the prediction over the interval,
+    within COAST_SEARCH's and the cap."""
     cv = ConstantVelocity()
-    cv.observe(np.array([0.3, 0.0, math.radians(20.0)]), 0.5)
+    assert cv.observe(np.array([0.3, 0.0, math.radians(20.0)]), 0.5)
     np.testing.assert_allclose(cv.velocity, [0.6, 0.0, math.radians(40.0)])
-    cv.lose_turn()
+    cv.lose_turn(0.5)
     np.testing.assert_allclose(cv.velocity, [0.6, 0.0, 0.0])
     cv.observe_turn(math.radians(10.0), 0.5)
     np.testing.assert_allclose(cv.velocity, [0.6, 0.0, math.radians(20.0)])
+    # 1.5 s unobserved: the gate is 3 · 0.5 · 1.5 = 2.25 m/s; 3 m/s is 2.4 m/s away.
+    assert not cv.observe(np.array([1.5, 0.0, math.radians(5.0)]), 0.5)
+    np.testing.assert_allclose(cv.velocity, [0.6, 0.0, math.radians(10.0)])
+    assert cv.unobserved == pytest.approx(1.5)
+    # Half a second later the gate is 3 · 0.5 · 2.5 = 3.75 m/s: the same speed is taken.
+    assert cv.observe(np.array([1.5, 0.0, 0.0]), 0.5)
+    np.testing.assert_allclose(cv.velocity, [3.0, 0.0, 0.0])
+    assert cv.unobserved == 0.0
     assert coast_window(cv.predict(0.1)[1]).window_theta == COAST_SEARCH.window_theta
     wide = coast_window(cv.predict(0.5)[1])
     assert wide.window_theta == pytest.approx(math.radians(2.0 * 45.0 * 0.5))

@@ -261,8 +261,8 @@ class Tracker:
             moved = between(before, self.offset)
             if fused:  # its translation is mostly the prediction's: the turn alone is news
                 self.velocity.observe_turn(float(moved[2]), dt)
-            else:
-                self.velocity.observe(moved, dt)
+            elif not self.velocity.observe(moved, dt):
+                self.counts["speed_not_believed"] += 1
         return True
 
     def _plicp(
@@ -400,7 +400,7 @@ class Tracker:
     def _unmatched(self) -> bool:
         self.match_cov, self.overlap = None, 0.0
         if self.velocity is not None:
-            self.velocity.lose_turn()
+            self.velocity.lose_turn(0.0 if self._coasted is None else self._coasted[1])
         return False
 
     def keyframe_due(self) -> bool:
