@@ -435,19 +435,20 @@ def _without_odometry(data):
 
 
 def test_a_log_without_odometry_runs_on_scan_matching_alone_and_says_so() -> None:
-    """rooms-laser without its odometry: every scan but two matched (the constant-velocity
-    prediction placed by a correlative search, refined by point-to-line ICP), 47 closures,
-    ATE 0.94 m (seed 0) — against 0.026 m with the wheels: along the rooms' corridor the
-    scans hold the motion too loosely for matching alone, which the wheels' prior fixes.
-    The default front end is then the keyframe's (``reference = "auto"``): the local map
-    with only the coasted prediction as its prior scored 2.69 m."""
+    """rooms-laser without its odometry: every scan but one matched (the constant-velocity
+    prediction placed by a correlative search, refined by point-to-line ICP), 48 closures,
+    ATE 1.29 m (seed 0; 0.89 m before the no-odometry rules of 2026-12-07, seeds 1-3
+    unchanged at 1.00, 2.07, 2.21 m) — against 0.026 m with the wheels: along the rooms'
+    corridor the scans hold the motion too loosely for matching alone, which the wheels'
+    prior fixes. The default front end is then the keyframe's (``reference = "auto"``): the
+    local map with only the coasted prediction as its prior scored 2.44 m."""
     data = load_dataset("rooms-laser", seed=0)
     result = run("graph-slam", _without_odometry(data), seed=0)
     d = result.output.diagnostics
     assert d["odometry"] == NO_ODOMETRY and d["frontend_reference"] == "keyframe"
     assert d["matched"] >= 0.99 * d["scans"] and d["loops_kept"] >= 20
     ate = evaluate(result, data).scores.ate.rmse
-    assert ate < 1.3
+    assert ate < 1.5
     on_map = run("graph-slam", _without_odometry(data), config={"frontend": {"reference": "map"}})
     assert on_map.output.diagnostics["frontend_reference"] == "map"
     assert evaluate(on_map, data).scores.ate.rmse > 1.5 * ate
@@ -502,8 +503,9 @@ def test_the_held_velocity_drops_its_turn_and_disbelieves_a_jump_in_speed() -> N
 @pytest.mark.realdata
 @pytest.mark.slow
 def test_aces_without_odometry_first_300_s(raw_log) -> None:
-    """The first 300 s of raw ACES by scan matching alone: measured 0.048 ± 0.071 m, 0.34°
-    over 291 relations (with the wheels: 0.037 ± 0.034 m, 0.30°)."""
+    """The first 300 s of raw ACES by scan matching alone: measured 0.042 ± 0.045 m, 0.32°
+    over 291 relations (0.048 ± 0.071 m, 0.34° before the no-odometry rules of 2026-12-07;
+    with the wheels: 0.037 ± 0.034 m, 0.30°)."""
     from slamkit.eval.relations import relation_errors
 
     data = raw_log("aces-raw", 300.0)
