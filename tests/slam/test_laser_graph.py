@@ -469,6 +469,9 @@ def test_a_generated_building_without_odometry_is_mapped() -> None:
     d = result.output.diagnostics
     assert d["odometry"] == NO_ODOMETRY
     assert d["matched"] >= 0.99 * d["scans"]
+    # Measured: 704 of 705 scans matched, 39 of them fused with the prediction along a
+    # corridor, 6 matched speeds not believed.
+    assert d["degenerate_fused"] >= 20 and d["speed_not_believed"] >= 1
     assert evaluate(result, data).scores.ate.rmse < 1.2
 
 
