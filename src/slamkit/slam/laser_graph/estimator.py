@@ -365,7 +365,12 @@ class LaserGraphSlam(EstimatorShell):
     def _diagnostics(self) -> dict[str, object]:
         c = self._counts + self._tracker.counts
         solves = self._graph.solves
+        # Without odometry: the scans matched with the prediction along a corridor, and the
+        # matched speeds not believed (frontend.Tracker.match).
+        coasting = ("degenerate_fused", "speed_not_believed")
+        no_odometry = {k: c[k] for k in coasting} if self._tracker.velocity is not None else {}
         return {
+            **no_odometry,
             "odometry": "wheels" if self._tracker.velocity is None else NO_ODOMETRY,
             "frontend_reference": self._reference,
             "scans": c["scans"],

@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -50,6 +50,7 @@ from slamkit.slam.laser_graph.config import FrontEndSettings
 
 __all__ = [
     "COAST_SEARCH",
+    "COAST_WINDOW_MAX_THETA",
     "COV_FLOOR_DEG",
     "COV_FLOOR_XY",
     "LOCAL_MAP_KEYFRAMES",
@@ -59,6 +60,7 @@ __all__ = [
     "PLICP",
     "Keyframe",
     "Tracker",
+    "coast_window",
     "cov_floor",
     "floored_information",
     "local_map",
@@ -86,9 +88,26 @@ COAST_SEARCH = CorrelativeConfig(
     window_xy=0.2, window_theta=math.radians(15.0), resolution=0.03, sigma=0.05, levels=4
 )
 """Without odometry, each scan is first placed by this correlative search around the
-constant-velocity prediction (±0.2 m, ±15°: about two standard deviations of the prediction at
-the velocity's random walk of 0.5 m/s² and 45°/s² over a fifth of a second, a little more at
-slower scan rates), then refined by point-to-line ICP."""
+constant-velocity prediction, then refined by point-to-line ICP. Its window is the narrowest
+one (±0.2 m, ±15°: about two standard deviations of the prediction at the velocity's random
+walk of 0.5 m/s² and 45°/s² over a fifth of a second). A longer interval between scans
+widens the heading window to two standard deviations of the prediction over that interval, up
+to :data:`COAST_WINDOW_MAX_THETA` (:func:`coast_window`): turns start and stop between scans.
+The translation window stays: a robot's speed changes slowly, and a wider one lets the
+optimum settle on a look-alike place along a corridor, whose velocity is then held."""
+
+COAST_WINDOW_MAX_THETA = math.radians(60.0)
+"""The widest heading window of the correlative search without odometry [rad] (a wider
+window costs little, the search is branch and bound, but lets more look-alikes compete)."""
+
+
+def coast_window(prediction_cov: FloatArray) -> CorrelativeConfig:
+    """:data:`COAST_SEARCH` with its heading half-width two standard deviations of the
+    prediction ``(3, 3)``, within :data:`COAST_SEARCH`'s and
+    :data:`COAST_WINDOW_MAX_THETA`."""
+    d = math.sqrt(max(float(prediction_cov[2, 2]), 0.0))
+    theta = min(max(2.0 * d, COAST_SEARCH.window_theta), COAST_WINDOW_MAX_THETA)
+    return replace(COAST_SEARCH, window_theta=theta)
 
 
 @dataclass(frozen=True)
@@ -151,6 +170,7 @@ class Tracker:
         self.velocity = ConstantVelocity() if model is None else None
         self._coasted: tuple[FloatArray, float] | None = None  # offset before, dt
         self._coarse: tuple[PreparedScan | NormalCloud, CorrelativeReference] | None = None
+        self._keyframe_cloud: tuple[PreparedScan, NormalCloud] | None = None
         self.track_cov: FloatArray = np.zeros((3, 3))
         """Covariance of the current offset: the last match's, propagated by the motion
         since (the prior of a degenerate scan's fused match)."""
@@ -216,6 +236,7 @@ class Tracker:
         self.last_override = None
         if isinstance(reference, NormalCloud) and self.model is not None:
             return self._match_map(reference, points)
+        fused = False
         try:
             start = self.offset if self.velocity is None else self._search(reference, points)
             if isinstance(reference, NormalCloud):
@@ -225,18 +246,77 @@ class Tracker:
                     prior_information=np.linalg.solve(prior, np.eye(3)),
                 )  # fmt: skip
             else:
-                result = plicp(reference, points, start, self.plicp)
+                result, start, fused = self._plicp(reference, points, start)
         except MatchError as exc:
             self.counts[f"failed:{exc.reason}"] += 1
             return self._unmatched()
-        if not within_gate(self.offset, result.pose, self.settings):
+        # The gate bounds ICP's correction of where it started: the prediction with the
+        # wheels; without them the correlative optimum, the prediction being a guess.
+        if not within_gate(start, result.pose, self.settings):
             self.counts["gated"] += 1
             return self._unmatched()
         self._accept(result)
         if self.velocity is not None and self._coasted is not None:
             before, dt = self._coasted
-            self.velocity.observe(between(before, self.offset), dt)
+            moved = between(before, self.offset)
+            if fused:  # its translation is mostly the prediction's: the turn alone is news
+                self.velocity.observe_turn(float(moved[2]), dt)
+            elif not self.velocity.observe(moved, dt):
+                self.counts["speed_not_believed"] += 1
         return True
+
+    def _plicp(
+        self, reference: PreparedScan, points: FloatArray, start: FloatArray
+    ) -> tuple[MatchResult, FloatArray, bool]:
+        """Point-to-line ICP against the keyframe from ``start``: the match, where it started
+        and whether it was fused with the prediction. Without odometry a scan that leaves a
+        direction unconstrained (a corridor: ``"degenerate"``) is matched instead by
+        point-to-normal ICP against the keyframe's points with the coasted prediction as its
+        prior (:meth:`_degenerate_match`): the directions the scan holds (across the
+        corridor, the heading) come from the scan, the others from the prediction, where
+        refusing the match left every direction to the prediction."""
+        try:
+            return plicp(reference, points, start, self.plicp), start, False
+        except MatchError as exc:
+            if exc.reason != "degenerate" or self.velocity is None:
+                raise
+        # Along the unconstrained direction the correlative optimum is anywhere in its
+        # window: ICP starts from the prediction there, with the optimum's heading.
+        start = np.array([self.offset[0], self.offset[1], start[2]])
+        result = self._degenerate_match(reference, points, start)
+        self.counts["degenerate_fused"] += 1
+        return result, start, True
+
+    def _degenerate_match(
+        self, reference: PreparedScan, points: FloatArray, start: FloatArray
+    ) -> MatchResult:
+        """Point-to-normal ICP of ``points`` against the keyframe's points (their normals
+        as the local map's, :func:`local_map`) from ``start``, with the prior
+        ``N(prediction, Σ + F)`` (the coasted offset and its covariance, floored); then the
+        position along the direction the scan holds least is the prediction's.
+
+        That direction is the weakest eigenvector ``e`` of the scan's own information
+        ``H = C⁻¹ − Λ`` (``C`` the match's posterior covariance, ``Λ`` the prior's
+        information) in x, y: ``p ← p + e eᵀ (p̂ − p)``. The prior alone does not hold it:
+        along a uniform corridor the current scan's points fall back onto the keyframe's
+        own samples at zero offset, a pull toward the keyframe that outweighs a prior of a
+        few tenths of a metre (generated building 1: the estimate stood still while the
+        robot drove 6 m)."""
+        if self._keyframe_cloud is None or self._keyframe_cloud[0] is not reference:
+            cloud = PointMap(LOCAL_MAP_VOXEL)
+            cloud.insert(np.zeros(3), reference.points)
+            self._keyframe_cloud = (reference, NormalCloud.build(*cloud.arrays()))
+        prior_info = np.linalg.solve(self.odometry_cov + cov_floor(), np.eye(3))
+        result = normal_icp(
+            self._keyframe_cloud[1], points, start, self.normal_icp,
+            prior_information=prior_info, prior_pose=self.offset,
+        )  # fmt: skip
+        scan_info = np.linalg.solve(result.cov, np.eye(3)) - prior_info
+        _, vectors = np.linalg.eigh(0.5 * (scan_info[:2, :2] + scan_info[:2, :2].T))
+        e = vectors[:, 0]  # (eigh sorts ascending: the weakest first)
+        pose = result.pose.copy()
+        pose[:2] += e * float(e @ (self.offset[:2] - pose[:2]))
+        return replace(result, pose=pose)
 
     def _match_map(self, reference: NormalCloud, points: FloatArray) -> bool:
         """The local-map match with the wheels: point-to-normal ICP held to the wheels'
@@ -301,19 +381,26 @@ class Tracker:
         self.overlap = result.inlier_fraction
 
     def _search(self, reference: PreparedScan | NormalCloud, points: FloatArray) -> FloatArray:
-        """Without odometry: the correlative optimum (:data:`COAST_SEARCH`) of ``points``
-        against the keyframe (or the local map) around the coasted prediction, where ICP
-        starts (from a prediction this rough, ICP alone often settles in a local minimum)."""
+        """Without odometry: the correlative optimum of ``points`` against the keyframe (or
+        the local map) around the coasted prediction, where ICP starts (from a prediction this
+        rough, ICP alone often settles in a local minimum). The window is two standard
+        deviations of the prediction over the interval since the last scan
+        (:func:`coast_window`)."""
         if self._coarse is None or self._coarse[0] is not reference:
             coarse = CorrelativeReference.from_points(reference.points, COAST_SEARCH)
             self._coarse = (reference, coarse)
+        config = COAST_SEARCH
+        if self.velocity is not None and self._coasted is not None:
+            config = coast_window(self.velocity.predict(self._coasted[1])[1])
         try:
-            return correlative_match(self._coarse[1], points, self.offset, COAST_SEARCH).pose
+            return correlative_match(self._coarse[1], points, self.offset, config).pose
         except MatchError:
             return self.offset
 
     def _unmatched(self) -> bool:
         self.match_cov, self.overlap = None, 0.0
+        if self.velocity is not None:
+            self.velocity.lose_turn(0.0 if self._coasted is None else self._coasted[1])
         return False
 
     def keyframe_due(self) -> bool:
