@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from slamkit.datasets import load_dataset
 from slamkit.pipeline import EstimatorOutput, InnovationLog, ParticleSnapshot, run
@@ -41,3 +42,32 @@ def test_run_figures_include_particles_and_nis_when_the_estimator_provides_them(
     # The map figure shows the last cloud too (FastSLAM: the poses behind the maps).
     labels = [c.get_label() for c in figs["trajectory.png"].axes[0].collections]
     assert "particles at t = 20.0 s" in labels
+
+
+def test_the_errors_figure_draws_a_band_only_with_a_covariance() -> None:
+    """Graph SLAM has no covariance: its errors figure plots the errors after the ATE's
+    SE(2) alignment (their RMS is the headline ATE) and no band, and says so; an EKF's
+    plots its unaligned errors with the ±3σ band."""
+    ds = load_dataset("corridor-loop-laser", seed=0)
+    res = run("laser-odometry", ds)
+    ev = evaluate(res, ds)
+    assert ev.sigmas is None and ev.aligned_errors is not None
+    ate = ev.scores.ate
+    assert np.sqrt(np.mean(np.sum(ev.aligned_errors[:, :2] ** 2, axis=1))) == pytest.approx(
+        ate.rmse, rel=1e-9
+    )
+    fig = run_figures(res, ds, ev)["errors.png"]
+    title = fig.axes[0].get_title()
+    assert "alignment of the ATE" in title and "σ" in title and "±" not in title
+    drawn = fig.axes[0].lines[0].get_ydata()
+    np.testing.assert_allclose(drawn, ev.aligned_errors[:, 0])
+    assert not fig.axes[0].collections  # no band
+
+    five = load_dataset("five-features", seed=0)
+    ekf = run("ekf-localization", five)
+    ev = evaluate(ekf, five)
+    assert ev.sigmas is not None
+    fig = run_figures(ekf, five, ev)["errors.png"]
+    assert "no alignment" in fig.axes[0].get_title() and "±3σ" in fig.axes[0].get_title()
+    np.testing.assert_allclose(fig.axes[0].lines[0].get_ydata(), ev.errors[:, 0])
+    assert fig.axes[0].collections  # the band

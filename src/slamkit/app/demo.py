@@ -14,7 +14,7 @@ DEMO_LOOK_AT = (
     ("report.html", "the report page: figures, metrics, config, timings (open in a browser)"),
     ("map.png", "the occupancy map SLAM built, with its path against the true one (dashed)"),
     ("loops.png", "the pose graph's keyframes and the loop closures it accepted"),
-    ("errors.png", "x, y and heading error against time, with the ±3σ band"),
+    ("errors.png", "x, y and heading error against time, after the ATE's alignment"),
     ("metrics.json", "ATE, RPE and the estimator's counts (keyframes, loops, timings)"),
 )
 """The demo's files worth opening first, and what each shows."""

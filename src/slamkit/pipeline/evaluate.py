@@ -14,6 +14,7 @@ from slamkit.errors import CovarianceError, InputError, SlamkitError
 from slamkit.estimation.contract import InnovationLog, LandmarkIds
 from slamkit.eval import (
     AssociationScores,
+    TrajectoryError,
     absolute_trajectory_error,
     associate,
     association_scores,
@@ -48,6 +49,8 @@ class Evaluation:
     matched_times: FloatArray | None = None
     errors: FloatArray | None = None
     """Per matched step ``(dx, dy, dtheta)`` estimate minus truth, no alignment."""
+    aligned_errors: FloatArray | None = None
+    """The same after the SE(2) alignment of the headline ATE (None: no ATE)."""
     sigmas: FloatArray | None = None
     """Per matched step standard deviations ``(3,)`` from the estimator's covariance."""
     nees: FloatArray | None = None
@@ -215,7 +218,15 @@ def _trajectory_scores(
                     steps=int(ok.sum()),
                 ),
             )
-    arrays = {"matched_times": result.times[ia], "errors": err, "sigmas": sig, "nees": nees_vals}
+    ate = scores.ate
+    aligned = pose_errors(ate.aligned_estimate, ref) if isinstance(ate, TrajectoryError) else None
+    arrays = {
+        "matched_times": result.times[ia],
+        "errors": err,
+        "aligned_errors": aligned,
+        "sigmas": sig,
+        "nees": nees_vals,
+    }
     return scores, arrays
 
 

@@ -1,4 +1,5 @@
-"""The standard figures of one run: map view, per-axis errors with ±3σ, NEES over time.
+"""The standard figures of one run: map view, per-axis errors (with ±3σ when the estimator
+has a covariance, else after the ATE's alignment), NEES over time.
 
 Every picture is made to be read: axis limits from the trajectories and the map, not from
 covariance ellipses or a lost start (:mod:`slamkit.viz.layout`); the map the run localizes
@@ -268,12 +269,24 @@ def _trajectory_figure(
 
 def _error_figure(result: Result, evaluation: Evaluation, n_sigma: float, t0: float) -> Figure:
     """x, y, heading errors against the time since the start, each axis limited to what the
-    run shows after its first transient (convergence, when the run was scored for it)."""
+    run shows after its first transient (convergence, when the run was scored for it).
+
+    With the estimator's covariance: the errors as they are (no alignment, as the NEES
+    reads them) with the ``±n_sigma·σ`` band. Without: the errors after the SE(2)
+    alignment of the headline ATE, and no band; the title says which."""
     assert evaluation.errors is not None and evaluation.matched_times is not None
     t = evaluation.matched_times - t0
     fig = new_figure(figsize=(9.0, 6.5))
     axes = fig.subplots(3, 1, sharex=True)
-    plot_pose_errors(axes, t, evaluation.errors, evaluation.sigmas, n_sigma)
+    errors, sigmas = evaluation.errors, evaluation.sigmas
+    if sigmas is not None:
+        title = f"estimate − truth (no alignment) with the estimator's ±{n_sigma:g}σ"
+    elif evaluation.aligned_errors is not None:
+        errors = evaluation.aligned_errors
+        title = "estimate − truth after the SE(2) alignment of the ATE (no covariance: no σ band)"
+    else:
+        title = "estimate − truth (no alignment; no covariance: no σ band)"
+    plot_pose_errors(axes, t, errors, sigmas, n_sigma)
     conv = evaluation.scores.convergence
     settle = conv.time if isinstance(conv, ConvergenceReport) and conv.time is not None else None
     # after convergence; without a convergence score, after the first 5 % of the run
@@ -282,15 +295,12 @@ def _error_figure(result: Result, evaluation: Evaluation, n_sigma: float, t0: fl
     if not np.any(after):
         after = np.ones_like(t, dtype=bool)
     unit = np.array([1.0, 1.0, np.degrees(1.0)])
-    err = evaluation.errors.copy()
+    err = errors.copy()
     err[:, 2] = (err[:, 2] + np.pi) % (2 * np.pi) - np.pi
     for i, ax in enumerate(axes):
         half = robust_abs_limit(err[after, i] * unit[i], quantile=1.0)
-        if evaluation.sigmas is not None:
-            half = max(
-                half,
-                robust_abs_limit(n_sigma * evaluation.sigmas[after, i] * unit[i], quantile=0.95),
-            )
+        if sigmas is not None:
+            half = max(half, robust_abs_limit(n_sigma * sigmas[after, i] * unit[i], quantile=0.95))
         half = 1.25 * half if half > 0 else 1.0
         ax.set_ylim(-half, half)
         ax.axhline(0.0, color="0.6", linewidth=0.6, zorder=0)
@@ -303,6 +313,6 @@ def _error_figure(result: Result, evaluation: Evaluation, n_sigma: float, t0: fl
                 label="before convergence" if i == 0 else None,
             )
     axes[-1].set_xlabel("time since the start [s]")
-    axes[0].set_title(f"estimate − truth with ±{n_sigma:g}σ")
+    axes[0].set_title(title)
     legend_outside(axes[0])
     return fig
