@@ -210,6 +210,28 @@ def test_pngs_are_large_and_svg_on_request(five, tmp_path: Path) -> None:  # typ
     assert b"<svg" in svg.read_bytes()[:2000]
 
 
+def test_the_scale_bar_goes_where_it_hides_the_least() -> None:
+    """Walls (an image's dark cells) and a path in the lower right: the bar goes to the
+    lower left, which is empty, and has no box; with every corner empty it stays in the
+    lower right."""
+    from slamkit.viz.layout import add_scale_bar, emptiest_corner
+
+    prob = np.full((100, 100), 0.5)
+    prob[:12, 75:] = 1.0  # a wall block in the lower right (cells of 0.1 m)
+    grid = OccupancyGrid(prob, 0.1, np.array([0.0, 0.0]))
+    ax = new_figure().add_subplot()
+    plot_map(ax, grid, crop=False, scale_bar=False)
+    ax.plot([8.0, 9.5], [0.5, 0.5])
+    ax.set_xlim(0.0, 10.0)
+    ax.set_ylim(0.0, 10.0)
+    assert emptiest_corner(ax) == "lower left"
+    bar = add_scale_bar(ax)
+    assert bar.loc == 3 and not bar.patch.get_visible()  # 3: lower left
+    empty = new_figure().add_subplot()
+    empty.set_xlim(0.0, 10.0)
+    assert emptiest_corner(empty) == "lower right"
+
+
 def test_a_3d_graph_is_shown_on_its_principal_plane_on_one_scale() -> None:
     rng = np.random.default_rng(3)
     uv = rng.uniform(-10, 10, (200, 2)) * [3.0, 1.0]

@@ -26,6 +26,7 @@ __all__ = [
     "Box",
     "add_scale_bar",
     "crop_to_known",
+    "emptiest_corner",
     "known_box",
     "legend_outside",
     "map_box",
@@ -198,9 +199,60 @@ def _nice_length(span: float) -> float:
     return float(10.0 * power)  # pragma: no cover - the loop always returns
 
 
+_CORNERS = {  # location: the corner's box in axes fractions (x0, x1, y0, y1)
+    "lower right": (0.7, 1.0, 0.0, 0.15),
+    "lower left": (0.0, 0.3, 0.0, 0.15),
+    "upper right": (0.7, 1.0, 0.85, 1.0),
+    "upper left": (0.0, 0.3, 0.85, 1.0),
+}
+
+
+def _drawn_points(ax: Axes) -> NDArray[np.float64]:
+    """Every point the axes draw in data units ``(P, 2)``: line vertices, scatter offsets
+    and the centres of an image's marked pixels (those darker than mid-grey: walls)."""
+    parts = [np.asarray(line.get_xydata(), dtype=np.float64) for line in ax.lines]
+    parts += [np.asarray(c.get_offsets(), dtype=np.float64) for c in ax.collections]
+    for image in ax.images:
+        values = image.get_array()
+        if values is None or np.ndim(values) != 2 or np.size(values) == 0:
+            continue
+        rgba = np.asarray(image.to_rgba(values), dtype=np.float64)
+        luminance = rgba[..., :3] @ np.array([0.299, 0.587, 0.114])
+        x0, x1, y0, y1 = image.get_extent()
+        rows, cols = np.nonzero(luminance < 0.5)
+        h, w = luminance.shape
+        ys = y0 + (rows + 0.5) / h * (y1 - y0)
+        if image.origin == "upper":
+            ys = y1 - (rows + 0.5) / h * (y1 - y0)
+        parts.append(np.column_stack([x0 + (cols + 0.5) / w * (x1 - x0), ys]))
+    parts = [p.reshape(-1, 2) for p in parts if p.size]
+    return np.concatenate(parts) if parts else np.zeros((0, 2))
+
+
+def emptiest_corner(ax: Axes) -> str:
+    """The corner of ``ax`` (``"lower right"``, ``"lower left"``, ``"upper right"``,
+    ``"upper left"``, in that order of preference) over which the fewest drawn points lie:
+    where a scale bar hides the least."""
+    points = _drawn_points(ax)
+    if points.shape[0] == 0:
+        return "lower right"
+    frac = ax.transAxes.inverted().transform(ax.transData.transform(points))
+    counts = {
+        loc: int(
+            np.count_nonzero(
+                (frac[:, 0] >= x0) & (frac[:, 0] <= x1) & (frac[:, 1] >= y0) & (frac[:, 1] <= y1)
+            )
+        )
+        for loc, (x0, x1, y0, y1) in _CORNERS.items()
+    }
+    return min(counts, key=lambda loc: counts[loc])  # ties: the first, lower right
+
+
 def add_scale_bar(ax: Axes, *, length: float | None = None) -> AnchoredSizeBar:
-    """A scale bar in the lower right of ``ax`` (data units are metres): ``length`` metres,
-    or a round length near a fifth of the x range."""
+    """A scale bar (data units are metres) of ``length`` metres, or a round length near a
+    fifth of the x range, in the corner that hides the least of what is drawn
+    (:func:`emptiest_corner`; call it once the data and the limits are set), without a
+    box: only the bar and its label cover the plot."""
     xmin, xmax = ax.get_xlim()
     size = _nice_length(abs(xmax - xmin)) if length is None else float(length)
     label = f"{size:g} m" if size >= 1 else f"{100 * size:g} cm"
@@ -208,15 +260,14 @@ def add_scale_bar(ax: Axes, *, length: float | None = None) -> AnchoredSizeBar:
         ax.transData,
         size,
         label,
-        "lower right",
+        emptiest_corner(ax),
         pad=0.4,
         sep=4,
         color="black",
-        frameon=True,
+        frameon=False,
         size_vertical=0,
         label_top=True,
     )
-    bar.patch.set_alpha(0.75)
     ax.add_artist(bar)
     return bar
 
