@@ -193,6 +193,9 @@ def _run(
     console.print(_render_metrics(report.scores))
     for warning in report.scores.warnings:  # the consistency monitor (slamkit.eval.monitor)
         console.print(f"[bold yellow]warning:[/] {escape(warning.message)}")
+    judged = report.scores.verdict
+    colour = "green" if judged.consistent else "yellow"
+    console.print(f"[bold {colour}]verdict:[/] {escape(judged.line)}")
     console.print(f"wrote {', '.join(report.files)} to [bold]{report.out_dir}[/]")
     if "report.html" in report.files:
         console.print(f"report: [bold]{report.out_dir / 'report.html'}[/] (open it in a browser)")

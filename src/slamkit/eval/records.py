@@ -16,6 +16,7 @@ from slamkit.eval.innovations import NisSummary
 from slamkit.eval.landmarks import LandmarkError
 from slamkit.eval.relations import RelationError
 from slamkit.eval.trajectory import RelativeError, TrajectoryError
+from slamkit.eval.verdict import Verdict, verdict
 
 __all__ = [
     "NeesSummary",
@@ -132,4 +133,10 @@ class RunScores:
                 out[f.name] = [v.as_dict() for v in value]
             elif value is not None:
                 out[f.name] = value.as_dict() if hasattr(value, "as_dict") else value
+        out["verdict"] = self.verdict.as_dict()
         return out
+
+    @property
+    def verdict(self) -> Verdict:
+        """The run's one-line verdict from its findings (:mod:`slamkit.eval.verdict`)."""
+        return verdict(self.warnings)

@@ -82,6 +82,8 @@ figure img { max-width: 100%; border: 1px solid #ddd; }
 figcaption { font-size: 0.85em; color: #555; }
 .runs { display: grid; grid-template-columns: repeat(auto-fit, minmax(360px, 1fr)); gap: 1em; }
 .muted { color: #777; }
+#verdict.consistent { color: #1b6e1b; }
+#verdict.doubtful { color: #8a5a00; }
 """
 
 
@@ -368,6 +370,10 @@ def run_html(page: RunPage) -> str:
     flat = flatten_metrics(page.metrics)
     facts += [(label, flat[key]) for key, label in HEADLINE if key in flat]
     body.append(_table(None, facts, "summary"))
+    judged = page.metrics.get("verdict")
+    if isinstance(judged, dict) and "line" in judged:  # (older metrics.json have none)
+        state = "consistent" if judged.get("consistent") else "doubtful"
+        body.append(f'<p id="verdict" class="{state}"><b>Verdict:</b> {_e(judged["line"])}</p>')
     warnings = page.metrics.get("warnings") or []
     if warnings:  # the consistency monitor's and the estimator's findings
         body.append("<h2>Warnings</h2>")
@@ -384,7 +390,11 @@ def run_html(page: RunPage) -> str:
     else:
         body.append('<p class="muted">no figures (run without --no-plots to get them)</p>')
     body.append("<h2>Metrics</h2>")
-    shown = {k: v for k, v in flat.items() if k not in ("reading", "warnings")}  # shown above
+    shown = {  # shown above
+        k: v
+        for k, v in flat.items()
+        if k not in ("reading", "warnings") and not k.startswith("verdict")
+    }
     body.append(_table(("metric", "value"), shown.items(), "metrics"))
     body.append("<h2>Timings [s]</h2>")
     body.append(_table(("phase", "seconds"), _timing_rows(page), "timings"))
