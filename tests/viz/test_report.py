@@ -71,3 +71,35 @@ def test_the_errors_figure_draws_a_band_only_with_a_covariance() -> None:
     assert "no alignment" in fig.axes[0].get_title() and "±3σ" in fig.axes[0].get_title()
     np.testing.assert_allclose(fig.axes[0].lines[0].get_ydata(), ev.errors[:, 0])
     assert fig.axes[0].collections  # the band
+
+
+def test_on_data_without_truth_the_path_is_coloured_by_time_with_its_closures() -> None:
+    """The user's own log (no truth): trajectory.png is not the map view again but the path
+    coloured by the time since the start (with a colour bar) and the graph's loop
+    closures, one red line each; with the truth it stays the estimate over the truth."""
+    import dataclasses
+
+    from matplotlib.collections import LineCollection
+
+    from slamkit.datasets.stream import GroundTruth
+    from slamkit.optim.data import loop_closures
+
+    ds = load_dataset("corridor-loop-laser", seed=0)
+    own = dataclasses.replace(ds, truth=GroundTruth())
+    res = run("graph-slam", own)
+    assert res.output.graph is not None
+    closures = loop_closures(res.output.graph)
+    assert closures.shape[0] > 0
+    fig = run_figures(res, own, evaluate(res, own))["trajectory.png"]
+    ax, bar = fig.axes
+    assert bar.get_ylabel() == "time since the start [s]"
+    collections = [c for c in ax.collections if isinstance(c, LineCollection)]
+    path = next(c for c in collections if c.get_array() is not None)
+    times = np.asarray(path.get_array())
+    assert len(path.get_segments()) == len(res) - 1 and np.all(np.diff(times) >= 0)
+    assert times[-1] == pytest.approx(res.times[-1] - res.times[0], rel=0.05)
+    red = [c for c in collections if c.get_label().startswith("loop closures")]
+    assert len(red) == 1 and len(red[0].get_segments()) == closures.shape[0]
+
+    with_truth = run_figures(res, ds, evaluate(res, ds))["trajectory.png"]
+    assert len(with_truth.axes) == 1  # no colour bar: the estimate over the truth

@@ -501,3 +501,45 @@ def plot_nis(
     hi = as_array(upper, "upper", (t.size,))
     mid = 0.5 * (lo + hi)
     return plot_consistency(ax, t, v / mid, (lo / mid, hi / mid), label="window NIS", color=color)
+
+
+def plot_path_by_time(
+    ax: Axes, times: ArrayLike, poses: ArrayLike, *, label: str = "estimate"
+) -> Artist:
+    """The path ``poses (N, 2+)`` as a line coloured by the time since its start (``times
+    (N,)``, viridis: dark early, yellow late) with a colour bar: on data without a truth to
+    draw it against, when the robot was where, and where it came back."""
+    from matplotlib.collections import LineCollection
+
+    t = as_array(times, "times", (None,))
+    p = as_array(poses, "poses", (t.shape[0], None))[:, :2]
+    since = t - t[0]
+    segments = np.stack([p[:-1], p[1:]], axis=1)
+    lines = LineCollection(cast(Any, segments), cmap="viridis", linewidths=1.4, label=label, zorder=2)
+    lines.set_array(0.5 * (since[:-1] + since[1:]))
+    ax.add_collection(lines)
+    ax.figure.colorbar(lines, ax=ax, label="time since the start [s]", shrink=0.8, pad=0.02)
+    ax.update_datalim(p)
+    ax.autoscale_view()
+    return lines
+
+
+def plot_closures(ax: Axes, poses: ArrayLike, pairs: ArrayLike) -> Artist | None:
+    """Loop closures as thin red lines between the poses ``poses (K, 2+)`` of each pair
+    ``(E, 2)`` (rows into ``poses``); None when there is none."""
+    from matplotlib.collections import LineCollection
+
+    p = as_array(poses, "poses", (None, None))[:, :2]
+    ij = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if ij.shape[0] == 0:
+        return None
+    lines = LineCollection(
+        cast(Any, np.stack([p[ij[:, 0]], p[ij[:, 1]]], axis=1)),
+        colors="tab:red",
+        linewidths=0.5,
+        alpha=0.6,
+        label=f"loop closures ({ij.shape[0]})",
+        zorder=3,
+    )
+    ax.add_collection(lines)
+    return lines

@@ -21,6 +21,7 @@ from slamkit.eval import (
     nis_summary,
 )
 from slamkit.geometry.alignment import Similarity
+from slamkit.optim.data import loop_closures
 from slamkit.viz.layout import (
     Box,
     legend_outside,
@@ -33,12 +34,14 @@ from slamkit.viz.layout import (
 from slamkit.viz.maps import plot_map
 from slamkit.viz.plots import (
     new_figure,
+    plot_closures,
     plot_consistency,
     plot_covariance_ellipses,
     plot_landmark_estimates,
     plot_landmarks,
     plot_nis,
     plot_particles,
+    plot_path_by_time,
     plot_pose_errors,
     plot_segments,
     plot_trajectory,
@@ -236,7 +239,19 @@ def _trajectory_figure(
     if grid is not None:
         plot_map(ax, grid, scale_bar=False)
     plot_reference(ax, dataset.truth, gps_alignment(evaluation))
-    plot_estimate_over_truth(ax, result, dataset)
+    own_data = dataset.truth.poses is None and dataset.truth.positions is None
+    if own_data and result.estimator not in POINT_ESTIMATORS and len(result) > 1:
+        # Nothing to draw the path against: when the robot was where, and the closures.
+        plot_path_by_time(ax, result.times, result.poses)
+        plot_start_end(ax, result.poses)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+    else:
+        plot_estimate_over_truth(ax, result, dataset)
+    graph = result.output.graph
+    if graph is not None and graph.dim == 2:
+        plot_closures(ax, graph.poses, loop_closures(graph))
     if result.covariances is not None and len(result) > 1:
         every = max(1, len(result) // 25)
         plot_covariance_ellipses(
