@@ -161,3 +161,20 @@ def test_a_clean_reading_is_one_line_and_a_malformed_one_is_refused(tmp_path: Pa
     (run / "metrics.json").write_text(json.dumps(metrics))
     with pytest.raises(InputError, match=r"reading\.records"):
         read_run_folder(run)
+
+
+def test_the_estimators_counts_have_a_table_of_their_own_in_words() -> None:
+    """``diagnostics`` is not a block of dotted keys in the metrics table: it has its own
+    table, each key in words (``loops rejected › refine: degenerate``)."""
+    from slamkit.report.html import RunPage
+
+    metrics = {
+        "ate": {"rmse": 0.05},
+        "diagnostics": {"keyframes": 12, "loops_rejected": {"refine:degenerate": 3}},
+    }
+    text = run_html(RunPage(Path("."), "graph-slam", "loop", metrics=metrics))
+    table = text[text.index('<table id="metrics">') :].split("</table>", 1)[0]
+    assert "ate.rmse" in table and "diagnostics" not in table
+    counts = text[text.index('<table id="diagnostics">') :].split("</table>", 1)[0]
+    assert "<th>keyframes</th>" in counts and ">12<" in counts
+    assert "loops rejected › refine: degenerate" in counts and ">3<" in counts

@@ -222,6 +222,12 @@ def flatten_metrics(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, s
     return rows
 
 
+def _in_words(key: str) -> str:
+    """A dotted diagnostics key in words: ``loops_rejected.low_score`` → ``loops rejected ›
+    low score`` (a reason after a colon kept: ``refine:degenerate`` → ``refine: degenerate``)."""
+    return " › ".join(part.replace("_", " ").replace(":", ": ") for part in key.split("."))
+
+
 def _reading_row(reading: Mapping[str, Any]) -> str:
     """``"used of records scans, N dropped, M repaired, K ignored"`` of a ``"reading"``
     record."""
@@ -390,12 +396,22 @@ def run_html(page: RunPage) -> str:
     else:
         body.append('<p class="muted">no figures (run without --no-plots to get them)</p>')
     body.append("<h2>Metrics</h2>")
-    shown = {  # shown above
+    shown = {  # the reading, verdict and warnings above, the estimator's counts below
         k: v
         for k, v in flat.items()
-        if k not in ("reading", "warnings") and not k.startswith("verdict")
+        if k not in ("reading", "warnings") and not k.startswith(("verdict.", "diagnostics."))
     }
     body.append(_table(("metric", "value"), shown.items(), "metrics"))
+    counts = page.metrics.get("diagnostics")
+    if isinstance(counts, Mapping) and counts:
+        body.append("<h2>The estimator's own counts</h2>")
+        body.append(
+            '<p class="muted">What the estimator counted of itself (keyframes, matches, '
+            "closures tried and refused by reason, particles, landmarks, …), as in "
+            "<code>metrics.json</code>'s <code>diagnostics</code>.</p>"
+        )
+        rows = [(_in_words(k), v) for k, v in flatten_metrics(counts).items()]
+        body.append(_table(("count", "value"), rows, "diagnostics"))
     body.append("<h2>Timings [s]</h2>")
     body.append(_table(("phase", "seconds"), _timing_rows(page), "timings"))
     body.append("<h2>Configuration (config.json)</h2>")
