@@ -41,6 +41,19 @@ def test_a_line_every_interval_with_the_share_of_work_the_elapsed_and_the_time_l
     )
 
 
+def test_the_time_left_follows_the_rate_of_the_last_30_seconds():
+    # a laser SLAM slows as its graph grows: the rate since the start would promise too little
+    clock = FakeClock()
+    lines: list[str] = []
+    plain = PlainProgress("slam", "scans", lines.append, clock, interval=10.0)
+    plain(0, 1000)
+    clock.now += 10.0
+    plain(500, 1000)  # 50 scans/s at first
+    clock.now += 30.0
+    plain(600, 1000)  # then 100 scans in 30 s: 400 left take 120 s, not the 27 s of the mean
+    assert lines[-1] == "slam: 60 % of scans (600/1,000), 0:00:40 elapsed, ~0:02:00 left"
+
+
 def test_the_steps_after_the_count_are_named_with_their_own_elapsed_time():
     clock = FakeClock()
     lines: list[str] = []

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
@@ -20,6 +21,7 @@ from rich.text import Text
 __all__ = [
     "ERR_CONSOLE",
     "PLAIN_INTERVAL",
+    "RATE_WINDOW",
     "PlainProgress",
     "ProgressHandle",
     "RateColumn",
@@ -32,6 +34,11 @@ printed while a bar runs appears above the bar."""
 
 PLAIN_INTERVAL = 10.0
 """Seconds between two lines of progress without a terminal."""
+
+RATE_WINDOW = 30.0
+"""Seconds of the latest counts the time left is estimated from (the rate over them), as
+rich's bar does: a laser SLAM slows as its graph grows, and the rate since the start would
+promise too little (``docs/architecture.md``, "Progress")."""
 
 
 def _clock_text(seconds: float) -> str:
@@ -132,15 +139,16 @@ class PlainProgress:
         self._lock = threading.Lock()
         self._done = 0
         self._total: int | None = None
-        self._first: tuple[float, int] | None = None  # (time, done) of the first count
+        self._counts: deque[tuple[float, int]] = deque()  # (time, done) of the latest counts
         self._stage: str | None = None
         self._stage_start = self._start
 
     def __call__(self, done: int, total: int) -> None:
         with self._lock:
             now = self._clock()
-            if self._first is None:
-                self._first = (now, done)
+            self._counts.append((now, done))
+            while len(self._counts) > 1 and self._counts[1][0] <= now - RATE_WINDOW:
+                self._counts.popleft()  # keep one count at or before the window's start
             self._done, self._total = done, (total if total and total > 0 else None)
         self.tick()
 
@@ -168,8 +176,11 @@ class PlainProgress:
             f"{self.label}: {100 * done / total:.0f} % of {self.unit} "
             f"({done:,}/{total:,}), {elapsed} elapsed"
         )
-        if self._first is not None and done > self._first[1]:
-            rate = (done - self._first[1]) / max(now - self._first[0], 1e-9)
+        if self._counts and done > self._counts[0][1]:
+            # the rate from the last count at or before the window's start (or the first)
+            # up to now: a stall makes the time left grow
+            since, done_then = self._counts[0]
+            rate = (done - done_then) / max(now - since, 1e-9)
             text += f", ~{_clock_text(max(total - done, 0) / rate)} left"
         return text
 
