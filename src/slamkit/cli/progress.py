@@ -254,6 +254,7 @@ def progress_bar(
         _LeftColumn(),
         console=err_console,
         transient=True,
+        speed_estimate_period=RATE_WINDOW,  # the plain line's window too
     ) as bar:
         current: list[TaskID] = [bar.add_task(label, total=None, unit=unit)]
 
