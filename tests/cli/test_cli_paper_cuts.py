@@ -62,12 +62,26 @@ def test_the_progress_bar_shows_count_rate_and_time_left_never_none():
     with progress_bar("job", "events", console) as progress:
         before = console.export_text(clear=False)
         progress(0, 0)  # a library that does not know its total yet
+        progress.counting("scans")  # what the library counts, said before the first count
         for k in range(1, 40):
+            progress(k, 40)
+    text = console.export_text()
+    assert "None" not in before + text
+    assert "left" in text and "scans/s" in text and "scans 39/40" in text and "98%" in text
+
+
+def test_the_steps_after_the_count_replace_the_bar_with_their_name():
+    console = Console(stderr=True, force_terminal=True, width=160, record=True)
+    with progress_bar("job", "events", console) as progress:
+        for k in range(1, 41):
             progress(k, 40)
         progress.stage("writing 3 plots")
     text = console.export_text()
-    assert "None" not in before + text
-    assert "left" in text and "events/s" in text and "writing 3 plots" in text
+    # every render from the step's first on (at least that one and the last): its name and
+    # elapsed time, and no frozen "0% … left 0:00:00" row of the finished count beside it
+    after = text[text.index("job: writing 3 plots") :]
+    assert after.count("job: writing 3 plots") >= 2 and "elapsed" in after
+    assert "%" not in after and "left" not in after and "40/40" not in after
 
 
 def test_help_lists_choices_and_shows_no_type_noise():

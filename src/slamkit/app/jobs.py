@@ -21,7 +21,7 @@ from slamkit.eval.records import RunScores
 from slamkit.io import atomic_folder, write_json, write_tum
 from slamkit.io.folders import check_output_folder
 from slamkit.io.rosmap_read import RosMapReading, read_ros_map_reading
-from slamkit.pipeline import Progress, Result, get_estimator_entry, run
+from slamkit.pipeline import Progress, Result, Stage, get_estimator_entry, run, work_measure
 from slamkit.pipeline.evaluate import evaluate
 
 __all__ = ["ANIMATION_FRAMES", "KNOWN_MAP_ESTIMATORS", "RunReport", "RunRequest", "run_job"]
@@ -106,15 +106,22 @@ def run_metrics(scores: RunScores, reading: ReadingSummary | None) -> dict[str, 
 def run_job(
     request: RunRequest,
     progress: Progress | None = None,
-    stage: Callable[[str], None] | None = None,
+    stage: Stage | None = None,
+    counting: Callable[[str], None] | None = None,
 ) -> RunReport:
     """Load the data set, run the estimator, evaluate, and write into ``request.out_dir``:
     ``trajectory.tum``, ``metrics.json``, ``config.json`` (the resolved configuration),
     the files of :func:`slamkit.app.outputs.write_result_files` (``landmarks.csv``,
     ``groundtruth.tum``, ``graph.g2o``, ``map.pgm`` + ``map.yaml``, KITTI on request), PNG
     plots and ``report.html`` (the page of the run: :mod:`slamkit.report`). The folder is
-    written completely or not at all. ``stage(text)`` is told of the steps after the run
-    (plots, the animation), which take long on big data sets."""
+    written completely or not at all.
+
+    ``counting(unit)`` is told once, before the first ``progress(done, total)``, what the
+    progress counts (``"scans"``, ``"readings"``, ``"events"``:
+    :func:`slamkit.pipeline.work_measure`). ``stage(text)`` is told of each step without a
+    count, in order: the estimator's last step, scoring, drawing the plots, writing the
+    result files (the map among them), writing the plots, the animation, the rerun and MCAP
+    recordings, the report page; they take long on big data sets."""
     say = stage if stage is not None else (lambda text: None)
     entry = get_estimator_entry(request.estimator)
     given = request.dataset if isinstance(request.dataset, Dataset) else None
@@ -156,6 +163,8 @@ def run_job(
             )
         dataset = dataclasses.replace(dataset, known_grid=known_map.grid)
     timings["load the data set"] = time.perf_counter() - clock
+    if counting is not None:
+        counting(work_measure(entry, dataset).unit)
     # twice the GIF's frames, from which it picks those where the robot moves
     frames = 2 * ANIMATION_FRAMES if request.animate else 0
     clock = time.perf_counter()
@@ -166,6 +175,7 @@ def run_job(
         seed=request.seed,
         progress=progress,
         frames=frames,
+        stage=say,
     )
     timings["run the estimator"] = time.perf_counter() - clock
     clock = time.perf_counter()
@@ -188,6 +198,7 @@ def run_job(
     if request.known_map is not None:  # re-run from config.json in any folder
         resolved["map"] = str(Path(request.known_map).resolve())
     with atomic_folder(request.out_dir, overwrite=request.overwrite) as tmp:
+        say("writing the result files")
         write_tum(tmp / "trajectory.tum", result.times, result.poses)
         write_json(tmp / "metrics.json", run_metrics(evaluation.scores, dataset.reading))
         write_json(tmp / "config.json", resolved)
@@ -231,6 +242,7 @@ def run_job(
             mcap = Path(request.mcap)
             write_mcap(result, dataset, mcap if mcap.is_absolute() else tmp / mcap)
         timings["figures and files"] = time.perf_counter() - clock
+        say("writing the report page")
         _write_report(tmp, entry.description, dataset.description, timings)
         files = tuple(sorted(p.name for p in tmp.iterdir()))
     settings = {} if preset is None else dict(preset.settings)

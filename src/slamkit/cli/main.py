@@ -181,7 +181,7 @@ def _run(
         mcap=mcap,
     )
     with progress_bar(f"{estimator} on {data}") as progress:
-        report = run_job(request, progress, progress.stage)
+        report = run_job(request, progress, progress.stage, progress.counting)
     if report.preset_settings:
         used = ", ".join(f"{k}={v}" for k, v in report.preset_settings.items())
         console.print(f"preset {report.preset} (config.json has every setting): {used}")

@@ -1,8 +1,16 @@
-"""The progress bar of the ``slamkit`` commands: count, rate and time left on stderr, and
-the steps without a count (writing plots) named while they run."""
+"""The progress of the ``slamkit`` commands on stderr.
+
+On a terminal: a bar with what it counts (``scans 1,234/13,630``), the rate and the time
+left, and then each step without a count (drawing the plots, writing the report) with a
+spinner of its own, its name and its elapsed time. Without a terminal (CI, ``tee``,
+``nohup``): a plain line every :data:`PLAIN_INTERVAL` seconds
+(``graph-slam on x: 45 % of scans (1,234/2,742), 0:00:31 elapsed, ~0:00:38 left``)."""
 
 from __future__ import annotations
 
+import threading
+import time
+from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
@@ -10,11 +18,33 @@ from rich.console import Console
 from rich.progress import ProgressColumn, Task
 from rich.text import Text
 
-__all__ = ["ERR_CONSOLE", "ProgressHandle", "RateColumn", "progress_bar"]
+__all__ = [
+    "ERR_CONSOLE",
+    "PLAIN_INTERVAL",
+    "RATE_WINDOW",
+    "PlainProgress",
+    "ProgressHandle",
+    "RateColumn",
+    "progress_bar",
+]
 
 ERR_CONSOLE = Console(stderr=True)
 """The stderr console of every command: progress bars and error lines share it, so a line
 printed while a bar runs appears above the bar."""
+
+PLAIN_INTERVAL = 10.0
+"""Seconds between two lines of progress without a terminal."""
+
+RATE_WINDOW = 30.0
+"""Seconds of the latest counts the time left is estimated from (the rate over them), as
+rich's bar does: a laser SLAM slows as its graph grows, and the rate since the start would
+promise too little (``docs/architecture.md``, "Progress")."""
+
+
+def _clock_text(seconds: float) -> str:
+    minutes, secs = divmod(int(seconds), 60)
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours:d}:{minutes:02d}:{secs:02d}"
 
 
 class RateColumn(ProgressColumn):
@@ -26,59 +56,218 @@ class RateColumn(ProgressColumn):
 
     def render(self, task: Task) -> Text:
         speed = task.finished_speed or task.speed
-        text = "" if speed is None else f"{speed:,.0f} {self.unit}/s"
+        unit = task.fields.get("unit", self.unit)
+        text = "" if speed is None or task.total is None else f"{speed:,.0f} {unit}/s"
         return Text(text, style="progress.data.speed")
 
 
-class ProgressHandle:
-    """What :func:`progress_bar` yields: call it as ``progress(done, total)``; ``stage(text)``
-    names a step without a count (writing plots), shown with the spinner and elapsed time."""
+class _CountColumn(ProgressColumn):
+    """``scans 1,234/13,630``: the unit and the count (blank without a total)."""
 
-    def __init__(self, update: Callable[..., None]) -> None:
-        self.update = update
+    def render(self, task: Task) -> Text:
+        if task.total is None:
+            return Text("")
+        unit = task.fields.get("unit", "")
+        text = f"{unit} {int(task.completed):,}/{int(task.total):,}"
+        return Text(text, style="progress.download")
+
+
+class _PercentColumn(ProgressColumn):
+    def render(self, task: Task) -> Text:
+        text = "" if task.total is None else f"{task.percentage:>3.0f}%"
+        return Text(text, style="progress.percentage")
+
+
+class _ElapsedColumn(ProgressColumn):
+    def render(self, task: Task) -> Text:
+        elapsed = task.finished_time if task.finished else task.elapsed
+        return Text(f"elapsed {_clock_text(elapsed or 0.0)}", style="progress.elapsed")
+
+
+class _LeftColumn(ProgressColumn):
+    """``left 0:00:38`` from the rate of the counted work (blank without a total)."""
+
+    def render(self, task: Task) -> Text:
+        if task.total is None or task.finished:
+            return Text("")
+        left = task.time_remaining
+        return Text(
+            f"left {'-:--:--' if left is None else _clock_text(left)}",
+            style="progress.remaining",
+        )
+
+
+class ProgressHandle:
+    """What :func:`progress_bar` yields: call it as ``progress(done, total)``;
+    ``counting(unit)`` says what the count is of (``"scans"``); ``stage(text)`` names a step
+    without a count (writing plots), shown with a spinner and its own elapsed time."""
+
+    def __init__(
+        self,
+        update: Callable[..., None],
+        stage: Callable[[str], None],
+        counting: Callable[[str], None],
+    ) -> None:
+        self._update = update
+        self.stage = stage
+        self.counting = counting
 
     def __call__(self, done: int, total: int) -> None:
-        self.update(completed=done, total=total if total and total > 0 else None)
+        self._update(done, total)
+
+
+class PlainProgress:
+    """Progress as plain lines for a log: :meth:`tick` writes the state when ``interval``
+    seconds have passed since the last line (or the start). ``clock`` and ``write`` are
+    injected (``time.monotonic`` and a console's print in use)."""
+
+    def __init__(
+        self,
+        label: str,
+        unit: str,
+        write: Callable[[str], None],
+        clock: Callable[[], float] = time.monotonic,
+        interval: float = PLAIN_INTERVAL,
+    ) -> None:
+        self.label = label
+        self.unit = unit
+        self._write = write
+        self._clock = clock
+        self.interval = interval
+        self._start = clock()
+        self._last_line = self._start
+        self._lock = threading.Lock()
+        self._done = 0
+        self._total: int | None = None
+        self._counts: deque[tuple[float, int]] = deque()  # (time, done) of the latest counts
+        self._stage: str | None = None
+        self._stage_start = self._start
+
+    def __call__(self, done: int, total: int) -> None:
+        with self._lock:
+            now = self._clock()
+            self._counts.append((now, done))
+            while len(self._counts) > 1 and self._counts[1][0] <= now - RATE_WINDOW:
+                self._counts.popleft()  # keep one count at or before the window's start
+            self._done, self._total = done, (total if total and total > 0 else None)
+        self.tick()
+
+    def counting(self, unit: str) -> None:
+        self.unit = unit
 
     def stage(self, text: str) -> None:
-        self.update(description=text, completed=0, total=None)
+        with self._lock:
+            self._stage, self._stage_start = text, self._clock()
+        self.tick()
+
+    def line(self) -> str:
+        """The state now, as one line."""
+        now = self._clock()
+        elapsed = _clock_text(now - self._start)
+        if self._stage is not None:
+            return (
+                f"{self.label}: {self._stage} ({_clock_text(now - self._stage_start)}), "
+                f"{elapsed} elapsed"
+            )
+        if self._total is None:
+            return f"{self.label}: {elapsed} elapsed"
+        done, total = self._done, self._total
+        text = (
+            f"{self.label}: {100 * done / total:.0f} % of {self.unit} "
+            f"({done:,}/{total:,}), {elapsed} elapsed"
+        )
+        if self._counts and done > self._counts[0][1]:
+            # the rate from the last count at or before the window's start (or the first)
+            # up to now: a stall makes the time left grow
+            since, done_then = self._counts[0]
+            rate = (done - done_then) / max(now - since, 1e-9)
+            text += f", ~{_clock_text(max(total - done, 0) / rate)} left"
+        return text
+
+    def tick(self) -> None:
+        """Write :meth:`line` if ``interval`` seconds have passed since the last line."""
+        with self._lock:
+            now = self._clock()
+            if now - self._last_line < self.interval:
+                return
+            self._last_line = now
+            text = self.line()
+        self._write(text)
+
+
+@contextmanager
+def _ticking(plain: PlainProgress) -> Iterator[None]:
+    """Call ``plain.tick()`` from a thread, so the lines keep coming during long steps that
+    report nothing."""
+    stop = threading.Event()
+
+    def loop() -> None:
+        while not stop.wait(min(1.0, plain.interval)):
+            plain.tick()
+
+    thread = threading.Thread(target=loop, name="slamkit-progress", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
 
 
 @contextmanager
 def progress_bar(
-    label: str, unit: str = "events", console: Console | None = None
+    label: str,
+    unit: str = "events",
+    console: Console | None = None,
+    interval: float = PLAIN_INTERVAL,
 ) -> Iterator[ProgressHandle]:
-    """A transient rich progress bar on stderr (silent when stderr is not a terminal) with
-    the count, the rate and the time left; yields the ``progress(done, total)`` callback the
-    library functions take. Until the first call (total unknown) it shows a spinner and the
-    elapsed time, never "0/None"."""
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        SpinnerColumn,
-        TaskProgressColumn,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
+    """The progress of one command on stderr; yields the ``progress(done, total)``
+    callback the library functions take (:class:`ProgressHandle`).
 
+    On a terminal: a transient rich bar with the count in ``unit`` (or what ``counting``
+    says), the rate and the time left; until the first call (total unknown) a spinner and
+    the elapsed time, never "0/None"; each ``stage(text)`` then replaces the bar with a
+    spinner, the stage's name and its elapsed time. Without a terminal: a
+    :class:`PlainProgress` line every ``interval`` seconds."""
     err_console = console if console is not None else ERR_CONSOLE
+    if not err_console.is_terminal:
+        plain = PlainProgress(
+            label,
+            unit,
+            lambda text: err_console.print(text, markup=False, highlight=False, soft_wrap=True),
+            interval=interval,
+        )
+        with _ticking(plain):
+            yield ProgressHandle(plain, plain.stage, plain.counting)
+        return
+
+    from rich.progress import BarColumn, Progress, SpinnerColumn, TaskID, TextColumn
+
     with Progress(
         SpinnerColumn(),
         TextColumn("{task.description}"),
         BarColumn(),
-        TaskProgressColumn(),
-        MofNCompleteColumn(),
-        TextColumn(unit),
+        _PercentColumn(),
+        _CountColumn(),
         RateColumn(unit),
-        TextColumn("elapsed"),
-        TimeElapsedColumn(),
-        TextColumn("left"),
-        TimeRemainingColumn(),
+        _ElapsedColumn(),
+        _LeftColumn(),
         console=err_console,
         transient=True,
-        disable=not err_console.is_terminal,
+        speed_estimate_period=RATE_WINDOW,  # the plain line's window too
     ) as bar:
-        task = bar.add_task(label, total=None)
-        yield ProgressHandle(lambda **kw: bar.update(task, **kw))
+        current: list[TaskID] = [bar.add_task(label, total=None, unit=unit)]
+
+        def update(done: int, total: int) -> None:
+            bar.update(current[0], completed=done, total=total if total and total > 0 else None)
+
+        def stage(text: str) -> None:
+            bar.update(current[0], visible=False)
+            bar.stop_task(current[0])
+            current[0] = bar.add_task(f"{label}: {text}", total=None)
+            bar.refresh()  # the step's name at once, not at the next tick
+
+        def counting(new_unit: str) -> None:
+            bar.update(current[0], unit=new_unit)
+
+        yield ProgressHandle(update, stage, counting)

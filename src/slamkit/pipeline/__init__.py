@@ -18,7 +18,8 @@ from slamkit.pipeline.registry import (
     get_estimator_entry,
     list_estimators,
 )
-from slamkit.pipeline.runner import Progress, Result, run
+from slamkit.pipeline.runner import Progress, Result, Stage, run
+from slamkit.pipeline.work import WorkMeasure, work_measure
 
 __all__ = [
     "ESTIMATORS",
@@ -31,7 +32,10 @@ __all__ = [
     "PoseEstimate",
     "Progress",
     "Result",
+    "Stage",
+    "WorkMeasure",
     "get_estimator_entry",
     "list_estimators",
     "run",
+    "work_measure",
 ]

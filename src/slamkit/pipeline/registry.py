@@ -20,7 +20,7 @@ from slamkit.datasets.stream import Dataset
 from slamkit.errors import InputError, UnknownNameError
 from slamkit.estimation.contract import Estimator, EstimatorFactory
 
-__all__ = ["ESTIMATORS", "EstimatorEntry", "get_estimator_entry", "list_estimators"]
+__all__ = ["ESTIMATORS", "EstimatorEntry", "WorkUnit", "get_estimator_entry", "list_estimators"]
 
 Requirement = Literal[
     "motion",
@@ -32,6 +32,10 @@ Requirement = Literal[
     "true_poses",
 ]
 """Parts of a Dataset an estimator may need; ``true_poses`` is for mapping with known poses."""
+
+WorkUnit = Literal["scans", "readings", "events"]
+"""The events an estimator spends its time on (:mod:`slamkit.pipeline.work`): laser scans,
+landmark readings, or every event alike."""
 
 
 def _has(dataset: Dataset, requirement: Requirement) -> bool:
@@ -53,6 +57,9 @@ class EstimatorEntry:
     known_poses: bool = False
     """The estimator maps with known poses: the runner gives it the data set's true poses
     through the stream (:func:`~slamkit.datasets.stream.with_known_poses`)."""
+    work: WorkUnit = "events"
+    """The events that cost the estimator its time, in which a run's progress is counted
+    (:func:`~slamkit.pipeline.work.work_measure`; every event when the data set has none)."""
 
     @staticmethod
     def _resolve(spec: str) -> Any:
@@ -101,6 +108,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.localization.least_squares:LeastSquaresLocalization",
             "slamkit.localization.least_squares:LeastSquaresConfig",
             requires=("landmark_sensor", "known_landmarks"),
+            work="readings",
         ),
         EstimatorEntry(
             "ekf-localization",
@@ -108,6 +116,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.localization.ekf:EkfLocalization",
             "slamkit.localization.ekf:EkfConfig",
             requires=("motion", "landmark_sensor", "known_landmarks"),
+            work="readings",
         ),
         EstimatorEntry(
             "ukf-localization",
@@ -115,6 +124,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.localization.ukf:UkfLocalization",
             "slamkit.localization.ukf:UkfConfig",
             requires=("motion", "landmark_sensor", "known_landmarks"),
+            work="readings",
         ),
         EstimatorEntry(
             "mcl",
@@ -123,6 +133,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.localization.mcl:MonteCarloLocalization",
             "slamkit.localization.mcl:MclConfig",
             requires=("motion",),
+            work="scans",
         ),
         EstimatorEntry(
             "laser-odometry",
@@ -131,6 +142,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.localization.laser_odometry:LaserOdometry",
             "slamkit.localization.laser_odometry:LaserOdometryConfig",
             requires=("motion", "laser"),
+            work="scans",
         ),
         EstimatorEntry(
             "graph-slam",
@@ -139,6 +151,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.slam.laser_graph:LaserGraphSlam",
             "slamkit.slam.laser_graph:LaserGraphConfig",
             requires=("laser",),  # without odometry: scan matching alone
+            work="scans",
         ),
         EstimatorEntry(
             "occupancy-mapping",
@@ -147,6 +160,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.mapping.occupancy:OccupancyMapping",
             "slamkit.mapping.occupancy:OccupancyMappingConfig",
             requires=("laser",),
+            work="scans",
             known_poses=True,
         ),
         EstimatorEntry(
@@ -156,6 +170,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.mapping.ekf_mapping:EkfMapping",
             "slamkit.mapping.ekf_mapping:EkfMappingConfig",
             requires=("landmark_sensor", "true_poses"),
+            work="readings",
             known_poses=True,
         ),
         EstimatorEntry(
@@ -165,6 +180,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.slam.ekf_slam:EkfSlam",
             "slamkit.slam.ekf_slam:EkfSlamConfig",
             requires=("motion", "landmark_sensor"),
+            work="readings",
         ),
         EstimatorEntry(
             "fastslam1",
@@ -173,6 +189,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.slam.fastslam:FastSlam1",
             "slamkit.slam.fastslam:FastSlamConfig",
             requires=("motion", "landmark_sensor"),
+            work="readings",
         ),
         EstimatorEntry(
             "fastslam2",
@@ -181,6 +198,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.slam.fastslam:FastSlam2",
             "slamkit.slam.fastslam:FastSlamConfig",
             requires=("motion", "landmark_sensor"),
+            work="readings",
         ),
         EstimatorEntry(
             "grid-rbpf",
@@ -189,6 +207,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.slam.grid_rbpf:GridRbpf",
             "slamkit.slam.grid_rbpf:GridRbpfConfig",
             requires=("motion", "laser"),
+            work="scans",
         ),
         EstimatorEntry(
             "seif",
@@ -197,6 +216,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.slam.seif:Seif",
             "slamkit.slam.seif:SeifConfig",
             requires=("motion", "landmark_sensor"),
+            work="readings",
         ),
     )
 }

@@ -24,13 +24,18 @@ from slamkit.estimation.contract import (
 )
 from slamkit.geometry.pose2 import interpolate_poses
 from slamkit.pipeline.registry import EstimatorEntry, get_estimator_entry
+from slamkit.pipeline.work import work_measure
 
-__all__ = ["Progress", "Result", "run"]
+__all__ = ["Progress", "Result", "Stage", "run"]
 
 log = logging.getLogger(__name__)
 
 Progress = Callable[[int, int], None]
-"""``progress(done, total)`` in events; called about a hundred times per run."""
+"""``progress(done, total)`` in units of work (:func:`~slamkit.pipeline.work.work_measure`:
+scans, landmark readings or events); called about a hundred times per run."""
+
+Stage = Callable[[str], None]
+"""``stage(text)``: a step without a count has begun (the estimator's last step)."""
 
 
 @dataclass(frozen=True)
@@ -97,6 +102,7 @@ def run(
     seed: int = 0,
     progress: Progress | None = None,
     frames: int = 0,
+    stage: Stage | None = None,
 ) -> Result:
     """Run ``estimator`` (a registered name or entry) over ``dataset``.
 
@@ -123,7 +129,8 @@ def run(
     setup = time.perf_counter() - t0
 
     events = dataset.events
-    total = len(events)
+    weights = work_measure(entry, dataset).weights
+    total = int(weights.sum())
     every = max(1, -(-total // 100))  # ceil: at most ~100 progress calls
     next_report = every
     times: list[float] = []
@@ -142,8 +149,9 @@ def run(
         covs.append(cov)
         seconds.append(setup)
         setup = 0.0
-    done = 0
-    log.debug("running %s on %s (%d events)", entry.name, dataset.name, total)
+    done = 0  # units of work
+    seen = 0  # events
+    log.debug("running %s on %s (%d events)", entry.name, dataset.name, len(events))
     for step, (t, group) in enumerate(group_by_time(events), start=1):
         tic = time.perf_counter()
         for ev in group:
@@ -155,15 +163,18 @@ def run(
         poses.append(pose)
         covs.append(cov)
         slot = int((t - first_t) // frame_dt) if frame_dt > 0 else last_slot + 1
-        if frames and (slot > last_slot or done + len(group) == total):
+        if frames and (slot > last_slot or seen + len(group) == len(events)):
             snapshots.append(_frame(est, t, pose, cov))
             last_slot = slot
-        done += len(group)
+        done += int(weights[seen : seen + len(group)].sum())
+        seen += len(group)
         if progress is not None and done >= next_report:
             progress(done, total)
             next_report = done + every
     if progress is not None:
         progress(total, total)
+    if stage is not None:
+        stage(f"finishing {entry.name}")
     output = est.finish()
     have_cov = all(c is not None for c in covs) and bool(covs)
     recorded = np.asarray(poses, dtype=float).reshape(-1, 3)
