@@ -515,7 +515,9 @@ def plot_path_by_time(
     p = as_array(poses, "poses", (t.shape[0], None))[:, :2]
     since = t - t[0]
     segments = np.stack([p[:-1], p[1:]], axis=1)
-    lines = LineCollection(cast(Any, segments), cmap="viridis", linewidths=1.4, label=label, zorder=2)
+    lines = LineCollection(
+        cast(Any, segments), cmap="viridis", linewidths=1.4, label=label, zorder=2
+    )
     lines.set_array(0.5 * (since[:-1] + since[1:]))
     ax.add_collection(lines)
     ax.figure.colorbar(lines, ax=ax, label="time since the start [s]", shrink=0.8, pad=0.02)
