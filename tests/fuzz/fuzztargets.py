@@ -406,6 +406,79 @@ def small_bag(
         return path.read_bytes()
 
 
+def mcap_target() -> Target | None:
+    """A small ROS 2 bag in MCAP storage (the file alone, as a user hands it over); None
+    when rosbags is absent."""
+    try:
+        import rosbags  # noqa: F401
+    except ImportError:
+        return None
+    from slamkit.datasets.rosbag import read_rosbag
+
+    rel = "small.mcap"
+    off = small_mcap(angle_max=1.5)  # the quirk: angle_max one increment off
+    return Target(
+        "mcap",
+        {rel: small_mcap()},
+        lambda root: read_rosbag(root / rel),
+        binary=(rel,),
+        quirks={"quirk_angle_max_one_increment_off": lambda rng, data: off},
+    )
+
+
+def small_mcap(angle_max: float = 1.0) -> bytes:
+    """:func:`small_bag`'s four scans and four odometry messages as ROS 2 messages (no
+    ``seq`` in the header) in an MCAP file; ``angle_max`` as written."""
+    import tempfile
+
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    Vec, Quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+    msgs = []
+    for k, (x, y, th) in enumerate(_path(4)):
+        ns = 1_000_000_000 + 100_000_000 * k
+        stamp = T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+        scan = T["sensor_msgs/msg/LaserScan"](
+            header=T["std_msgs/msg/Header"](stamp=stamp, frame_id="laser"),
+            angle_min=-1.0, angle_max=angle_max, angle_increment=0.5, time_increment=0.0,
+            scan_time=0.0, range_min=0.1, range_max=10.0,
+            ranges=np.array([1.0, 2.0, 3.0, 4.0, 5.0], dtype=np.float32) + k,
+            intensities=np.zeros(0, dtype=np.float32),
+        )  # fmt: skip
+        pose = T["geometry_msgs/msg/Pose"](
+            position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+            orientation=Quat(x=0.0, y=0.0, z=math.sin(th / 2), w=math.cos(th / 2)),
+        )
+        odom = T["nav_msgs/msg/Odometry"](
+            header=T["std_msgs/msg/Header"](stamp=stamp, frame_id="odom"),
+            child_frame_id="base_link",
+            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
+            twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                twist=T["geometry_msgs/msg/Twist"](linear=Vec(x=0.0, y=0.0, z=0.0),
+                                                   angular=Vec(x=0.0, y=0.0, z=0.0)),
+                covariance=np.zeros(36),
+            ),
+        )  # fmt: skip
+        msgs.append(("/odom", "nav_msgs/msg/Odometry", ns - 1000, odom))
+        msgs.append(("/scan", "sensor_msgs/msg/LaserScan", ns, scan))
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "bag"
+        w = Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP)
+        w.open()
+        conns: dict[str, Any] = {}
+        for topic, msgtype, _, _ in msgs:
+            if topic not in conns:
+                conns[topic] = w.add_connection(topic, msgtype, typestore=ts)
+        for topic, msgtype, stamp_ns, msg in msgs:
+            w.write(conns[topic], stamp_ns, ts.serialize_cdr(msg, msgtype))
+        w.close()
+        (storage,) = folder.glob("*.mcap")
+        return storage.read_bytes()
+
+
 def _tf(T: Any, stamp: Any, pose: tuple[float, float, float]) -> Any:
     """A ``TFMessage`` with one transform ``base_link → laser`` at ``pose``."""
     x, y, yaw = pose
@@ -439,7 +512,7 @@ def all_targets() -> list[Target]:
         tum_target(),
         rosmap_target(),
     ]
-    for bag in (rosbag_target(), rosbag_target("rosbag_lz4", "lz4")):
+    for bag in (rosbag_target(), rosbag_target("rosbag_lz4", "lz4"), mcap_target()):
         if bag is not None:
             out.append(bag)
     return out

@@ -292,3 +292,27 @@ def test_stamps_closer_than_float_spacing_are_remade_from_the_line_order() -> No
     times = np.r_[1e9 + np.arange(56) * 1e-7, 1e308]  # 56 scans within 6 µs, then damage
     out, repair = repair_stamps(times, 1.0)
     assert repair.restamped and np.all(np.diff(out) > 0)
+
+
+def test_an_mcap_record_length_beyond_the_file_is_refused_before_reading(tmp_path: Path) -> None:
+    """An MCAP file whose first record claims 2⁶³ bytes: refused by the record walk, naming
+    the file, instead of the reader asking for the memory (MemoryError, found by the fuzz);
+    the file as written reads."""
+    pytest.importorskip("rosbags")
+    from fuzztargets import small_mcap
+
+    from slamkit.datasets import LaserScan
+    from slamkit.datasets.rosbag import read_rosbag
+    from slamkit.datasets.rosbag_records import MCAP_MAGIC
+
+    good = tmp_path / "good.mcap"
+    good.write_bytes(small_mcap())
+    assert sum(isinstance(e, LaserScan) for e in read_rosbag(good).events) == 4
+    data = bytearray(small_mcap())
+    assert data[: len(MCAP_MAGIC)] == MCAP_MAGIC
+    struct.pack_into("<Q", data, len(MCAP_MAGIC) + 1, 2**63)  # the header record's length
+    path = tmp_path / "b.mcap"
+    path.write_bytes(bytes(data))
+    with pytest.raises(DatasetFormatError, match="beyond the file") as info:
+        read_rosbag(path)
+    assert info.value.path == path

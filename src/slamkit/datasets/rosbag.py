@@ -197,14 +197,17 @@ def _odometry(
     topic = bag.odometry_from or str(bag.odometry_topic)
     t = o.bag_times if opts.stamps == "bag" else header_stamps(o.sec, o.nsec)
     q = o.orientation  # (M, 4) x y z w
-    norm = np.linalg.norm(q, axis=1)
+    with np.errstate(over="ignore", invalid="ignore"):  # a huge component: inf, refused
+        norm = np.linalg.norm(q, axis=1)
     ok = np.isfinite(o.position).all(axis=1) & np.isfinite(norm) & (norm > 1e-9)
     problems.report(
         "bad_odometry", topic, np.flatnonzero(~ok), "pose not finite or quaternion of norm 0"
     )
     qx, qy, qz, qw = (q[:, k] / np.where(ok, norm, 1.0) for k in range(4))
-    # yaw of a unit quaternion: atan2(2 (w z + x y), 1 - 2 (y² + z²))
-    yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    # yaw of a unit quaternion: atan2(2 (w z + x y), 1 - 2 (y² + z²)); the rows not ok (a
+    # huge or zero norm) may overflow here and are dropped below
+    with np.errstate(over="ignore", invalid="ignore"):
+        yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
     poses = np.column_stack([o.position[:, 0], o.position[:, 1], yaw])
     idx = np.flatnonzero(ok)
     t, poses = t[idx], poses[idx]

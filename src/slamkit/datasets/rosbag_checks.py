@@ -82,9 +82,10 @@ def check_geometry(
     bad = np.flatnonzero(~finite | (n < 1) | ((n > 1) & (s.angle_increment == 0)))
     problems.report("geometry", topic, bad, "angle_min/angle_increment not usable")
     ok[bad] = False
-    last = s.angle_min + (n - 1) * s.angle_increment
+    with np.errstate(over="ignore", invalid="ignore"):  # a huge increment: inf, refused
+        last = s.angle_min + (n - 1) * s.angle_increment
+        off = np.abs(last - s.angle_max)
     inc = np.abs(s.angle_increment)
-    off = np.abs(last - s.angle_max)
     bad = np.flatnonzero(ok & (off > np.maximum(ANGLE_MAX_TOLERANCE * inc, 1e-9)))
     if bad.size:
         i = int(bad[0])
@@ -105,7 +106,8 @@ def check_geometry(
             f"{int(quirk.sum())} of {n.size} scans: the beams are angle_min + i·angle_increment"
         )
     changed = (n != n0) | (np.abs(s.angle_min - amin0) > 1e-6)
-    changed |= np.abs(s.angle_increment - inc0) * np.maximum(n - 1, 0) > 1e-6
+    with np.errstate(over="ignore", invalid="ignore"):
+        changed |= np.abs(s.angle_increment - inc0) * np.maximum(n - 1, 0) > 1e-6
     bad = np.flatnonzero(ok & changed)
     problems.report(
         "geometry",

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
-from slamkit.datasets.rosbag_records import check_bag1_records
+from slamkit.datasets.rosbag_records import check_bag1_records, check_mcap_records
 from slamkit.errors import DataNotFoundError, DatasetFormatError, InputError
 from slamkit.geometry.angles import wrap_angle_float
 from slamkit.geometry.pose2 import compose
@@ -439,10 +439,17 @@ def read_bag(path: Path, scan_topic: str, odometry: OdometryRequest) -> BagConte
         # lz4 reports a damaged compressed chunk as a bare RuntimeError ("LZ4F_decompress
         # failed"); in this block nothing else raises one.
         RuntimeError,
+        # An MCAP file carries its own message definitions: a damaged one may lack a field
+        # the reader takes (AttributeError) or state an array length no index can hold.
+        AttributeError,
+        OverflowError,
+        # ... and a cut one makes the MCAP reader take an empty byte string for a character.
+        TypeError,
     )
     try:
         if path.is_file():
             check_bag1_records(path)  # before rosbags trusts a damaged length
+            check_mcap_records(path)
         reader = AnyReader([path], default_typestore=get_typestore(Stores.LATEST))
         with reader:
             return _read_messages(reader, path, scan_topic, odometry)

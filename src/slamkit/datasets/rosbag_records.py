@@ -24,10 +24,18 @@ from typing import BinaryIO
 
 from slamkit.errors import DatasetFormatError
 
-__all__ = ["BAG1_MAGIC", "check_bag1_records"]
+__all__ = ["BAG1_MAGIC", "MCAP_MAGIC", "check_bag1_records", "check_mcap_records"]
 
 BAG1_MAGIC = b"#ROSBAG V2.0\n"
 """The first line of a ROS 1 bag of the format read here."""
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+"""The first (and last) eight bytes of an MCAP file."""
+MCAP_CHUNK = 0x06
+MCAP_FOOTER = 0x02
+MCAP_MAX_INFLATION = 1024
+"""A compressed chunk may state at most this many times its size, uncompressed: zstd and
+lz4 reach a few hundred on runs of zeros; more is a damaged length, not a real chunk."""
 
 OP_BAG_HEADER = 0x03
 OP_CHUNK = 0x05
@@ -110,3 +118,46 @@ def check_bag1_records(path: Path) -> None:
                     "is not the start of a record of the bag (a damaged bag)",
                     path,
                 )
+
+
+def check_mcap_records(path: Path) -> None:
+    """Refuse an MCAP file whose top-level records (``opcode (uint8) length (uint64)
+    content``) would end beyond the file, or whose chunk states an uncompressed size that
+    its records cannot hold (the readers allocate what a length says before they read, as
+    for ROS 1 above). A file that does not start with :data:`MCAP_MAGIC` is left to
+    ``rosbags``."""
+    size = path.stat().st_size
+    with path.open("rb") as src:
+        if src.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            return
+        pos = len(MCAP_MAGIC)
+        while pos + 9 <= size:
+            src.seek(pos)
+            op, length = struct.unpack("<BQ", src.read(9))
+            if pos + 9 + length > size:
+                raise DatasetFormatError(
+                    f"cannot read the MCAP file: the record at byte {pos} ({length} bytes) "
+                    f"ends beyond the file's {size} bytes (a damaged or cut file)",
+                    path,
+                )
+            if op == MCAP_CHUNK:
+                _check_mcap_chunk(src.read(min(length, 64)), length, pos, path)
+            if op == MCAP_FOOTER:
+                return
+            pos += 9 + length
+
+
+def _check_mcap_chunk(head: bytes, length: int, pos: int, path: Path) -> None:
+    """A chunk's ``uncompressed_size`` against what its records can hold: equal to them
+    uncompressed, at most :data:`MCAP_MAX_INFLATION` times them compressed."""
+    if len(head) < 32:
+        raise DatasetFormatError(f"cannot read the MCAP file: the chunk at byte {pos} is cut", path)
+    uncompressed = struct.unpack_from("<Q", head, 16)[0]
+    (name_len,) = struct.unpack_from("<I", head, 28)
+    records = length - 32 - name_len - 8  # what is left for the records, at most
+    if records < 0 or uncompressed > MCAP_MAX_INFLATION * max(records, 1):
+        raise DatasetFormatError(
+            f"cannot read the MCAP file: the chunk at byte {pos} states {uncompressed} "
+            f"bytes uncompressed in {length} bytes (a damaged length)",
+            path,
+        )
