@@ -316,3 +316,23 @@ def test_an_mcap_record_length_beyond_the_file_is_refused_before_reading(tmp_pat
     with pytest.raises(DatasetFormatError, match="beyond the file") as info:
         read_rosbag(path)
     assert info.value.path == path
+
+
+@pytest.mark.parametrize("compression", ["bz2", "lz4"])
+def test_a_compressed_bag_reads_as_the_plain_one(tmp_path: Path, compression: str) -> None:
+    """ROS 1 bags with bz2 or lz4 chunks (rosbag record's --bz2 / --lz4) read to the same
+    scans, odometry and stamps as the same bag uncompressed."""
+    pytest.importorskip("rosbags")
+    from slamkit.datasets.rosbag import read_rosbag
+
+    plain, packed = tmp_path / "plain.bag", tmp_path / f"{compression}.bag"
+    plain.write_bytes(small_bag())
+    packed.write_bytes(small_bag(compression=compression))
+    assert packed.read_bytes() != plain.read_bytes()
+    a, b = read_rosbag(plain), read_rosbag(packed)
+    assert len(a.events) == len(b.events) == 8
+    for x, y in zip(a.events, b.events, strict=True):
+        assert type(x) is type(y) and x.t == y.t
+        for name in ("ranges", "pose", "u"):
+            if hasattr(x, name):
+                np.testing.assert_array_equal(getattr(x, name), getattr(y, name))
