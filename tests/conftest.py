@@ -1,7 +1,9 @@
-"""Shared fixtures: seeded generators and the real-data folder (skip when absent)."""
+"""Shared fixtures: seeded generators, the real-data folder (skip when absent), small
+CARMEN logs and wheel glitches put into a data set."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 
@@ -9,6 +11,7 @@ import numpy as np
 import pytest
 
 from slamkit.datasets import ENV_VAR, find_data_root
+from slamkit.datasets.stream import Control, Dataset
 
 
 @pytest.fixture
@@ -44,3 +47,25 @@ def carmen_log(tmp_path: Path) -> Callable[..., Path]:
         return path
 
     return write
+
+
+def _with_heading_jump(data: Dataset, jump: float, at: float) -> tuple[Dataset, float]:
+    """``data`` whose wheels report a turn of ``jump`` [rad] too much in one control at the
+    fraction ``at`` of the drive (a gyro or encoder spike: ``ω += jump / dt``), so the
+    prediction carries the wrong heading from then on, and the stamp of the glitch."""
+    controls = [k for k, e in enumerate(data.events) if isinstance(e, Control)]
+    k = controls[int(at * len(controls))]
+    e = data.events[k]
+    assert isinstance(e, Control) and e.dt > 0
+    u = np.array(e.u, dtype=np.float64)
+    u[1] += jump / e.dt
+    events = list(data.events)
+    events[k] = dataclasses.replace(e, u=u)
+    return dataclasses.replace(data, events=tuple(events)), e.t
+
+
+@pytest.fixture
+def heading_jump() -> Callable[[Dataset, float, float], tuple[Dataset, float]]:
+    """``heading_jump(data, jump, at)``: ``data`` with one wheel glitch of ``jump`` [rad] at
+    the fraction ``at`` of its controls, and the glitch's stamp."""
+    return _with_heading_jump

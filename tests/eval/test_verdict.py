@@ -9,11 +9,10 @@ import dataclasses
 import math
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from slamkit.datasets import load_dataset
-from slamkit.datasets.stream import Control, Dataset
+from slamkit.datasets.stream import Dataset
 from slamkit.estimation.contract import RunWarning
 from slamkit.eval.verdict import CONSISTENT, verdict
 from slamkit.pipeline import run
@@ -42,19 +41,6 @@ def test_the_rules_on_findings_made_by_hand() -> None:
     }
 
 
-def _with_heading_jump(data: Dataset, jump: float) -> Dataset:
-    """``data`` whose wheels report ``jump`` [rad] too much turn in one control, halfway."""
-    controls = [k for k, e in enumerate(data.events) if isinstance(e, Control)]
-    k = controls[len(controls) // 2]
-    e = data.events[k]
-    assert isinstance(e, Control) and e.dt > 0
-    u = np.array(e.u, dtype=np.float64)
-    u[1] += jump / e.dt
-    events = list(data.events)
-    events[k] = dataclasses.replace(e, u=u)
-    return dataclasses.replace(data, events=tuple(events))
-
-
 @pytest.fixture(scope="module")
 def loop_world() -> Dataset:
     return load_dataset("corridor-loop-laser", seed=0)
@@ -66,13 +52,15 @@ def _page(scores, estimator: str, dataset: str) -> str:
     return run_html(page)
 
 
-def test_a_clean_run_looks_consistent_and_a_glitched_one_is_doubtful(loop_world) -> None:
+def test_a_clean_run_looks_consistent_and_a_glitched_one_is_doubtful(
+    loop_world, heading_jump
+) -> None:
     clean = evaluate(run("graph-slam", loop_world, seed=0), loop_world).scores
     assert clean.verdict.line == CONSISTENT
     assert clean.as_dict()["verdict"] == {"consistent": True, "line": CONSISTENT, "reasons": []}
     assert 'id="verdict" class="consistent"' in _page(clean, "graph-slam", "loop")
 
-    glitched = _with_heading_jump(loop_world, math.radians(60.0))
+    glitched, _ = heading_jump(loop_world, math.radians(60.0), 0.5)
     scores = evaluate(run("graph-slam", glitched, seed=0), glitched).scores
     assert not scores.verdict.consistent
     assert "odometry glitches" in scores.verdict.reasons

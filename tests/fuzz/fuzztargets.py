@@ -356,38 +356,11 @@ def small_bag(
             )
         )
     T = ts.types
-    msgs = []
-    for k, (x, y, th) in enumerate(_path(4)):
-        ns = 1_000_000_000 + 100_000_000 * k
-        stamp = T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
-        scan = T["sensor_msgs/msg/LaserScan"](
-            header=T["std_msgs/msg/Header"](seq=k, stamp=stamp, frame_id="laser"),
-            angle_min=-1.0, angle_max=angle_max, angle_increment=0.5, time_increment=0.0,
-            scan_time=0.0, range_min=0.1, range_max=10.0,
-            ranges=np.array([1.0, 2.0, 3.0, 4.0, 5.0], dtype=np.float32) + k,
-            intensities=np.zeros(0, dtype=np.float32),
-        )  # fmt: skip
-        Vec, Quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
-        pose = T["geometry_msgs/msg/Pose"](
-            position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
-            orientation=Quat(x=0.0, y=0.0, z=math.sin(th / 2), w=math.cos(th / 2)),
-        )
-        odom = T["nav_msgs/msg/Odometry"](
-            header=T["std_msgs/msg/Header"](seq=k, stamp=stamp, frame_id="odom"),
-            child_frame_id="base_link",
-            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
-            twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                twist=T["geometry_msgs/msg/Twist"](linear=Vec(x=0.0, y=0.0, z=0.0),
-                                                   angular=Vec(x=0.0, y=0.0, z=0.0)),
-                covariance=np.zeros(36),
-            ),
-        )  # fmt: skip
-        msgs.append(("/odom", "nav_msgs/msg/Odometry", ns - 1000, odom))
-        if mounting is not None and k == 0:
-            msgs.append(
-                ("/tf_static", "tf2_msgs/msg/TFMessage", ns - 2000, _tf(T, stamp, mounting))
-            )
-        msgs.append(("/scan", "sensor_msgs/msg/LaserScan", ns, scan))
+    msgs = _small_messages(T, ros1=True, angle_max=angle_max)
+    if mounting is not None:  # after the first odometry message, before the first scan
+        _, _, scan_ns, scan = msgs[1]
+        tf = _tf(T, scan.header.stamp, mounting)
+        msgs.insert(1, ("/tf_static", "tf2_msgs/msg/TFMessage", scan_ns - 2000, tf))
     import tempfile
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -435,35 +408,7 @@ def small_mcap(angle_max: float = 1.0) -> bytes:
     from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
-    T = ts.types
-    Vec, Quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
-    msgs = []
-    for k, (x, y, th) in enumerate(_path(4)):
-        ns = 1_000_000_000 + 100_000_000 * k
-        stamp = T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
-        scan = T["sensor_msgs/msg/LaserScan"](
-            header=T["std_msgs/msg/Header"](stamp=stamp, frame_id="laser"),
-            angle_min=-1.0, angle_max=angle_max, angle_increment=0.5, time_increment=0.0,
-            scan_time=0.0, range_min=0.1, range_max=10.0,
-            ranges=np.array([1.0, 2.0, 3.0, 4.0, 5.0], dtype=np.float32) + k,
-            intensities=np.zeros(0, dtype=np.float32),
-        )  # fmt: skip
-        pose = T["geometry_msgs/msg/Pose"](
-            position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
-            orientation=Quat(x=0.0, y=0.0, z=math.sin(th / 2), w=math.cos(th / 2)),
-        )
-        odom = T["nav_msgs/msg/Odometry"](
-            header=T["std_msgs/msg/Header"](stamp=stamp, frame_id="odom"),
-            child_frame_id="base_link",
-            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
-            twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                twist=T["geometry_msgs/msg/Twist"](linear=Vec(x=0.0, y=0.0, z=0.0),
-                                                   angular=Vec(x=0.0, y=0.0, z=0.0)),
-                covariance=np.zeros(36),
-            ),
-        )  # fmt: skip
-        msgs.append(("/odom", "nav_msgs/msg/Odometry", ns - 1000, odom))
-        msgs.append(("/scan", "sensor_msgs/msg/LaserScan", ns, scan))
+    msgs = _small_messages(ts.types, ros1=False, angle_max=angle_max)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "bag"
         w = Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP)
@@ -477,6 +422,48 @@ def small_mcap(angle_max: float = 1.0) -> bytes:
         w.close()
         (storage,) = folder.glob("*.mcap")
         return storage.read_bytes()
+
+
+def _small_messages(T: Any, ros1: bool, angle_max: float) -> list[tuple[str, str, int, Any]]:
+    """The four odometry messages and four scans (5 beams from -1 rad by 0.5 rad, ranges
+    1-5 m plus the scan's index) of :func:`small_bag` and :func:`small_mcap` as ``(topic,
+    type, bag stamp [ns], message)`` in bag order, with the types ``T`` of a ROS 1 or a
+    ROS 2 store (a ROS 1 header has a ``seq``)."""
+    Vec, Quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+
+    def header(k: int, stamp: Any, frame: str) -> Any:
+        if ros1:
+            return T["std_msgs/msg/Header"](seq=k, stamp=stamp, frame_id=frame)
+        return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
+
+    msgs = []
+    for k, (x, y, th) in enumerate(_path(4)):
+        ns = 1_000_000_000 + 100_000_000 * k
+        stamp = T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+        scan = T["sensor_msgs/msg/LaserScan"](
+            header=header(k, stamp, "laser"),
+            angle_min=-1.0, angle_max=angle_max, angle_increment=0.5, time_increment=0.0,
+            scan_time=0.0, range_min=0.1, range_max=10.0,
+            ranges=np.array([1.0, 2.0, 3.0, 4.0, 5.0], dtype=np.float32) + k,
+            intensities=np.zeros(0, dtype=np.float32),
+        )  # fmt: skip
+        pose = T["geometry_msgs/msg/Pose"](
+            position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+            orientation=Quat(x=0.0, y=0.0, z=math.sin(th / 2), w=math.cos(th / 2)),
+        )
+        odom = T["nav_msgs/msg/Odometry"](
+            header=header(k, stamp, "odom"),
+            child_frame_id="base_link",
+            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
+            twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                twist=T["geometry_msgs/msg/Twist"](linear=Vec(x=0.0, y=0.0, z=0.0),
+                                                   angular=Vec(x=0.0, y=0.0, z=0.0)),
+                covariance=np.zeros(36),
+            ),
+        )  # fmt: skip
+        msgs.append(("/odom", "nav_msgs/msg/Odometry", ns - 1000, odom))
+        msgs.append(("/scan", "sensor_msgs/msg/LaserScan", ns, scan))
+    return msgs
 
 
 def _tf(T: Any, stamp: Any, pose: tuple[float, float, float]) -> Any:

@@ -192,22 +192,33 @@ def test_pairwise_consistency_refuses_a_closure_shifted_along_the_corridor(slam)
     assert not pair_consistent(poses, (j2, k2, shifted), (j1, k1, z1))
 
 
+def _first_closure(est) -> tuple[tuple[int, int], np.ndarray]:
+    """The ends and the information matrix of the first loop closure of ``est``'s graph."""
+    i, j, _, info = est.graph.edges()
+    first = next(e for e, kind in enumerate(est.graph.edge_kinds()) if kind == "loop")
+    return (int(i[first]), int(j[first])), info[first]
+
+
+def _solved_copy(est) -> PoseGraph:
+    """A copy of ``est``'s final graph (poses and edges), optimised."""
+    i, j, z, info = est.graph.edges()
+    graph = PoseGraph(default_optimizer())
+    for p in est.graph.poses:
+        graph.add_pose(p)
+    for e, kind in enumerate(est.graph.edge_kinds()):
+        graph.add_edge(int(i[e]), int(j[e]), z[e], info[e], kind)
+    graph.optimize()
+    return graph
+
+
 def test_the_backend_removes_an_injected_inconsistent_closure(slam) -> None:
     """A closure 1.5 m off the truth, weighted like the real ones, added to the final graph:
     the Δχ² check removes it and the poses stay where they were (within 1 cm); the true
     relative pose at the same weight is kept."""
     est, _, truth = slam
-    i, j, z, info = est.graph.edges()
-    loops = [e for e, kind in enumerate(est.graph.edge_kinds()) if kind == "loop"]
-    a, b = int(i[loops[0]]), int(j[loops[0]])
-    weight = info[loops[0]]
+    (a, b), weight = _first_closure(est)
     for offset, removed in ((1.5, True), (0.0, False)):
-        graph = PoseGraph(default_optimizer())
-        for p in est.graph.poses:
-            graph.add_pose(p)
-        for e, kind in enumerate(est.graph.edge_kinds()):
-            graph.add_edge(int(i[e]), int(j[e]), z[e], info[e], kind)
-        graph.optimize()
+        graph = _solved_copy(est)
         before = graph.poses
         wrong = between(truth[a], truth[b]) + np.array([offset, 0.0, 0.0])
         e = graph.add_edge(a, b, wrong, weight, "loop")
@@ -224,21 +235,14 @@ def test_the_backend_removes_consistent_wrong_closures(slam, offset: float, coun
     like the real ones and offered together: both are removed and the poses stay where
     they were (within 1 cm)."""
     est, _, truth = slam
-    i, j, z, info = est.graph.edges()
-    loops = [e for e, kind in enumerate(est.graph.edge_kinds()) if kind == "loop"]
-    a, b = int(i[loops[0]]), int(j[loops[0]])
-    graph = PoseGraph(default_optimizer())
-    for p in est.graph.poses:
-        graph.add_pose(p)
-    for e, kind in enumerate(est.graph.edge_kinds()):
-        graph.add_edge(int(i[e]), int(j[e]), z[e], info[e], kind)
-    graph.optimize()
+    (a, b), weight = _first_closure(est)
+    graph = _solved_copy(est)
     before = graph.poses
     shift = np.array([offset, 0.0, 0.0])
     pair = []
     for d in range(count):
         wrong = between(truth[a + d], truth[b + d]) + shift
-        pair.append(graph.add_edge(a + d, b + d, wrong, info[loops[0]], "loop"))
+        pair.append(graph.add_edge(a + d, b + d, wrong, weight, "loop"))
     out = optimize_consistent(graph, pair, MAX_CHI2, MAX_EDGE_CHI2)
     assert sorted(out) == pair
     assert np.abs(graph.poses[:, :2] - before[:, :2]).max() < 0.01

@@ -5,14 +5,13 @@ good wheels."""
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
 import pytest
 
 from slamkit.datasets import load_dataset
-from slamkit.datasets.stream import Control, Dataset
+from slamkit.datasets.stream import Dataset
 from slamkit.geometry.pose2 import between
 from slamkit.pipeline import run
 from slamkit.pipeline.evaluate import evaluate
@@ -30,30 +29,17 @@ JUMP_DEG = 60.0
 JUMP_AT = 0.4  # of the drive
 
 
-def _with_heading_jump(data: Dataset, jump: float, at: float) -> tuple[Dataset, float]:
-    """``data`` whose wheels report a turn of ``jump`` [rad] too much in one control at the
-    fraction ``at`` of the drive (a gyro or encoder spike: ``ω += jump / dt``), so the
-    prediction carries the wrong heading from then on, and the stamp of the glitch."""
-    controls = [k for k, e in enumerate(data.events) if isinstance(e, Control)]
-    k = controls[int(at * len(controls))]
-    e = data.events[k]
-    assert isinstance(e, Control) and e.dt > 0
-    u = np.array(e.u, dtype=np.float64)
-    u[1] += jump / e.dt
-    events = list(data.events)
-    events[k] = dataclasses.replace(e, u=u)
-    return dataclasses.replace(data, events=tuple(events)), e.t
-
-
 @pytest.fixture(scope="module")
 def loop_world() -> Dataset:
     return load_dataset("corridor-loop-laser", seed=0)
 
 
-def test_a_heading_jump_is_overridden_and_the_loop_still_closes(loop_world: Dataset) -> None:
+def test_a_heading_jump_is_overridden_and_the_loop_still_closes(
+    loop_world: Dataset, heading_jump
+) -> None:
     clean = run("graph-slam", loop_world, seed=0)
     clean_ate = evaluate(clean, loop_world).scores.ate
-    glitched, t_jump = _with_heading_jump(loop_world, math.radians(JUMP_DEG), JUMP_AT)
+    glitched, t_jump = heading_jump(loop_world, math.radians(JUMP_DEG), JUMP_AT)
     dr = evaluate(run("dead-reckoning", glitched, seed=0), glitched).scores.ate
     result = run("graph-slam", glitched, seed=0)
     ate = evaluate(result, glitched).scores.ate
@@ -69,14 +55,14 @@ def test_a_heading_jump_is_overridden_and_the_loop_still_closes(loop_world: Data
     assert ate.rmse < clean_ate.rmse + 0.05  # ... graph SLAM is as good as without it
 
 
-def test_laser_odometry_overrides_a_heading_jump_too(loop_world: Dataset) -> None:
+def test_laser_odometry_overrides_a_heading_jump_too(loop_world: Dataset, heading_jump) -> None:
     """The same glitch under laser odometry: overridden at the first scan after it, by the
     jump undone (measured: at 51.40 s, −60.1° and 7 mm), reported as a run warning, and the
     path as good as without it (measured: ATE 0.047 m, clean 0.067 m; dead reckoning > 3
     m)."""
     clean = run("laser-odometry", loop_world, seed=0)
     clean_ate = evaluate(clean, loop_world).scores.ate
-    glitched, t_jump = _with_heading_jump(loop_world, math.radians(JUMP_DEG), JUMP_AT)
+    glitched, t_jump = heading_jump(loop_world, math.radians(JUMP_DEG), JUMP_AT)
     result = run("laser-odometry", glitched, seed=0)
     ate = evaluate(result, glitched).scores.ate
     d = result.output.diagnostics
@@ -176,7 +162,7 @@ def test_a_generated_building_with_three_heading_jumps_is_mapped() -> None:
     assert "odometry_glitches" in kinds
 
 
-def test_grid_rbpf_overrides_a_heading_jump(loop_world: Dataset) -> None:
+def test_grid_rbpf_overrides_a_heading_jump(loop_world: Dataset, heading_jump) -> None:
     """The same glitch under the grid RBPF (10 particles): the best particle's map refutes
     the wheels at the first update after the jump, every particle takes the laser's step,
     and a run warning says so. Measured: overridden at 51.40 s by −60.3°; ATE 0.238 m
@@ -184,7 +170,7 @@ def test_grid_rbpf_overrides_a_heading_jump(loop_world: Dataset) -> None:
     config = {"particles": 10}
     clean = run("grid-rbpf", loop_world, seed=0, config=config)
     clean_ate = evaluate(clean, loop_world).scores.ate
-    glitched, t_jump = _with_heading_jump(loop_world, math.radians(JUMP_DEG), JUMP_AT)
+    glitched, t_jump = heading_jump(loop_world, math.radians(JUMP_DEG), JUMP_AT)
     result = run("grid-rbpf", glitched, seed=0, config=config)
     ate = evaluate(result, glitched).scores.ate
     d = result.output.diagnostics

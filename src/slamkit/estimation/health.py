@@ -27,6 +27,7 @@ import numpy as np
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Control, Dataset, MotionSpec, Odometry
 from slamkit.estimation.contract import RunWarning
+from slamkit.geometry.angles import wrap_angle
 
 __all__ = [
     "LOST_SHARE",
@@ -139,7 +140,7 @@ def usable_motion(dataset: Dataset) -> tuple[MotionSpec | None, str | None]:
         if poses.shape[0] == 0:
             return None, "the data set has no odometry readings"
         travel = float(np.hypot(*(poses[:, :2] - poses[0, :2]).T).max())
-        turn = float(np.abs(np.angle(np.exp(1j * (poses[:, 2] - poses[0, 2])))).max())
+        turn = float(np.abs(wrap_angle(poses[:, 2] - poses[0, 2])).max())
         what = f"the odometry never moves ({len(poses)} readings)"
     else:
         controls = [e.u for e in dataset.events if isinstance(e, Control)]

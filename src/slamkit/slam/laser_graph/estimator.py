@@ -185,7 +185,8 @@ class LaserGraphSlam(EstimatorShell):
         return PoseEstimate(compose(self._base(), self._tracker.offset))
 
     def finish(self) -> EstimatorOutput:
-        if not self._keys or not (self._counts["scans"] <= 1 or self._tracker.counts["matched"]):
+        never_matched = self._counts["scans"] > 1 and not self._tracker.counts["matched"]
+        if not self._keys or never_matched:
             raise MatchError(laser_unusable(self._counts, self._tracker.counts), "laser_unusable")
         if len(self._graph) > 1:
             self._optimize()
