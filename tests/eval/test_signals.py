@@ -49,6 +49,9 @@ def test_a_simulated_graph_slam_run_reports_its_matches_closures_and_fit() -> No
     assert s.matched_share == d["matched"] / d["scans"]
     assert s.keyframes == d["keyframes"] and s.closures_kept == d["loops_kept"] > 5
     assert s.graph_chi2_per_dof == pytest.approx(d["final_cost"] / (3 * d["loops_kept"]))
+    graph = result.output.graph  # the degrees of freedom: residuals beyond the unknowns
+    assert graph is not None and graph.poses.shape[0] == s.keyframes
+    assert 3 * graph.n_edges - 3 * (graph.poses.shape[0] - 1) == s.graph_dof
     assert 0.2 < s.graph_chi2_per_dof < 2.0  # measured 0.65: closures and path agree
 
 

@@ -111,7 +111,10 @@ figure img { max-width: 100%; border: 1px solid #ddd; }
 figcaption { font-size: 0.85em; color: #555; }
 .runs { display: grid; grid-template-columns: repeat(auto-fit, minmax(360px, 1fr)); gap: 1em; }
 .muted { color: #777; }
-table.metrics { width: 100%; } table.metrics th { width: 28%; font-weight: normal; }
+table.metrics { width: 100%; table-layout: fixed; }
+table.metrics th:nth-child(1) { width: 30%; } table.metrics th:nth-child(2) { width: 8em; }
+table.metrics th:nth-child(3) { width: 3.5em; } table.metrics th { font-weight: normal; }
+table.metrics tr:first-child th { font-weight: bold; }
 table.metrics td.muted { font-size: 0.9em; }
 details summary { cursor: pointer; color: #555; margin: 0.3em 0; }
 #verdict.consistent { color: #1b6e1b; }
