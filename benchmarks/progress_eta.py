@@ -1,9 +1,11 @@
 """How honest the progress bar's time left is: graph-slam over a real log, timed per count.
 
 For the moments at 25, 50, 75 and 90 % of the work it prints the time truly left and the
-time left estimated three ways: from the mean rate since the start counted in scans, the
-same counted in events (the bar before it counted scans), and from the rate of the last
-30 s (what the bar and the plain line use: ``slamkit.cli.progress.RATE_WINDOW``)::
+time left estimated four ways: from the mean rate since the start counted in scans, the
+same counted in events (the bar before it counted scans), from the rate of the last
+30 s (``slamkit.pipeline.eta.RATE_WINDOW``), and the range the bar and the plain line give
+(:class:`slamkit.pipeline.eta.TimeLeft` with the estimator's pace: for graph SLAM from the
+last 30 s's pace holding to the pace rising as it has since the start)::
 
     PYTHONPATH=src python benchmarks/progress_eta.py "$SLAMKIT_DATA/laser/rosbags/intel.bag"
 
@@ -17,9 +19,9 @@ import time
 
 import numpy as np
 
-from slamkit.cli.progress import RATE_WINDOW
 from slamkit.datasets.files import load_data
 from slamkit.pipeline import get_estimator_entry, run, work_measure
+from slamkit.pipeline.eta import RATE_WINDOW, TimeLeft
 
 
 def main(path: str, estimator: str = "graph-slam") -> None:
@@ -49,12 +51,16 @@ def main(path: str, estimator: str = "graph-slam") -> None:
         j = next(k for k, (tk, _) in enumerate(counts) if tk >= t - RATE_WINDOW)
         t_then, done_then = counts[j - 1] if j > 0 else (0.0, 0)
         window = (total - done) * (t - t_then) / max(done - done_then, 1)
+        bar = TimeLeft(measure.pace)
+        for tk, dk in counts[: i + 1]:
+            bar.add(tk, dk)
+        low, high = bar.estimate(total) or (float("nan"), float("nan"))
         print(
             f"  {100 * done / total:3.0f} % of {measure.unit} "
             f"({100 * done_events / events:3.0f} % of events) at {t:5.1f} s: truly "
             f"{t_end - t:5.1f} s left; mean rate in {measure.unit} {t * (total - done) / done:5.1f}"
             f" s, in events {t * (events - done_events) / done_events:5.1f} s, "
-            f"last {RATE_WINDOW:.0f} s {window:5.1f} s"
+            f"last {RATE_WINDOW:.0f} s {window:5.1f} s; the bar {low:5.1f} to {high:5.1f} s"
         )
 
 

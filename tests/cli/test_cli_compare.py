@@ -76,6 +76,6 @@ def test_compare_prints_a_row_a_run_and_writes_every_metric_as_csv(tmp_path):
         assert f"  {number}  {folder}" in lines  # the legend
         line = next(t for t in lines if t.startswith(f"│ {number:>3} │"))
         assert f"{metrics['ate']['rmse']:.4g}" in line  # the console row of this run
-    assert "ATE RMSE, aligned [m]" in res.output
+    assert "ATE RMSE, SE(2)-aligned [m]" in res.output
     # dead reckoning drifts; the EKF with landmarks does not
     assert float(rows[0]["ate.rmse"]) > float(rows[1]["ate.rmse"])

@@ -73,9 +73,9 @@ def test_run_job_says_what_it_counts_and_reports_the_steps_after_the_run_in_orde
         RunRequest("ekf-slam", "five-features", tmp_path / "out"),
         lambda d, t: calls.append((d, t)),
         stages.append,
-        units.append,
+        lambda unit, pace: units.append(f"{unit} {pace}"),
     )
-    assert units == ["readings"] and calls[-1] == (339, 339)
+    assert units == ["readings steady"] and calls[-1] == (339, 339)
     plots = sum(name.endswith(".png") for name in report.files)
     assert plots >= 3
     assert stages == [
@@ -86,3 +86,18 @@ def test_run_job_says_what_it_counts_and_reports_the_steps_after_the_run_in_orde
         f"writing {plots} plots",
         "writing the report page",
     ]
+
+
+def test_graph_slam_says_its_pace_grows_and_a_run_that_speeds_up_gets_one_figure():
+    from slamkit.pipeline.eta import TimeLeft
+
+    rooms = load_dataset("rooms-laser", seed=0)
+    assert work_measure(get_estimator_entry("graph-slam"), rooms).pace == "growing"
+    assert work_measure(get_estimator_entry("laser-odometry"), rooms).pace == "steady"
+    # time per scan falling (T(x) = 0.05 x − 1e-5 x²): the fitted rise is held at 0
+    left = TimeLeft("growing")
+    for done in range(0, 2001, 50):
+        left.add(0.05 * done - 1e-5 * done**2, done)
+    low, high = left.estimate(2500) or (0.0, 1.0)
+    assert low == high > 0
+    assert TimeLeft("growing").estimate(10) is None  # no count, no rate

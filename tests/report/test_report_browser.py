@@ -6,6 +6,7 @@ installs it in CI); skips with the reason elsewhere.
 
 from __future__ import annotations
 
+import html
 import json
 import re
 import shutil
@@ -36,6 +37,33 @@ window.addEventListener("load", function () {
 </script>"""
 
 
+# The layout of the page's key elements after the load event: each one's text, its box in
+# CSS pixels and whether it is shown (a box of some size, not hidden by its style).
+LAYOUT_PROBE = """<script>
+window.addEventListener("load", function () {
+  function shown(el) {
+    var r = el.getBoundingClientRect(), st = window.getComputedStyle(el);
+    return r.width > 0 && r.height > 0 && st.visibility !== "hidden" && st.display !== "none";
+  }
+  function box(el) {
+    var r = el.getBoundingClientRect();
+    return {text: el.textContent.trim(), x: r.left + window.scrollX, y: r.top + window.scrollY,
+            w: r.width, h: r.height, shown: shown(el)};
+  }
+  function all(sel) { return Array.prototype.map.call(document.querySelectorAll(sel), box); }
+  var out = document.createElement("pre");
+  out.id = "layout-probe";
+  out.textContent = JSON.stringify({
+    verdict: all("#verdict"), groups: all("section.metric-group > h3"),
+    units: all("section.metric-group > table.metrics td:nth-child(4)"),
+    unit_cells: all("section.metric-group > table.metrics td:nth-child(3)"),
+    captions: all("figcaption"), figures: all("figure img")
+  });
+  document.body.appendChild(out);
+});
+</script>"""
+
+
 def _browser() -> str:
     for name in BROWSERS:
         path = shutil.which(name)
@@ -55,16 +83,23 @@ def _chromium(browser: str, *args: str) -> subprocess.CompletedProcess[str]:
     )  # fmt: skip
 
 
-def _image_probe(browser: str, page: Path) -> list[list[object]]:
+def _probe(browser: str, page: Path, script: str, name: str) -> object:
+    """What ``script`` wrote into ``<pre id=name>`` of a copy of ``page`` after the load
+    event, laid out in the screenshot's window size."""
     probe = page.with_name(".probe-" + page.name)
-    probe.write_text(page.read_text(encoding="utf-8").replace("</body>", PROBE + "</body>"))
+    probe.write_text(page.read_text(encoding="utf-8").replace("</body>", script + "</body>"))
     try:
-        done = _chromium(browser, "--dump-dom", probe.as_uri())
+        done = _chromium(browser, "--window-size=1200,1800", "--dump-dom", probe.as_uri())
     finally:
         probe.unlink()
-    match = re.search(r'<pre id="img-probe">(.*?)</pre>', done.stdout, re.S)
+    match = re.search(rf'<pre id="{name}">(.*?)</pre>', done.stdout, re.S)
     assert match, f"the probe did not run: {done.stderr[-500:]}"
-    rows: list[list[object]] = json.loads(match.group(1).replace("&quot;", '"'))
+    return json.loads(html.unescape(match.group(1)))
+
+
+def _image_probe(browser: str, page: Path) -> list[list[object]]:
+    rows = _probe(browser, page, PROBE, "img-probe")
+    assert isinstance(rows, list)
     return rows
 
 
@@ -117,3 +152,36 @@ def test_compare_page_links_every_runs_figures(run_folder: Path, tmp_path: Path)
     assert all(r[1] is True and int(str(r[2])) > 100 for r in rows)
     shot = _screenshot(browser, page, tmp_path / "cmp.png")
     assert shot.std() > 20.0
+
+
+def test_the_layouts_key_elements_are_shown(run_folder: Path, tmp_path: Path) -> None:
+    """The verdict line near the top, the metric groups with their units and explanations,
+    and a caption in words under each figure, all shown; the screenshot has text where
+    the browser put the verdict."""
+    from slamkit.eval.glossary import GROUPS
+    from slamkit.report import FIGURE_CAPTIONS
+
+    browser = _browser()
+    page = run_folder / "report.html"
+    layout = _probe(browser, page, LAYOUT_PROBE, "layout-probe")
+    assert isinstance(layout, dict)
+    metrics = json.loads((run_folder / "metrics.json").read_text())
+    (verdict,) = layout["verdict"]
+    assert verdict["shown"] and verdict["text"] == "Verdict: " + metrics["verdict"]["line"]
+    assert verdict["y"] < 1800 and verdict["y"] < min(f["y"] for f in layout["figures"])
+    titles = [g["text"] for g in layout["groups"]]
+    # ekf-slam on five-features: truth, NEES/NIS, its own counts, the run
+    assert titles == list(GROUPS) and all(g["shown"] for g in layout["groups"])
+    units = {u["text"] for u in layout["unit_cells"]}
+    assert {"m", "deg", "%", "s"} <= units
+    assert all(u["shown"] for u in layout["units"]) and any(u["text"] for u in layout["units"])
+    captions = layout["captions"]
+    assert len(captions) == len(layout["figures"]) == len(list(run_folder.glob("*.png")))
+    for cap in captions:
+        name = cap["text"].split(" ", 1)[0]
+        assert cap["shown"] and FIGURE_CAPTIONS[name] in cap["text"]
+    # The screenshot: ink where the verdict is (text on white).
+    shot = _screenshot(browser, page, tmp_path / "page.png")
+    x, y, w, h = (round(float(verdict[k])) for k in ("x", "y", "w", "h"))
+    line = shot[y : y + h, x : x + w]
+    assert line.size and line.min() < 128 and line.std() > 20.0

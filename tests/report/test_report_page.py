@@ -140,7 +140,7 @@ def test_run_page_says_what_reading_the_data_did_and_lists_every_warning(tmp_pat
     assert "more than 10% of a file" in section
     # Not also in the metrics table as dotted keys.
     assert "reading.dropped" not in text and "reading.repaired" not in text
-    table = text[text.index('<table id="metrics">') :].split("</table>", 1)[0]
+    table = text[text.index('<div id="metrics">') :].split("</div>", 1)[0]
     assert "reading" not in table and "warnings" not in table
     # Both kinds of warning are listed, the estimator's kind as the tooltip.
     assert '<li title="odometry_glitches">3 odometry glitches overridden at 12.5 s</li>' in text
@@ -173,7 +173,7 @@ def test_the_estimators_counts_have_a_table_of_their_own_in_words() -> None:
         "diagnostics": {"keyframes": 12, "loops_rejected": {"refine:degenerate": 3}},
     }
     text = run_html(RunPage(Path("."), "graph-slam", "loop", metrics=metrics))
-    table = text[text.index('<table id="metrics">') :].split("</table>", 1)[0]
+    table = text[text.index('<div id="metrics">') :].split("</div>", 1)[0]
     assert "ate.rmse" in table and "diagnostics" not in table
     counts = text[text.index('<table id="diagnostics">') :].split("</table>", 1)[0]
     assert "<th>keyframes</th>" in counts and ">12<" in counts

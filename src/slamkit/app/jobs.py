@@ -22,6 +22,7 @@ from slamkit.io import atomic_folder, write_json, write_tum
 from slamkit.io.folders import check_output_folder
 from slamkit.io.rosmap_read import RosMapReading, read_ros_map_reading
 from slamkit.pipeline import Progress, Result, Stage, get_estimator_entry, run, work_measure
+from slamkit.pipeline.eta import Pace
 from slamkit.pipeline.evaluate import evaluate
 
 __all__ = ["ANIMATION_FRAMES", "KNOWN_MAP_ESTIMATORS", "RunReport", "RunRequest", "run_job"]
@@ -107,7 +108,7 @@ def run_job(
     request: RunRequest,
     progress: Progress | None = None,
     stage: Stage | None = None,
-    counting: Callable[[str], None] | None = None,
+    counting: Callable[[str, Pace], None] | None = None,
 ) -> RunReport:
     """Load the data set, run the estimator, evaluate, and write into ``request.out_dir``:
     ``trajectory.tum``, ``metrics.json``, ``config.json`` (the resolved configuration),
@@ -116,12 +117,13 @@ def run_job(
     plots and ``report.html`` (the page of the run: :mod:`slamkit.report`). The folder is
     written completely or not at all.
 
-    ``counting(unit)`` is told once, before the first ``progress(done, total)``, what the
-    progress counts (``"scans"``, ``"readings"``, ``"events"``:
-    :func:`slamkit.pipeline.work_measure`). ``stage(text)`` is told of each step without a
-    count, in order: the estimator's last step, scoring, drawing the plots, writing the
-    result files (the map among them), writing the plots, the animation, the rerun and MCAP
-    recordings, the report page; they take long on big data sets."""
+    ``counting(unit, pace)`` is told once, before the first ``progress(done, total)``, what
+    the progress counts (``"scans"``, ``"readings"``, ``"events"``:
+    :func:`slamkit.pipeline.work_measure`) and how its time per unit behaves (``"steady"``
+    or ``"growing"``: :class:`slamkit.pipeline.eta.TimeLeft`). ``stage(text)`` is told of
+    each step without a count, in order: the estimator's last step, scoring, drawing the
+    plots, writing the result files (the map among them), writing the plots, the animation,
+    the rerun and MCAP recordings, the report page; they take long on big data sets."""
     say = stage if stage is not None else (lambda text: None)
     entry = get_estimator_entry(request.estimator)
     given = request.dataset if isinstance(request.dataset, Dataset) else None
@@ -164,7 +166,8 @@ def run_job(
         dataset = dataclasses.replace(dataset, known_grid=known_map.grid)
     timings["load the data set"] = time.perf_counter() - clock
     if counting is not None:
-        counting(work_measure(entry, dataset).unit)
+        measure = work_measure(entry, dataset)
+        counting(measure.unit, measure.pace)
     # twice the GIF's frames, from which it picks those where the robot moves
     frames = 2 * ANIMATION_FRAMES if request.animate else 0
     clock = time.perf_counter()

@@ -8,7 +8,6 @@ Heavy imports happen inside the commands so ``slamkit --help`` stays fast.
 
 from __future__ import annotations
 
-import math
 import signal
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -73,64 +72,22 @@ def main_options(
 
 
 def _render_metrics(scores: RunScores) -> Table:
-    """The headline scores of a run; those that do not apply to it are left out."""
-    from slamkit.eval import (
-        AssociationScores,
-        ConvergenceReport,
-        GpsError,
-        LandmarkError,
-        RelationError,
-        TrajectoryError,
-    )
+    """The headline scores of a run by group, labels and units from
+    :mod:`slamkit.eval.glossary` (the report page's); those that do not apply are left out."""
+    from slamkit.eval.glossary import GROUPS, metric_rows
 
     table = Table(show_header=True, header_style="bold")
     table.add_column("metric")
     table.add_column("value", justify="right")
-
-    def add(name: str, value: float | str | None, fmt: str) -> None:
-        if value is not None:  # escape: "[m]" would otherwise be read as rich markup
-            table.add_row(escape(name), format(value, fmt))
-
-    ate, raw = scores.ate, scores.ate_unaligned
-    if isinstance(ate, TrajectoryError):
-        add("ATE RMSE, SE(2)-aligned [m]", ate.rmse, ".3f")
-    if isinstance(raw, TrajectoryError):
-        add("ATE RMSE, unaligned [m]", raw.rmse, ".3f")
-        add("heading RMSE, unaligned [deg]", math.degrees(raw.heading_rmse), ".2f")
-    add("final position error [m]", scores.final_position_error, ".3f")
-    add("mean NEES (3 dof)", None if scores.nees is None else scores.nees.mean, ".2f")
-    conv = scores.convergence
-    if isinstance(conv, ConvergenceReport):
-        add("converged after [s]", conv.time, ".1f")
-        after = conv.position_error
-        add("median error after [m]", None if after is None else after.median, ".3f")
-    lm = scores.landmarks
-    if isinstance(lm, LandmarkError):
-        add("landmark RMSE [m]", lm.rmse, ".3f")
-        add("landmarks mapped / true", f"{lm.n_matched} / {lm.n_matched + lm.n_missing}", "s")
-    if isinstance(scores.gps, GpsError):
-        add("GPS RMSE, SE(2)-aligned [m]", scores.gps.rmse, ".3f")
-    assoc = scores.association
-    if isinstance(assoc, AssociationScores):
-        add("association accuracy", assoc.accuracy, ".4f")
-        # AssociationScores.duplicates: estimated landmarks that estimate no true one (mapped
-        # twice, clutter, a missed loop closure); merged: one estimate for several true ones
-        add("spurious landmarks (match no true one)", assoc.duplicates, "d")
-        add("merged landmarks (one for several true)", assoc.merged, "d")
-    rel = scores.relations
-    if isinstance(rel, RelationError):  # mean ± std as in the published tables
-        add(
-            "relation error, translation [m]",
-            f"{rel.translation_mean:.3f} ± {rel.translation_std:.3f}",
-            "s",
-        )
-        add(
-            "relation error, rotation [deg]",
-            f"{rel.rotation_mean_deg:.1f} ± {rel.rotation_std_deg:.1f}",
-            "s",
-        )
-        add("relations covered [%]", 100 * rel.covered_fraction, ".0f")
-    add("run time [s]", scores.runtime.total_seconds, ".3f")
+    rows = [r for r in metric_rows(scores.as_dict()) if r.info.console]
+    for group in GROUPS:
+        mine = [r for r in rows if r.info.group == group]
+        if not mine:
+            continue
+        table.add_row(f"[bold]{escape(group)}[/]", "", end_section=False)
+        for row in mine:  # escape: "[m]" would otherwise be read as rich markup
+            table.add_row("  " + escape(row.info.heading), escape(row.text))
+        table.add_section()
     return table
 
 

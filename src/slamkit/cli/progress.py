@@ -4,24 +4,28 @@ On a terminal: a bar with what it counts (``scans 1,234/13,630``), the rate and 
 left, and then each step without a count (drawing the plots, writing the report) with a
 spinner of its own, its name and its elapsed time. Without a terminal (CI, ``tee``,
 ``nohup``): a plain line every :data:`PLAIN_INTERVAL` seconds
-(``graph-slam on x: 45 % of scans (1,234/2,742), 0:00:31 elapsed, ~0:00:38 left``)."""
+(``graph-slam on x: 45 % of scans (1,234/2,742), 0:00:31 elapsed, ~0:00:38 left, from the
+last 30 s's pace, rising as measured since the start``). The time left is
+:class:`slamkit.pipeline.eta.TimeLeft`'s, in both."""
 
 from __future__ import annotations
 
 import threading
 import time
-from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import TYPE_CHECKING
 
 from rich.console import Console
 from rich.progress import ProgressColumn, Task
 from rich.text import Text
 
+if TYPE_CHECKING:  # the library is imported by the commands, not by `slamkit --help`
+    from slamkit.pipeline.eta import Pace, TimeLeft
+
 __all__ = [
     "ERR_CONSOLE",
     "PLAIN_INTERVAL",
-    "RATE_WINDOW",
     "PlainProgress",
     "ProgressHandle",
     "RateColumn",
@@ -35,16 +39,24 @@ printed while a bar runs appears above the bar."""
 PLAIN_INTERVAL = 10.0
 """Seconds between two lines of progress without a terminal."""
 
-RATE_WINDOW = 30.0
-"""Seconds of the latest counts the time left is estimated from (the rate over them), as
-rich's bar does: a laser SLAM slows as its graph grows, and the rate since the start would
-promise too little (``docs/architecture.md``, "Progress")."""
-
 
 def _clock_text(seconds: float) -> str:
     minutes, secs = divmod(int(seconds), 60)
     hours, minutes = divmod(minutes, 60)
     return f"{hours:d}:{minutes:02d}:{secs:02d}"
+
+
+def _left_text(low: float, high: float, between: str) -> str:
+    """``0:00:38``, or ``0:00:38 to 0:01:20`` when the two differ by more than a tenth."""
+    if high <= 1.1 * low + 1.0:
+        return _clock_text(low)
+    return f"{_clock_text(low)}{between}{_clock_text(high)}"
+
+
+def _time_left(pace: Pace) -> TimeLeft:
+    from slamkit.pipeline.eta import TimeLeft
+
+    return TimeLeft(pace)
 
 
 class RateColumn(ProgressColumn):
@@ -85,32 +97,38 @@ class _ElapsedColumn(ProgressColumn):
 
 
 class _LeftColumn(ProgressColumn):
-    """``left 0:00:38`` from the rate of the counted work (blank without a total)."""
+    """``left 0:00:38`` (``left 0:00:38–0:01:20`` for a growing pace) from the task's
+    ``left`` field (:meth:`TimeLeft.estimate`; blank without a total)."""
 
     def render(self, task: Task) -> Text:
         if task.total is None or task.finished:
             return Text("")
-        left = task.time_remaining
-        return Text(
-            f"left {'-:--:--' if left is None else _clock_text(left)}",
-            style="progress.remaining",
-        )
+        left = task.fields.get("left")
+        if left is None:
+            return Text("left -:--:--", style="progress.remaining")
+        low, high = left
+        return Text(f"left {_left_text(low, high, '–')}", style="progress.remaining")
 
 
 class ProgressHandle:
     """What :func:`progress_bar` yields: call it as ``progress(done, total)``;
-    ``counting(unit)`` says what the count is of (``"scans"``); ``stage(text)`` names a step
-    without a count (writing plots), shown with a spinner and its own elapsed time."""
+    ``counting(unit, pace)`` says what the count is of (``"scans"``) and how its time per
+    unit behaves (:class:`TimeLeft`); ``stage(text)`` names a step without a count (writing
+    plots), shown with a spinner and its own elapsed time."""
 
     def __init__(
         self,
         update: Callable[..., None],
         stage: Callable[[str], None],
-        counting: Callable[[str], None],
+        counting: Callable[[str, Pace], None],
+        note: Callable[[str], None] = lambda text: None,
     ) -> None:
         self._update = update
         self.stage = stage
         self.counting = counting
+        self.note = note
+        """``note(text)``: words shown beside the count (a sweep's ``2 running, 0
+        failed``)."""
 
     def __call__(self, done: int, total: int) -> None:
         self._update(done, total)
@@ -139,21 +157,25 @@ class PlainProgress:
         self._lock = threading.Lock()
         self._done = 0
         self._total: int | None = None
-        self._counts: deque[tuple[float, int]] = deque()  # (time, done) of the latest counts
+        self._left = _time_left("steady")
         self._stage: str | None = None
         self._stage_start = self._start
+        self._note = ""
 
     def __call__(self, done: int, total: int) -> None:
         with self._lock:
-            now = self._clock()
-            self._counts.append((now, done))
-            while len(self._counts) > 1 and self._counts[1][0] <= now - RATE_WINDOW:
-                self._counts.popleft()  # keep one count at or before the window's start
+            self._left.add(self._clock(), done)
             self._done, self._total = done, (total if total and total > 0 else None)
         self.tick()
 
-    def counting(self, unit: str) -> None:
+    def note(self, text: str) -> None:
+        """Words shown after the count (``2 running, 0 failed``)."""
+        with self._lock:
+            self._note = text
+
+    def counting(self, unit: str, pace: Pace = "steady") -> None:
         self.unit = unit
+        self._left = _time_left(pace)
 
     def stage(self, text: str) -> None:
         with self._lock:
@@ -176,12 +198,11 @@ class PlainProgress:
             f"{self.label}: {100 * done / total:.0f} % of {self.unit} "
             f"({done:,}/{total:,}), {elapsed} elapsed"
         )
-        if self._counts and done > self._counts[0][1]:
-            # the rate from the last count at or before the window's start (or the first)
-            # up to now: a stall makes the time left grow
-            since, done_then = self._counts[0]
-            rate = (done - done_then) / max(now - since, 1e-9)
-            text += f", ~{_clock_text(max(total - done, 0) / rate)} left"
+        if self._note:
+            text += f", {self._note}"
+        left = self._left.estimate(total, now)  # up to now: a stall makes it grow
+        if left is not None:
+            text += f", ~{_left_text(*left, ' to ')} left, from {self._left.basis}"
         return text
 
     def tick(self) -> None:
@@ -238,10 +259,12 @@ def progress_bar(
             interval=interval,
         )
         with _ticking(plain):
-            yield ProgressHandle(plain, plain.stage, plain.counting)
+            yield ProgressHandle(plain, plain.stage, plain.counting, plain.note)
         return
 
     from rich.progress import BarColumn, Progress, SpinnerColumn, TaskID, TextColumn
+
+    from slamkit.pipeline.eta import RATE_WINDOW
 
     with Progress(
         SpinnerColumn(),
@@ -257,9 +280,18 @@ def progress_bar(
         speed_estimate_period=RATE_WINDOW,  # the plain line's window too
     ) as bar:
         current: list[TaskID] = [bar.add_task(label, total=None, unit=unit)]
+        pace: list[TimeLeft] = [_time_left("steady")]
 
         def update(done: int, total: int) -> None:
-            bar.update(current[0], completed=done, total=total if total and total > 0 else None)
+            pace[0].add(time.monotonic(), done)
+            left = pace[0].estimate(total, time.monotonic()) if total and total > 0 else None
+            bar.update(
+                current[0],
+                completed=done,
+                total=total if total and total > 0 else None,
+                left=left,
+                pace=pace[0].pace,
+            )
 
         def stage(text: str) -> None:
             bar.update(current[0], visible=False)
@@ -267,7 +299,11 @@ def progress_bar(
             current[0] = bar.add_task(f"{label}: {text}", total=None)
             bar.refresh()  # the step's name at once, not at the next tick
 
-        def counting(new_unit: str) -> None:
+        def counting(new_unit: str, new_pace: Pace = "steady") -> None:
+            pace[0] = _time_left(new_pace)
             bar.update(current[0], unit=new_unit)
 
-        yield ProgressHandle(update, stage, counting)
+        def note(text: str) -> None:
+            bar.update(current[0], description=f"{label} ({text})")
+
+        yield ProgressHandle(update, stage, counting, note)

@@ -3,12 +3,15 @@
 
 ``slamkit sweep SPEC.toml [--scheduler ADDRESS] [--workers N] [--out DIR]`` runs every point
 of the spec (:func:`slamkit.sweep.run_sweep`) with a progress bar of done / running / failed
-runs; ``slamkit sweep report DIR`` writes the summaries (:func:`slamkit.sweep.write_report`).
+runs (without a terminal, a plain line every 10 s); ``slamkit sweep report DIR`` writes the
+summaries (:func:`slamkit.sweep.write_report`).
 ``sweep SPEC`` is the group's default command (``sweep run SPEC`` spelled out).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -16,10 +19,10 @@ import typer
 from rich.markup import escape
 from typer.core import TyperGroup
 
-from slamkit.cli._common import command_group, console, err_console, known_errors
+from slamkit.cli._common import command_group, console, err_console, known_errors, progress_bar
 
 if TYPE_CHECKING:
-    from slamkit.sweep import SweepReport
+    from slamkit.sweep import SweepProgress, SweepReport
 
 __all__ = ["sweep_app"]
 
@@ -64,26 +67,10 @@ def run_command(
     ] = False,
 ) -> None:
     """Run every point of SPEC not finished before; write OUT/results.parquet and .csv."""
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from slamkit.sweep import SweepProgress, load_spec, run_sweep
+    from slamkit.sweep import load_spec, run_sweep
 
     sweep = load_spec(spec)  # a bad spec fails here, before a cluster starts
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        TextColumn("{task.completed}/{task.total} done"),
-        TextColumn("{task.fields[running]} running, {task.fields[failed]} failed"),
-        TimeElapsedColumn(),
-        console=err_console,
-        transient=True,
-        disable=not err_console.is_terminal,
-    ) as bar:
-        task = bar.add_task(escape(sweep.name), total=None, running=0, failed=0)
-
-        def update(p: SweepProgress) -> None:
-            bar.update(task, completed=p.done, total=p.total, running=p.running, failed=p.failed)
-
+    with _sweep_progress(escape(sweep.name)) as update:
         try:
             result = run_sweep(
                 sweep,
@@ -109,6 +96,39 @@ def run_command(
             console.print(f"  [red]failed[/] {row['key']}: {escape(str(row['error']))}")
     names = ", ".join(p.name for p in result.files)
     console.print(f"wrote {names} to [bold]{escape(str(result.out_dir))}[/]", soft_wrap=True)
+
+
+@contextmanager
+def _sweep_progress(name: str) -> Iterator[Callable[[SweepProgress], None]]:
+    """The sweep's progress on stderr, as an ``update(SweepProgress)``: on a terminal a bar
+    of runs done, running and failed; without one (CI, ``nohup``) a plain line every
+    :data:`~slamkit.cli.progress.PLAIN_INTERVAL` seconds, as ``slamkit run`` writes."""
+    if not err_console.is_terminal:
+        with progress_bar(f"sweep {name}", unit="runs", console=err_console) as plain:
+
+            def update_plain(p: SweepProgress) -> None:
+                plain.note(f"{p.running} running, {p.failed} failed")
+                plain(p.done, p.total)
+
+            yield update_plain
+        return
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total} done"),
+        TextColumn("{task.fields[running]} running, {task.fields[failed]} failed"),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=True,
+    ) as bar:
+        task = bar.add_task(name, total=None, running=0, failed=0)
+
+        def update(p: SweepProgress) -> None:
+            bar.update(task, completed=p.done, total=p.total, running=p.running, failed=p.failed)
+
+        yield update
 
 
 def _print_report(report: SweepReport) -> None:

@@ -39,6 +39,7 @@ from slamkit.eval.relations import (
     relation_errors,
     select_relations,
 )
+from slamkit.eval.signals import SelfSignals, self_signals
 from slamkit.eval.trajectory import (
     AlignMode,
     RelativeError,
@@ -69,6 +70,7 @@ __all__ = [
     "RelationError",
     "RelativeError",
     "RpeUnit",
+    "SelfSignals",
     "TrajectoryError",
     "absolute_trajectory_error",
     "associate",
@@ -92,4 +94,5 @@ __all__ = [
     "relation_errors",
     "relative_pose_error",
     "select_relations",
+    "self_signals",
 ]

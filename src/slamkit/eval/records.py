@@ -15,6 +15,7 @@ from slamkit.eval.gps import GpsError
 from slamkit.eval.innovations import NisSummary
 from slamkit.eval.landmarks import LandmarkError
 from slamkit.eval.relations import RelationError
+from slamkit.eval.signals import SelfSignals
 from slamkit.eval.trajectory import RelativeError, TrajectoryError
 from slamkit.eval.verdict import Verdict, verdict
 
@@ -117,6 +118,10 @@ class RunScores:
     relations: RelationError | Skipped | None = None
     """The relation metric against the data set's reference relations
     (:func:`slamkit.eval.relation_errors`); skipped when the run covers none of them."""
+    signals: SelfSignals | None = None
+    """What the estimator knows of itself, with or without ground truth (keyframes,
+    closures, the graph's normalised χ², scans matched, N_eff, NIS, landmark counts:
+    :mod:`slamkit.eval.signals`); None when its diagnostics hold none of them."""
     warnings: tuple[Finding, ...] = ()
     """The consistency monitor's findings (:mod:`slamkit.eval.monitor`): NEES or NIS far
     outside its χ² band over a window; empty for a run that looks consistent (or has

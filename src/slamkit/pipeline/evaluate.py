@@ -28,8 +28,10 @@ from slamkit.eval import (
     relation_errors,
     relative_pose_error,
 )
+from slamkit.eval.innovations import NisSummary
 from slamkit.eval.monitor import ConsistencyWarning, nees_warning, nis_warning
 from slamkit.eval.records import NeesSummary, RunScores, RunTime, Skipped
+from slamkit.eval.signals import self_signals
 from slamkit.pipeline.runner import Result
 
 __all__ = ["CONVERGENCE", "CONVERGENCE_LOST", "Evaluation", "evaluate"]
@@ -82,7 +84,8 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
     says its ids are the data set's, by position otherwise), data-association scores
     against the true association of the readings, the relation metric against the data set's
     reference relations (:func:`~slamkit.eval.relation_errors`, default interpolation rule),
-    and run times; the consistency monitor's warnings (:mod:`slamkit.eval.monitor`: NEES
+    and run times; what the estimator knows of itself (:func:`~slamkit.eval.signals.self_signals`);
+    the consistency monitor's warnings (:mod:`slamkit.eval.monitor`: NEES
     and NIS over sliding windows against their χ² bands). Steps are matched by time
     stamp within ``max_dt`` (default: half the median step of the result)."""
     n = len(result)
@@ -124,14 +127,24 @@ def evaluate(result: Result, dataset: Dataset, *, max_dt: float | None = None) -
     chosen = result.output.reading_landmarks
     if chosen is not None and truth.reading_ids is not None:
         same = _same_ids(result)
-        scores = replace(scores, association=_scored(lambda: _association(chosen, dataset, same)))
+        found = result.output.landmarks
+        kept = None if found is None else found.landmarks.ids
+        scores = replace(
+            scores, association=_scored(lambda: _association(chosen, dataset, same, kept))
+        )
     relations = truth.relations
     if relations is not None:
         scores = replace(
             scores,
             relations=_scored(lambda: relation_errors(result.times, result.poses, relations)),
         )
-    scores = replace(scores, warnings=(*_monitor(arrays, log), *result.output.warnings))
+    nis = scores.nis if isinstance(scores.nis, NisSummary) else None
+    signals = self_signals(result.output.diagnostics, nis)
+    scores = replace(
+        scores,
+        signals=None if signals.empty else signals,
+        warnings=(*_monitor(arrays, log), *result.output.warnings),
+    )
     return Evaluation(scores, **arrays)
 
 
@@ -230,11 +243,13 @@ def _trajectory_scores(
     return scores, arrays
 
 
-def _association(chosen: np.ndarray, dataset: Dataset, same_ids: bool) -> AssociationScores:
+def _association(
+    chosen: np.ndarray, dataset: Dataset, same_ids: bool, kept: np.ndarray | None
+) -> AssociationScores:
     true = dataset.check_reading_ids()
     if true.size != chosen.size:
         raise InputError(
             f"association: the estimator reported {chosen.size} readings, the data set has "
             f"{true.size}"
         )
-    return association_scores(chosen, true, same_ids=same_ids)
+    return association_scores(chosen, true, same_ids=same_ids, kept=kept)

@@ -19,6 +19,7 @@ from slamkit.config import config_from_mapping
 from slamkit.datasets.stream import Dataset
 from slamkit.errors import InputError, UnknownNameError
 from slamkit.estimation.contract import Estimator, EstimatorFactory
+from slamkit.pipeline.eta import Pace
 
 __all__ = ["ESTIMATORS", "EstimatorEntry", "WorkUnit", "get_estimator_entry", "list_estimators"]
 
@@ -60,6 +61,11 @@ class EstimatorEntry:
     work: WorkUnit = "events"
     """The events that cost the estimator its time, in which a run's progress is counted
     (:func:`~slamkit.pipeline.work.work_measure`; every event when the data set has none)."""
+    pace: Pace = "steady"
+    """How its time per unit of work behaves through a run (:mod:`slamkit.pipeline.eta`):
+    ``"growing"`` when each unit costs more as the run goes (graph SLAM's closure search
+    and solves over a growing graph), so the time left is not the recent rate times the
+    work left."""
 
     @staticmethod
     def _resolve(spec: str) -> Any:
@@ -152,6 +158,7 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             "slamkit.slam.laser_graph:LaserGraphConfig",
             requires=("laser",),  # without odometry: scan matching alone
             work="scans",
+            pace="growing",
         ),
         EstimatorEntry(
             "occupancy-mapping",

@@ -8,6 +8,9 @@ counts, for the estimator of an :class:`~slamkit.pipeline.EstimatorEntry`, the e
 the kind it spends its time on (:attr:`EstimatorEntry.work`): laser scans or landmark
 readings, or every event when the data set has none of that kind. The runner reports its
 progress in these units, and a front end says what it counts (``scans 1,234/13,630``).
+Counting the right events is half of an honest time left; the other half is the time per
+unit, which grows through a graph-SLAM run (:attr:`WorkMeasure.pace`,
+:mod:`slamkit.pipeline.eta`).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit.datasets.stream import Dataset, LandmarkReadings, LaserScan
+from slamkit.pipeline.eta import Pace
 from slamkit.pipeline.registry import EstimatorEntry, WorkUnit
 
 __all__ = ["WorkMeasure", "work_measure"]
@@ -33,6 +37,9 @@ class WorkMeasure:
 
     unit: WorkUnit
     weights: NDArray[np.int64]
+    pace: Pace = "steady"
+    """How the time per unit behaves (:attr:`EstimatorEntry.pace`): what the time left is
+    estimated from (:class:`~slamkit.pipeline.eta.TimeLeft`)."""
 
     @property
     def total(self) -> int:
@@ -49,5 +56,5 @@ def work_measure(entry: EstimatorEntry, dataset: Dataset) -> WorkMeasure:
             (isinstance(ev, kind) for ev in dataset.events), dtype=np.int64, count=len(dataset)
         )
         if weights.any():
-            return WorkMeasure(entry.work, weights)
-    return WorkMeasure("events", np.ones(len(dataset), dtype=np.int64))
+            return WorkMeasure(entry.work, weights, entry.pace)
+    return WorkMeasure("events", np.ones(len(dataset), dtype=np.int64), entry.pace)

@@ -2,6 +2,7 @@
 runs as a table (console, CSV)."""
 
 from slamkit.report.html import (
+    FIGURE_CAPTIONS,
     FIGURE_ORDER,
     RunPage,
     compare_html,
@@ -21,6 +22,7 @@ from slamkit.report.table import (
 )
 
 __all__ = [
+    "FIGURE_CAPTIONS",
     "FIGURE_ORDER",
     "ComparisonTable",
     "RunPage",

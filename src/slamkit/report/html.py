@@ -28,8 +28,10 @@ from typing import Any
 
 from slamkit.datasets.reading import FEW_DROPPED, MAX_DROPPED_SHARE, ReadingSummary
 from slamkit.errors import InputError
+from slamkit.eval.glossary import GROUPS, MetricRow, metric_rows
 
 __all__ = [
+    "FIGURE_CAPTIONS",
     "FIGURE_ORDER",
     "RunPage",
     "compare_html",
@@ -54,15 +56,42 @@ FIGURE_ORDER = (
 )
 """The order figures appear in on a page; other images follow by name."""
 
+FIGURE_CAPTIONS = {
+    "trajectory.png": "The estimated path (blue) against the true one (dashed black) where "
+    "there is a truth, else coloured by the time since the start so a revisit shows; loop "
+    "closures in red. Start: green circle, end: square.",
+    "map.png": "The map the run built or localized in, with the estimated path over it; "
+    "the scale bar gives metres. Walls that appear twice, offset, are a place the run did "
+    "not recognise.",
+    "map_view.png": "The occupancy map in metres with the poses of the scans.",
+    "loops.png": "The optimised keyframes over the map and, in red, the loop closures kept: "
+    "each joins two visits of one place. Their number is in the title.",
+    "errors.png": "x, y and heading error against time. With a covariance, the error as "
+    "estimated and the ±3σ band: the error should stay inside it. Without one, the error "
+    "after the alignment of the headline ATE (the title says which).",
+    "particles.png": "The particle cloud at a few moments, each panel zoomed to its cloud, "
+    "with the true pose: a cloud that shrinks round the truth has found the robot.",
+    "nees.png": "NEES against time with its 95 % band: above the band the estimator is "
+    "over-confident, below it too cautious.",
+    "nis.png": "NIS of the updates against time with its 95 % band: innovations larger than "
+    "the filter predicts lie above it.",
+    "relation_errors.png": "The error of each reference relation, translation and rotation, "
+    "along the run: spikes are places where the map is locally wrong.",
+    "graph.png": "The pose graph: keyframes and their edges.",
+    "animation.gif": "The run as it went, one frame per moment, the current pose an arrow.",
+}
+"""What each figure shows and how to read it (the page's captions; others get their name)."""
+
 HEADLINE = (
-    ("ate.rmse", "ATE RMSE, aligned [m]"),
-    ("ate_unaligned.rmse", "ATE RMSE, unaligned [m]"),
-    ("final_position_error", "final position error [m]"),
-    ("landmarks.rmse", "landmark RMSE [m]"),
-    ("gps.rmse", "GPS RMSE, aligned [m]"),
-    ("runtime.total_seconds", "estimator time [s]"),
+    "ate.rmse",
+    "ate_unaligned.rmse",
+    "final_position_error",
+    "landmarks.rmse",
+    "gps.rmse",
+    "runtime.total_seconds",
 )
-"""Metrics (flattened keys) repeated at the top of a run's page, when the run has them."""
+"""Metrics (flattened keys) repeated at the top of a run's page, when the run has them; their
+labels and units from :mod:`slamkit.eval.glossary`."""
 
 _IMAGE_SUFFIXES = (".png", ".gif", ".svg", ".jpg", ".jpeg")
 
@@ -82,6 +111,12 @@ figure img { max-width: 100%; border: 1px solid #ddd; }
 figcaption { font-size: 0.85em; color: #555; }
 .runs { display: grid; grid-template-columns: repeat(auto-fit, minmax(360px, 1fr)); gap: 1em; }
 .muted { color: #777; }
+table.metrics { width: 100%; table-layout: fixed; }
+table.metrics th:nth-child(1) { width: 30%; } table.metrics th:nth-child(2) { width: 8em; }
+table.metrics th:nth-child(3) { width: 3.5em; } table.metrics th { font-weight: normal; }
+table.metrics tr:first-child th { font-weight: bold; }
+table.metrics td.muted { font-size: 0.9em; }
+details summary { cursor: pointer; color: #555; margin: 0.3em 0; }
 #verdict.consistent { color: #1b6e1b; }
 #verdict.doubtful { color: #8a5a00; }
 """
@@ -300,12 +335,57 @@ def _table(header: Sequence[str] | None, rows: Iterable[Sequence[str]], css_id: 
     return "\n".join(out)
 
 
-def _figure(src: str, caption: str, width: str = "") -> str:
+def _figure(src: str, caption: str, width: str = "", explanation: str = "") -> str:
     style = f' style="width:{width}"' if width else ""
+    words = f" {_e(explanation)}" if explanation else ""
     return (
         f'<figure{style}><a href="{_e(src)}"><img src="{_e(src)}" alt="{_e(caption)}"></a>'
-        f"<figcaption>{_e(caption)}</figcaption></figure>"
+        f"<figcaption><b>{_e(caption)}</b>{words}</figcaption></figure>"
     )
+
+
+def _metric_table(rows: Sequence[MetricRow], css_id: str) -> str:
+    """Rows of metrics as a table: label, value, unit, what it means."""
+    out = [
+        f'<table id="{_e(css_id)}" class="metrics">',
+        "<tr><th>metric</th><th>value</th><th>unit</th><th>what it means</th></tr>",
+    ]
+    for r in rows:
+        num = ' class="num"' if _is_number(r.text.split(" ± ")[0]) else ""
+        out.append(
+            f'<tr data-key="{_e(r.info.key)}"><th>{_e(r.info.label)}</th>'
+            f"<td{num}>{_e(r.text)}</td><td>{_e(r.info.unit)}</td>"
+            f'<td class="muted">{_e(r.info.explanation)}</td></tr>'
+        )
+    out.append("</table>")
+    return "\n".join(out)
+
+
+def _metrics_section(metrics: Mapping[str, Any]) -> list[str]:
+    """The run's numbers by group (:mod:`slamkit.eval.glossary`), each named metric with its
+    unit and explanation, the rest of its record under "more numbers"."""
+    rows = list(metric_rows(metrics))
+    out = ["<h2>Metrics</h2>", '<div id="metrics">']
+    out.append(
+        '<p class="muted">Angles in degrees, shares in per cent; <code>metrics.json</code> '
+        "keeps radians and fractions.</p>"
+    )
+    for i, group in enumerate(GROUPS):
+        named = [r for r in rows if r.info.group == group and r.named]
+        more = [r for r in rows if r.info.group == group and not r.named]
+        if not named and not more:
+            continue
+        slug = f"metrics-{i}"
+        out.append(f'<section class="metric-group" id="{slug}"><h3>{_e(group)}</h3>')
+        if named:
+            out.append(_metric_table(named, f"{slug}-table"))
+        if more:
+            out.append(f"<details><summary>{len(more)} more numbers</summary>")
+            out.append(_metric_table(more, f"{slug}-more"))
+            out.append("</details>")
+        out.append("</section>")
+    out.append("</div>")
+    return out
 
 
 def _timing_rows(page: RunPage) -> list[tuple[str, str]]:
@@ -373,8 +453,8 @@ def run_html(page: RunPage) -> str:
         facts.append(("seed", str(seed)))
     if preset:
         facts.append(("preset", str(preset)))
-    flat = flatten_metrics(page.metrics)
-    facts += [(label, flat[key]) for key, label in HEADLINE if key in flat]
+    shown = {r.info.key: r for r in metric_rows(page.metrics)}
+    facts += [(shown[k].info.heading, shown[k].text) for k in HEADLINE if k in shown]
     body.append(_table(None, facts, "summary"))
     judged = page.metrics.get("verdict")
     if isinstance(judged, dict) and "line" in judged:  # (older metrics.json have none)
@@ -392,23 +472,18 @@ def run_html(page: RunPage) -> str:
         body.extend(_reading_section(page.reading))
     body.append("<h2>Figures</h2>")
     if page.figures:
-        body.extend(_figure(name, name) for name in page.figures)
+        body.extend(_figure(n, n, explanation=FIGURE_CAPTIONS.get(n, "")) for n in page.figures)
     else:
         body.append('<p class="muted">no figures (run without --no-plots to get them)</p>')
-    body.append("<h2>Metrics</h2>")
-    shown = {  # the reading, verdict and warnings above, the estimator's counts below
-        k: v
-        for k, v in flat.items()
-        if k not in ("reading", "warnings") and not k.startswith(("verdict.", "diagnostics."))
-    }
-    body.append(_table(("metric", "value"), shown.items(), "metrics"))
+    body.extend(_metrics_section(page.metrics))
     counts = page.metrics.get("diagnostics")
     if isinstance(counts, Mapping) and counts:
-        body.append("<h2>The estimator's own counts</h2>")
+        body.append("<h2>The estimator's own counts (all)</h2>")
         body.append(
             '<p class="muted">What the estimator counted of itself (keyframes, matches, '
             "closures tried and refused by reason, particles, landmarks, …), as in "
-            "<code>metrics.json</code>'s <code>diagnostics</code>.</p>"
+            "<code>metrics.json</code>'s <code>diagnostics</code>; the signals read from "
+            "them are in the metrics above. Angles here are in radians.</p>"
         )
         rows = [(_in_words(k), v) for k, v in flatten_metrics(counts).items()]
         body.append(_table(("count", "value"), rows, "diagnostics"))

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from slamkit.errors import InputError
+from slamkit.eval.glossary import describe
 from slamkit.report.html import HEADLINE, RunPage
 
 __all__ = [
@@ -76,7 +77,7 @@ def comparison_table(pages: Sequence[RunPage]) -> ComparisonTable:
     keys: dict[str, None] = {}
     for v in values:
         keys.update(dict.fromkeys(v))
-    headline = tuple((k, label) for k, label in HEADLINE if k in keys)
+    headline = tuple((k, describe(k).heading) for k in HEADLINE if k in keys)
     return ComparisonTable(tuple(labels), tuple(pages), values, tuple(keys), headline)
 
 

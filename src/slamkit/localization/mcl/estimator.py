@@ -75,6 +75,8 @@ class _Counters:
     readings_skipped: int = 0
     innovations_skipped: int = 0
     particle_counts: list[int] = dataclass_field(default_factory=list)
+    ess_shares: list[float] = dataclass_field(default_factory=list)
+    """``N_eff / N`` after each measurement update."""
 
     def diagnostics(self, global_start: bool) -> dict[str, Any]:
         counts = np.asarray(self.particle_counts)
@@ -94,6 +96,8 @@ class _Counters:
             "particles_min": int(counts.min()),
             "particles_max": int(counts.max()),
             "particles_mean": float(counts.mean()),
+            "ess_share_mean": float(np.mean(self.ess_shares)) if self.ess_shares else None,
+            "ess_share_min": float(np.min(self.ess_shares)) if self.ess_shares else None,
         }
 
 
@@ -458,6 +462,7 @@ class MonteCarloLocalization(EstimatorShell):
             if not cfg.kld.enabled and self._p_inject > 0:
                 self._inject_pending = int(self._rng.binomial(n, self._p_inject))
         ess = effective_sample_size(self._particles.weights)
+        self._c.ess_shares.append(ess / n)
         if ess < cfg.resample_threshold * n or self._inject_pending > 0 or self._p_inject > 0:
             self._resample_pending = True
         self._maybe_snapshot(t)
