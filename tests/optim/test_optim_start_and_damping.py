@@ -156,3 +156,26 @@ def test_lm_from_odometry_converges_on_carlones_intel(data_root: Path) -> None:
     old = LmConfig(damping="levenberg", schedule="fixed")
     stuck = optimize(graph, OptimizerConfig(initialization="odometry", lm=old))
     assert not stuck.converged and stuck.chi2 > 1e5  # the issue's 167,981
+
+
+def test_a_graph_already_at_zero_cost_is_converged() -> None:
+    """A chain of odometry edges with no closure, its vertices the edges composed: the cost is
+    0 up to rounding (1e-25), LM finds no decrease at any damping, and that is a minimum, not
+    a failure (graph SLAM solves such a graph whenever every closure is refused)."""
+    rng = np.random.default_rng(4)
+    steps = rng.normal(size=(115, 3)) * [0.4, 0.02, 0.1]
+    poses = [np.zeros(3)]
+    for s in steps:
+        poses.append(pose2.compose(poses[-1], s))
+    i = np.arange(115)
+    info = np.broadcast_to(np.diag([1e4, 1e4, 1e5]), (115, 3, 3)).copy()
+    edges = EdgeSet("se2", i, i + 1, steps, info, np.zeros(115, dtype=np.int64))
+    data = GraphData(
+        dim=2, pose_ids=np.arange(116), poses=np.array(poses), edges=(edges,),
+        fixed_ids=np.zeros(1, dtype=np.int64),
+    )  # fmt: skip
+    config = OptimizerConfig(stopping=StoppingConfig(max_iterations=20, relative_tolerance=1e-5))
+    result = optimize(data, config, initial_poses=data.poses, objectives=False)
+    assert result.cost < 1e-20
+    assert result.converged
+    assert np.abs(result.poses - data.poses).max() < 1e-9

@@ -111,10 +111,10 @@ def test_the_long_hallway_is_closed_on_the_way_back() -> None:
     """The bare 50 m hallway there and back (seed 0): dead reckoning 1.76 m ATE, laser
     odometry against the keyframe 1.12 m (52 scans degenerate along the hallway). Graph SLAM
     (the default front end: the local map with the wheels' offset as a prior, which holds
-    the pose along the hallway; refused closures re-judged): 0.37 m, 11 closures, every
-    scan matched (seeds 1-5: 0.102, 0.071, 0.306, 0.066, 0.112 m; without re-judging
-    0.27 / 0.099 / 0.30 / 0.125 / 0.067 / 0.258 m; 0.106, 0.243, 0.104 m for seeds 0-2
-    with the prior at the prediction before 2026-12-06).
+    the pose along the hallway): 0.088 m with one closure kept, every scan matched (0.25 m
+    with 12 closures without place recognition, 0.37 m before the free-space check; seeds
+    1-5 in docs/estimators/laser_graph.md). Along a bare hallway most closures are aliases:
+    42 found by place recognition were verified, and the back end refused 37.
     (The keyframe reference bridges the degenerate stretch by the wheels alone: 1.94 m on
     seed 0; fusing its degenerate scans with the motion prior, a setting deleted on
     2026-12-07 because it lost Intel, gave 0.27 m.)"""
@@ -125,8 +125,8 @@ def test_the_long_hallway_is_closed_on_the_way_back() -> None:
     result = run("graph-slam", data, seed=0)
     d = result.output.diagnostics
     graph = evaluate(result, data).scores.ate.rmse
-    assert d["loops_kept"] >= 5 and not d["unmatched"]
-    assert graph < 0.45
+    assert d["loops_kept"] >= 1 and not d["unmatched"]
+    assert graph < 0.2
     assert graph < 0.25 * dead
     assert graph < 0.4 * lo
 
@@ -440,12 +440,13 @@ def _without_odometry(data):
 
 def test_a_log_without_odometry_runs_on_scan_matching_alone_and_says_so() -> None:
     """rooms-laser without its odometry: every scan but one matched (the constant-velocity
-    prediction placed by a correlative search, refined by point-to-line ICP), 48 closures,
-    ATE 1.29 m (seed 0; 0.89 m before the no-odometry rules of 2026-12-07, seeds 1-3
-    unchanged at 1.00, 2.07, 2.21 m) — against 0.026 m with the wheels: along the rooms'
-    corridor the scans hold the motion too loosely for matching alone, which the wheels'
-    prior fixes. The default front end is then the keyframe's (``reference = "auto"``): the
-    local map with only the coasted prediction as its prior scored 2.44 m."""
+    prediction placed by a correlative search, refined by point-to-line ICP), 52 closures,
+    ATE 1.29 m (seed 0; 0.89 m before the no-odometry rules of 2026-12-07; seeds 1-3 2.25,
+    2.26, 1.33 m since the free-space check) — against 0.026 m with the wheels: along the
+    rooms' corridor the scans hold the motion too loosely for matching alone, which the
+    wheels' prior fixes. The default front end is then the keyframe's (``reference =
+    "auto"``); the local map with only the coasted prediction as its prior scores 0.90,
+    0.75, 3.03, 2.86 m on seeds 0-3 (docs/estimators/laser_graph.md)."""
     data = load_dataset("rooms-laser", seed=0)
     result = run("graph-slam", _without_odometry(data), seed=0)
     d = result.output.diagnostics
@@ -455,7 +456,6 @@ def test_a_log_without_odometry_runs_on_scan_matching_alone_and_says_so() -> Non
     assert ate < 1.5
     on_map = run("graph-slam", _without_odometry(data), config={"frontend": {"reference": "map"}})
     assert on_map.output.diagnostics["frontend_reference"] == "map"
-    assert evaluate(on_map, data).scores.ate.rmse > 1.5 * ate
     with pytest.raises(InputError, match="needs motion"):
         run("grid-rbpf", _without_odometry(data), seed=0)
 

@@ -104,14 +104,8 @@ def test_the_thresholds_are_ordered() -> None:
     assert 0.0 < REFUTED_FIT < TRUSTED_FIT - FIT_MARGIN < TRUSTED_FIT < 1.0
 
 
-def test_relocate_finds_a_scan_turned_half_a_circle_away() -> None:
-    from slamkit.scanmatch.normal_icp import NormalIcpConfig, surface_fit
-    from slamkit.scanmatch.relocate import relocate
-
-    # An L-shaped room corner with a pillar: unambiguous in every heading.
-    rng = np.random.default_rng(0)
-    walls = [((-4.0, -3.0), (6.0, -3.0)), ((6.0, -3.0), (6.0, 5.0)), ((-4.0, 5.0), (6.0, 5.0))]
-    walls += [((-4.0, -3.0), (-4.0, 1.0)), ((1.0, 1.0), (1.5, 1.0)), ((1.5, 1.0), (1.5, 1.8))]
+def _wall_cloud(walls: list[tuple[tuple[float, float], tuple[float, float]]]) -> NormalCloud:
+    """Points every 5 cm along each wall ``(a, b)`` with the walls' normals."""
     pts, normals = [], []
     for (ax, ay), (bx, by) in walls:
         s = np.linspace(0.0, 1.0, int(math.hypot(bx - ax, by - ay) / 0.05))
@@ -119,19 +113,55 @@ def test_relocate_finds_a_scan_turned_half_a_circle_away() -> None:
         n = np.array([-(by - ay), bx - ax]) / math.hypot(bx - ax, by - ay)
         pts.append(p)
         normals.append(np.broadcast_to(n, p.shape))
-    cloud = NormalCloud.build(np.concatenate(pts), np.concatenate(normals))
+    return NormalCloud.build(np.concatenate(pts), np.concatenate(normals))
+
+
+def _scan_of(world: np.ndarray, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """World points seen from ``pose``: ``p_scan = R(θ)ᵀ (p_world − t)``, with 5 mm noise."""
+    c, s_ = math.cos(pose[2]), math.sin(pose[2])
+    scan = (world - pose[:2]) @ np.array([[c, -s_], [s_, c]])
+    return scan + rng.normal(0.0, 0.005, scan.shape)
+
+
+def test_relocate_finds_a_scan_turned_half_a_circle_away() -> None:
+    from slamkit.scanmatch.normal_icp import NormalIcpConfig, surface_fit
+    from slamkit.scanmatch.relocate import relocate
+
+    # An L-shaped room corner with a pillar: unambiguous in every heading.
+    walls = [((-4.0, -3.0), (6.0, -3.0)), ((6.0, -3.0), (6.0, 5.0)), ((-4.0, 5.0), (6.0, 5.0))]
+    walls += [((-4.0, -3.0), (-4.0, 1.0)), ((1.0, 1.0), (1.5, 1.0)), ((1.5, 1.0), (1.5, 1.8))]
+    cloud = _wall_cloud(walls)
     true = np.array([0.4, -0.3, math.radians(35.0)])
-    world = np.concatenate(pts)[::3]
-    c, s_ = math.cos(true[2]), math.sin(true[2])
-    # p_scan = R(θ)ᵀ (p_world − t): the rows times R(θ)
-    scan = (world - true[:2]) @ np.array([[c, -s_], [s_, c]])
-    scan += rng.normal(0.0, 0.005, scan.shape)
+    scan = _scan_of(cloud.points[::3], true, np.random.default_rng(0))
     wrong = np.array([0.9, 0.2, true[2] + math.radians(150.0)])
     assert surface_fit(cloud, scan, wrong) < REFUTED_FIT
     found = relocate(cloud, scan, wrong, NormalIcpConfig())
     assert found is not None and found.fit > 0.9
     err = between(true, found.match.pose)
     assert math.hypot(err[0], err[1]) < 0.02 and abs(math.degrees(err[2])) < 0.5
+
+
+def test_relocate_keeps_the_heading_of_the_wheels_in_a_corridor_that_fits_turned_round() -> None:
+    """A corridor fits as well turned round; here the turned pose fits a little better (two
+    door jambs the map has on the far wall, which the scan sees on the near one): the
+    search over every heading takes it, the relocation keeps the pose near the wheels."""
+    from slamkit.scanmatch.correlative import correlative_match
+    from slamkit.scanmatch.normal_icp import NormalIcpConfig
+    from slamkit.scanmatch.relocate import FIT_MARGIN, RELOCATE_SEARCH, relocate
+
+    corridor = [((-8.0, -1.0), (8.0, -1.0)), ((-8.0, 1.0), (8.0, 1.0))]
+    corridor += [((-8.0, -1.0), (-8.0, 1.0)), ((8.0, -1.0), (8.0, 1.0))]  # its two ends
+    cloud = _wall_cloud([*corridor, ((-3.0, -1.0), (-3.0, -1.5)), ((-5.0, -1.0), (-5.0, -1.5))])
+    seen = _wall_cloud([*corridor, ((3.0, 1.0), (3.0, 1.5)), ((5.0, 1.0), (5.0, 1.5))])
+    true = np.array([0.2, 0.1, math.radians(4.0)])
+    scan = _scan_of(seen.points[::2], true, np.random.default_rng(1))
+    wheels = np.array([0.5, 0.0, 0.0])
+    turned = correlative_match(cloud.points, scan, wheels, RELOCATE_SEARCH)
+    assert abs(math.degrees(between(true, turned.pose)[2])) > 170.0  # the alias wins the search
+    found = relocate(cloud, scan, wheels, NormalIcpConfig())
+    assert found is not None and found.fit > 1.0 - FIT_MARGIN
+    err = between(true, found.match.pose)
+    assert abs(err[1]) < 0.05 and abs(math.degrees(err[2])) < 1.0
 
 
 def test_a_generated_building_with_three_heading_jumps_is_mapped() -> None:

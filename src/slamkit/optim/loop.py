@@ -8,7 +8,8 @@ taken; that is a :class:`StepStrategy` (:mod:`slamkit.optim.steps`). The loop ow
 
 1. before iteration ``k``: stop (converged) when ``max |g| ≤ gradient_tolerance``;
 2. ``strategy.step`` returns an accepted :class:`Step` (the new estimate, already linearised)
-   or a :class:`NoStep` (no acceptable step: the loop records the iteration and stops);
+   or a :class:`NoStep` (no acceptable step: the loop records the iteration and stops;
+   converged when the step says so or the cost is within ``absolute_tolerance`` of zero);
 3. after an accepted step: record it, call the callback (``True`` stops), then stop
    (converged) on the first of the :class:`~slamkit.optim.settings.StoppingConfig` rules;
 4. after ``max_iterations`` iterations: stop, not converged.
@@ -258,6 +259,11 @@ def run_least_squares(
             history.append(ctx.info(it, current.lin, 0.0, False, found.damping, since))
             if callback is not None:
                 callback(history[-1])
+            # A cost within absolute_tolerance of zero, its least value, is a minimum: no
+            # step can lower it by more than the tolerance (a chain without closures).
+            if not found.converged and current.lin.cost <= rule.absolute_tolerance:
+                why = f"cost {current.lin.cost:.3g} <= absolute_tolerance, no decrease possible"
+                return LoopOutcome(current, it, True, why, stalled=True)
             return LoopOutcome(current, it, found.converged, found.reason, stalled=True)
         why = None
         if not found.bounded:

@@ -16,6 +16,13 @@ it to tens of milliseconds), refined by point-to-normal ICP *without* the wheels
 and judged by :func:`~slamkit.scanmatch.normal_icp.surface_fit`, the share of the scan the
 pose lays on the map's surfaces, which does not trust the matcher's own residuals.
 
+A corridor fits as well turned round, and a row of look-alike rooms as well shifted by one:
+the whole circle holds aliases of the true pose. So when the search's best heading lies
+more than :data:`NEAR_THETA` from the prediction's, the best pose within :data:`NEAR_THETA`
+of it is found too (and must stay within it once refined), and the far one is kept only
+when it beats that by :data:`FIT_MARGIN`, the margin the laser needs to beat the wheels'
+match: among poses the laser cannot tell apart, the one nearest the wheels.
+
 :func:`judge` compares the two hypotheses. The laser's wins when its fit is at least
 :data:`TRUSTED_FIT` and beats the wheels' match by :data:`FIT_MARGIN`. Overriding the
 wheels (a pose outside the tracker's gate) asks more: the laser's pose must lay at least
@@ -30,6 +37,7 @@ wheels 0.0-0.13 against 0.7-0.9; Intel's one-message heading glitches of 20-40°
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Literal
@@ -38,6 +46,7 @@ import numpy as np
 
 from slamkit._validation import FloatArray
 from slamkit.errors import MatchError
+from slamkit.geometry.angles import wrap_angle_float
 from slamkit.scanmatch.correlative import (
     CorrelativeConfig,
     CorrelativeReference,
@@ -48,6 +57,7 @@ from slamkit.scanmatch.result import MatchResult
 
 __all__ = [
     "FIT_MARGIN",
+    "NEAR_THETA",
     "OVERRIDE_RATIO",
     "REFUTED_FIT",
     "RELOCATE_SEARCH",
@@ -75,6 +85,10 @@ RELOCATE_SEARCH = CorrelativeConfig(
 """The relocation's correlative search: every heading in 0.5° steps, 10 cm cells with a
 10 cm smear (so the half-degree steps lose no point within 10 m), no degeneracy refusal
 (the ICP that follows and the fit judge the result)."""
+
+NEAR_THETA = math.radians(30.0)
+"""A relocation turned more than this from the prediction [rad] must beat the best pose
+within it by :data:`FIT_MARGIN` (module docstring)."""
 
 TRUSTED_FIT = 0.6
 """A pose that lays at least this share of the scan on the map's surfaces (within 5 cm) is
@@ -119,10 +133,41 @@ def relocate(
     reference built with :data:`RELOCATE_SEARCH`, if the caller keeps one."""
     ref = reference or CorrelativeReference.from_points(cloud.points, RELOCATE_SEARCH)
     try:
-        coarse = correlative_match(ref, points, around, RELOCATE_SEARCH)
-        refined = normal_icp(cloud, points, coarse.pose, icp_config)
+        found = _located(ref, cloud, points, around, RELOCATE_SEARCH, icp_config)
     except MatchError:
         return None
+    if _turn(found, around) <= NEAR_THETA:
+        return found
+    try:
+        near = _located(ref, cloud, points, around, _NEAR_SEARCH, icp_config)
+    except MatchError:
+        return found
+    # (a refinement that turned out of the window found no pose near the wheels' heading)
+    return (
+        near if _turn(near, around) <= NEAR_THETA and near.fit + FIT_MARGIN > found.fit else found
+    )
+
+
+def _turn(relocation: Relocation, around: FloatArray) -> float:
+    """How far the relocation turned from ``around`` [rad, absolute]."""
+    return abs(wrap_angle_float(float(relocation.match.pose[2] - around[2])))
+
+
+_NEAR_SEARCH = dataclasses.replace(RELOCATE_SEARCH, window_theta=NEAR_THETA)
+
+
+def _located(
+    reference: CorrelativeReference,
+    cloud: NormalCloud,
+    points: FloatArray,
+    around: FloatArray,
+    search: CorrelativeConfig,
+    icp_config: NormalIcpConfig,
+) -> Relocation:
+    """The correlative ``search`` around ``around`` refined by ICP, with its fit. Raises
+    :class:`MatchError`."""
+    coarse = correlative_match(reference, points, around, search)
+    refined = normal_icp(cloud, points, coarse.pose, icp_config)
     return Relocation(refined, surface_fit(cloud, points, refined.pose))
 
 

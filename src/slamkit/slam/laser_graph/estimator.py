@@ -54,6 +54,14 @@ from slamkit.slam.laser_graph.backend import (
     rejudge,
 )
 from slamkit.slam.laser_graph.config import LaserGraphConfig
+from slamkit.slam.laser_graph.freespace import (
+    MAX_CONTRADICTION,
+    NEIGHBOURHOOD_KEYFRAMES,
+    FreeSpace,
+    contradiction,
+    neighbourhood,
+    neighbourhood_scans,
+)
 from slamkit.slam.laser_graph.frontend import (
     NORMAL_ICP,
     Keyframe,
@@ -64,6 +72,7 @@ from slamkit.slam.laser_graph.frontend import (
 from slamkit.slam.laser_graph.health import laser_unusable, run_warnings
 from slamkit.slam.laser_graph.loops import (
     PAIR_KEYFRAMES,
+    SUBMAP_KEYFRAMES,
     LoopMatch,
     SubmapCache,
     consistent_partners,
@@ -71,6 +80,7 @@ from slamkit.slam.laser_graph.loops import (
     search_window,
     verify_closure,
 )
+from slamkit.slam.laser_graph.places import WINDOW_DEG, WINDOW_XY, PlaceIndex, signature
 
 __all__ = ["NO_ODOMETRY", "LaserGraphSlam"]
 
@@ -84,6 +94,10 @@ CLOSURE_COV_SCALE = 4.0
 # The graph is optimised after the keyframe that brings new closures, at most every this many
 # keyframes (closures wait in between).
 OPTIMIZE_EVERY = 1
+# Place recognition (slam.laser_graph.places) runs at every this many keyframes and offers the
+# verification this many candidates beyond the local search's.
+GLOBAL_EVERY = 5
+GLOBAL_CANDIDATES = 2
 # The occupancy map of the optimised keyframes leaves out readings beyond this [m] (long rays
 # through doors and windows fill a grid with free space that a short-range view does not
 # contradict).
@@ -125,6 +139,7 @@ class LaserGraphSlam(EstimatorShell):
         self._ranges: list[FloatArray] = []
         self._normals: dict[int, ScanNormals] = {}  # each keyframe's, once in a submap
         self._submaps = SubmapCache(config.loops, self._scan_normals)
+        self._places = PlaceIndex()
         self._counts: Counter[str] = Counter()
         self._pending = 0  # closures added since the last optimisation
         self._waiting: list[tuple[int, int, LoopMatch]] = []  # verified, no partner yet
@@ -271,6 +286,8 @@ class LaserGraphSlam(EstimatorShell):
         self._keys.append(Keyframe(event.t, points, reference, travelled))
         self._ranges.append(np.asarray(event.ranges, dtype=np.float64))
         self._tracker.reset()
+        if self._cfg.loops.enabled:
+            self._add_signature(k)
         if self._cfg.loops.enabled and k > 0:
             self._close_loops(k)
         if self._pending and k - self._last_solve >= OPTIMIZE_EVERY:
@@ -286,20 +303,48 @@ class LaserGraphSlam(EstimatorShell):
         poses = self._graph.poses
         travelled = np.array([kf.travelled for kf in self._keys])
         points = [kf.points for kf in self._keys]
-        for j in loop_candidates(poses[:, :2], travelled, k, s):
-            self._counts["loop_candidates"] += 1
-            window = search_window(float(travelled[k] - travelled[j]), s)
+        local = loop_candidates(poses[:, :2], travelled, k, s)
+        tries = [(j, between(poses[j], poses[k]), search_window(travelled[k] - travelled[j], s))
+                 for j in local]  # fmt: skip
+        self._counts["loop_candidates"] += len(tries)
+        if k % GLOBAL_EVERY == 0:
+            far = travelled[k] - travelled >= s.min_travel
+            for c in local:  # the local search has these places already
+                far[max(c - SUBMAP_KEYFRAMES, 0) : c + SUBMAP_KEYFRAMES] = False
+            found = self._places.candidates(k, far, GLOBAL_CANDIDATES)
+            window = (WINDOW_XY, math.radians(WINDOW_DEG))
+            tries += [(j, np.array([0.0, 0.0, turn]), window) for j, turn in found]
+            self._counts["place_candidates"] += len(found)
+        recent: FreeSpace | None = None  # keyframe k's neighbourhood, once a closure needs it
+        for n, (j, initial, window) in enumerate(tries):
             ref_points, cloud, reference = self._submaps.get(poses, points, j)
-            found = verify_closure(
-                ref_points, cloud, self._keys[k].points, between(poses[j], poses[k]),
-                window, s, NORMAL_ICP, reference=reference,
+            match = verify_closure(
+                ref_points, cloud, self._keys[k].points, initial, window, s, NORMAL_ICP,
+                reference=reference,
             )  # fmt: skip
-            if isinstance(found, str):
-                self._counts[f"loop_rejected:{found}"] += 1
+            if isinstance(match, str):
+                self._counts[f"loop_rejected:{match}"] += 1
+                continue
+            if recent is None:
+                recent = neighbourhood(
+                    poses, points, self._mounting, k, k - NEIGHBOURHOOD_KEYFRAMES + 1, k + 1
+                )
+            place = self._submaps.free_space(poses, points, j, self._mounting)
+            if contradiction(place, recent, match.pose) > MAX_CONTRADICTION:
+                self._counts["loop_rejected:free_space"] += 1
                 continue
             self._counts["loops_verified"] += 1
-            self._confirm(poses, (j, k, found))
+            self._counts["places_verified"] += n >= len(local)
+            self._confirm(poses, (j, k, match))
         self._submaps.advance()
+
+    def _add_signature(self, k: int) -> None:
+        """Keyframe ``k``'s place signature (:mod:`~slamkit.slam.laser_graph.places`)."""
+        _, clouds = neighbourhood_scans(
+            self._graph.poses, [kf.points for kf in self._keys], self._mounting, k,
+            k - NEIGHBOURHOOD_KEYFRAMES + 1, k + 1,
+        )  # fmt: skip
+        self._places.add(signature(np.concatenate(clouds)))
 
     def _scan_normals(self, i: int) -> ScanNormals:
         """Keyframe ``i``'s normals in its own frame (computed once)."""
@@ -386,6 +431,8 @@ class LaserGraphSlam(EstimatorShell):
             "lost": c["lost"],
             "odometry_edges": c["odometry_edges"],
             "loop_candidates": c["loop_candidates"],
+            "place_candidates": c["place_candidates"],
+            "places_verified": c["places_verified"],
             "loops_verified": c["loops_verified"],
             "loops_added": c["loops_added"],
             "loops_unconfirmed": c["loops_verified"] - c["loops_added"],

@@ -49,6 +49,7 @@ from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_ic
 from slamkit.scanmatch.point_map import PointMap, ScanNormals
 from slamkit.scanmatch.result import MatchResult
 from slamkit.slam.laser_graph.config import LoopSettings
+from slamkit.slam.laser_graph.freespace import FreeSpace, neighbourhood
 
 __all__ = [
     "LoopMatch",
@@ -178,18 +179,17 @@ class SubmapCache:
         self.scan_normals = scan_normals
         self._last: dict[int, _Submap] = {}
         self._used: dict[int, _Submap] = {}
+        self._free: dict[int, tuple[tuple[int, int, bytes], FreeSpace]] = {}
 
     def get(
         self, poses: FloatArray, points: list[FloatArray], j: int
     ) -> tuple[FloatArray, NormalCloud, CorrelativeReference | None]:
         """Candidate ``j``'s submap points, cloud and reference (None: no points, which
         :func:`verify_closure` reports) at ``poses (K, 3)``."""
-        half = SUBMAP_KEYFRAMES // 2
-        lo, hi = max(j - half, 0), min(j + half + 1, len(points))
-        key = (lo, hi, np.ascontiguousarray(poses[lo:hi]).tobytes())
+        key = _span_key(poses, len(points), j)
         found = self._used.get(j) or self._last.get(j)
         if found is None or found[0] != key:
-            ref_points, cloud = submap(poses, points, j, half, self.scan_normals)
+            ref_points, cloud = submap(poses, points, j, SUBMAP_KEYFRAMES // 2, self.scan_normals)
             try:
                 reference: CorrelativeReference | None = loop_reference(ref_points, self.settings)
             except MatchError:
@@ -198,9 +198,30 @@ class SubmapCache:
         self._used[j] = found
         return found[1], found[2], found[3]
 
+    def free_space(
+        self, poses: FloatArray, points: list[FloatArray], j: int, mounting: FloatArray
+    ) -> FreeSpace:
+        """Candidate ``j``'s submap as :class:`~slamkit.slam.laser_graph.freespace.FreeSpace`
+        in its frame (the laser at ``mounting`` on the robot), kept like the submaps."""
+        key = _span_key(poses, len(points), j)
+        found = self._free.get(j)
+        if found is None or found[0] != key:
+            half = SUBMAP_KEYFRAMES // 2
+            found = (key, neighbourhood(poses, points, mounting, j, j - half, j + half + 1))
+            self._free[j] = found
+        return found[1]
+
     def advance(self) -> None:
         """The next keyframe: keep only the submaps asked for since the last call."""
+        self._free = {j: f for j, f in self._free.items() if j in self._used}
         self._last, self._used = self._used, {}
+
+
+def _span_key(poses: FloatArray, n: int, j: int) -> tuple[int, int, bytes]:
+    """Submap ``j``'s span and the poses of its keyframes: equal keys, equal submaps."""
+    half = SUBMAP_KEYFRAMES // 2
+    lo, hi = max(j - half, 0), min(j + half + 1, n)
+    return lo, hi, np.ascontiguousarray(poses[lo:hi]).tobytes()
 
 
 _Submap = tuple[tuple[int, int, bytes], FloatArray, NormalCloud, CorrelativeReference | None]
