@@ -16,12 +16,15 @@ best particle's path, which is how its map was made:
 1. a wide correlative search (:data:`SEARCH`: ± 3 m, ± 45°, Olson's branch and bound on
    the old end points) around the filter's pose finds where the scan fits the old map best
    (a flat response, or a best pose on the window's edge, is no evidence: skipped);
-2. a lost loop is a match that is good (:data:`GOOD_FIT` of its points within 30 cm of an
-   old end point), clear (no rival peak of :data:`RIVAL_RATIO` of its score farther than
-   :data:`MIN_OFFSET` from it, :func:`~slamkit.scanmatch.correlative.correlative_rival`)
-   and far from the filter's pose: more than :data:`MIN_OFFSET` and more than
-   :data:`SPREAD_MULTIPLE` times the particles' spread (a loop smaller than that is one the
-   particles can still close).
+2. the map holds the place twice (``doubled``) when that match is good (:data:`GOOD_FIT`
+   of its points within 30 cm of an old end point), clear (no rival peak of
+   :data:`RIVAL_RATIO` of its score farther than :data:`RIVAL_SEPARATION` from it,
+   :func:`~slamkit.scanmatch.correlative.correlative_rival`) and far from the filter's
+   pose: more than :data:`MIN_OFFSET` and more than :data:`SPREAD_MULTIPLE` times the
+   particles' spread (a loop smaller than that is one the particles can still close);
+3. a loop is lost when two checks in a row (:data:`CHECK_EVERY` apart) find the place
+   doubled: one alone may be a look-alike the rival search missed, or a loop the filter
+   closes a few metres on (both seen on the generated buildings).
 
 The match's distance from the filter's pose is the loop's error there: on the generated
 buildings it agrees with the true error of the filter's pose against its old scans to a
@@ -59,6 +62,7 @@ __all__ = [
     "NEAR",
     "OLD_AFTER",
     "RIVAL_RATIO",
+    "RIVAL_SEPARATION",
     "SEARCH",
     "SHOWN",
     "SPREAD_MULTIPLE",
@@ -94,7 +98,9 @@ GOOD_FIT = 0.5
 FIT_DISTANCE = 3.0 * SEARCH.sigma
 """[m] an end point this near an old one fits the old map (the match's inlier distance)."""
 RIVAL_RATIO = 0.9
-"""A second peak scoring this share of the match's score makes the match unclear."""
+"""A second peak scoring this share of the match's score ..."""
+RIVAL_SEPARATION = 0.5
+"""... farther than this [m] from it makes the match unclear."""
 MIN_OFFSET = 1.0
 """[m] the least distance from the filter's pose to the match that is a lost loop."""
 SPREAD_MULTIPLE = 3.0
@@ -116,7 +122,8 @@ class LoopCheck:
     (``offset`` [m], ``turn`` [rad]), the match's normalised score and the share of its
     end points on the old map (``fit``), that share at the filter's own pose
     (``fit_here``), the particles' spread [m], the old scans used, whether a rival peak was
-    found, and the verdict."""
+    found, whether the match says the map holds the place twice (``doubled``), and the
+    verdict: ``lost`` when the check before said so too."""
 
     t: float
     pose: FloatArray
@@ -128,6 +135,7 @@ class LoopCheck:
     spread: float
     old_scans: int
     rival: bool
+    doubled: bool
     lost: bool
 
     def row(self) -> dict[str, float | int | bool]:
@@ -210,10 +218,10 @@ class LoopWatch:
         far = offset > max(MIN_OFFSET, SPREAD_MULTIPLE * spread)
         rival = False
         if far and found.inlier_fraction >= GOOD_FIT:
-            rival = (
-                correlative_rival(ref, current, here, found, MIN_OFFSET, RIVAL_RATIO) is not None
-            )
-        lost = far and found.inlier_fraction >= GOOD_FIT and not rival
+            second = correlative_rival(ref, current, here, found, RIVAL_SEPARATION, RIVAL_RATIO)
+            rival = second is not None
+        doubled = far and found.inlier_fraction >= GOOD_FIT and not rival
+        lost = doubled and bool(self.checks) and self.checks[-1].doubled
         out = LoopCheck(
             float(t),
             here.copy(),
@@ -225,6 +233,7 @@ class LoopWatch:
             float(spread),
             int(chosen.size),
             rival,
+            doubled,
             lost,
         )
         self.checks.append(out)
