@@ -78,7 +78,12 @@ from slamkit.scanmatch.relocate import TRUSTED_FIT, WINDOW_XY, judge
 from slamkit.scanmatch.result import MatchResult, scan_points
 from slamkit.scanmatch.to_map import MapMatchConfig, match_to_map
 from slamkit.slam.grid_rbpf.config import GridRbpfConfig
-from slamkit.slam.grid_rbpf.guard import map_fit, relocate_on_map
+from slamkit.slam.grid_rbpf.guard import (
+    WIDE_TURN,
+    map_fit,
+    refuse_wide_turn,
+    relocate_on_map,
+)
 from slamkit.slam.grid_rbpf.loops import LoopWatch, particle_spread
 from slamkit.slam.grid_rbpf.maps import TiledMap, TilePool, scan_cells
 from slamkit.slam.grid_rbpf.proposal import (
@@ -268,6 +273,7 @@ class GridRbpf(EstimatorShell):
             "dead_particles": c["dead"],
             "relocation_tried": c["relocation_tried"],
             "relocated": c["relocated"],
+            "turns_refused": c["turns_refused"],
             "odometry_overridden": len(self._overrides),
             "odometry_overrides": override_rows(self._overrides),
             "lost": c["lost"],
@@ -476,6 +482,15 @@ class GridRbpf(EstimatorShell):
             wheels_fit = map_fit(field, points, wheels)
             laser = relocate_on_map(field, points, predicted, self._match_cfg)
             overrides = laser is not None and not self._within_gate(predicted, laser.match.pose)
+            if laser is not None and overrides:
+                turn = abs(wrap_angle_float(float(between(predicted, laser.match.pose)[2])))
+                side = None
+                if turn > WIDE_TURN:
+                    side = refuse_wide_turn(field, points, predicted, self._match_cfg, laser)
+                if side is not None:
+                    self._counts["turns_refused"] += 1
+                    laser = side
+                    overrides = not self._within_gate(predicted, laser.match.pose)
             verdict = judge(wheels_fit, laser, overrides)
             if verdict == "laser":
                 assert laser is not None
