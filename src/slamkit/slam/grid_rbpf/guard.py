@@ -17,7 +17,10 @@ are moved, the best particle's scan is therefore checked on its own map:
    around the prediction (:func:`relocate_on_map`: Olson's correlative search on the
    particle's likelihood field, refined by the same Gauss-Newton match), and
    :func:`~slamkit.scanmatch.relocate.judge` keeps the laser's pose or the wheels';
-3. when the laser wins, every particle's step is the laser's instead of the wheels' (the
+3. a relocation more than :data:`WIDE_TURN` off the wheels' heading is first weighed
+   against the best pose within ± 60° of it (:func:`refuse_wide_turn`): a corridor turned
+   round fits as well as the corridor, so such a turn must fit clearly better;
+4. when the laser wins, every particle's step is the laser's instead of the wheels' (the
    estimator's ``_update``); a correction beyond the gate is an overridden glitch.
 
 Measured: ``docs/estimators/grid_rbpf.md``, "Odometry glitches".
