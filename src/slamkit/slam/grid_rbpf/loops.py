@@ -26,11 +26,10 @@ best particle's path, which is how its map was made:
    doubled: one alone may be a look-alike the rival search missed, or a loop the filter
    closes a few metres on (both seen on the generated buildings).
 
-The match's distance from the filter's pose is the loop's error there: on the generated
-buildings it agrees with the true error of the filter's pose against its old scans to a
-cell or two. The scan's fit to the old map *at* the filter's pose (``fit_here``) is kept
-for the record but decides nothing: in a corridor a scan moved metres along it still
-fits the walls.
+The match's distance from the filter's pose is the loop's error there (the true error of
+the filter's pose against its old scans, where the truth is known). The scan's fit to the
+old map *at* the filter's pose (``fit_here``) is kept for the record but decides nothing:
+in a corridor a scan moved metres along it still fits the walls.
 
 A lost loop is counted, listed and reported as the run warning ``loop_lost``. Measured:
 ``docs/estimators/grid_rbpf.md``, "A lost loop is said".
@@ -57,8 +56,10 @@ from slamkit.scanmatch.correlative import (
 
 __all__ = [
     "CHECK_EVERY",
+    "FIT_DISTANCE",
     "GOOD_FIT",
     "MIN_OFFSET",
+    "MIN_OLD_SCANS",
     "NEAR",
     "OLD_AFTER",
     "RIVAL_RATIO",
