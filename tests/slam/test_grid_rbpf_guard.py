@@ -14,6 +14,7 @@ from slamkit.maps import OccupancyGrid
 from slamkit.scanmatch.relocate import REFUTED_FIT
 from slamkit.scanmatch.to_map import MapMatchConfig
 from slamkit.slam.grid_rbpf import map_fit, relocate_on_map
+from slamkit.slam.grid_rbpf.guard import NEAR_SEARCH, TURN_RATIO, WIDE_TURN, refuse_wide_turn
 
 RES = 0.05
 
@@ -73,3 +74,59 @@ def test_relocation_finds_a_scan_turned_half_a_circle_away() -> None:
     assert found is not None and found.fit > 0.9
     err = between(true, found.match.pose)
     assert math.hypot(err[0], err[1]) < 0.03 and abs(math.degrees(err[2])) < 0.5
+
+
+def _box(partition: bool) -> LikelihoodField:
+    """An 8 m × 6 m room (x, y within ± 4, ± 3 m) on a 5 cm grid, the same under a half turn
+    about its centre (0, 0) — or, with ``partition``, not: a 3 m wall from the west wall at
+    y = 1."""
+    prob = np.full((200, 240), 0.5)
+    origin = np.array([-6.0, -5.0])
+    prob[40 : 200 - 39, 40 : 240 - 39] = 0.05
+    prob[40, 40:201] = prob[160, 40:201] = 0.95
+    prob[40:161, 40] = prob[40:161, 200] = 0.95
+    if partition:
+        prob[120, 40:100] = 0.95
+    grid = OccupancyGrid(prob, RES, origin)
+    return LikelihoodField.from_grid(grid, 0.05, max_range=20.0, free_threshold=1.0)
+
+
+def _seen(field: LikelihoodField, pose: np.ndarray, reach: float) -> np.ndarray:
+    """The wall cells within ``reach`` of ``pose``, as its scan (robot frame)."""
+    walls = field.grid.cell_to_world(np.argwhere(field.grid.prob > 0.9))
+    near = walls[np.hypot(*(walls - pose[:2]).T) <= reach]
+    return _in_robot_frame(near, pose)
+
+
+def test_a_half_turn_that_fits_no_better_than_the_wheels_side_is_refused() -> None:
+    """In a room that looks the same turned round, the twin pose (half a turn about the
+    centre) fits as well as the true one: a relocation there is refused, and the pose on the
+    wheels' side (the true one, within a cell and half a degree) is judged instead."""
+    field = _box(partition=False)
+    true = np.array([-2.0, 0.7, math.radians(80.0)])
+    points = _seen(field, true, 4.0)
+    match = MapMatchConfig(sigma_hit=0.05)
+    twin = np.array([-true[0], -true[1], true[2] + math.pi])
+    turned = relocate_on_map(field, points, twin, match, NEAR_SEARCH)
+    assert turned is not None and turned.fit > 0.95
+    assert abs(between(true, turned.match.pose)[2]) > WIDE_TURN
+    side = refuse_wide_turn(field, points, true, match, turned)
+    assert side is not None and side.fit >= TURN_RATIO * turned.fit
+    err = between(true, side.match.pose)
+    assert math.hypot(err[0], err[1]) < RES and abs(math.degrees(err[2])) < 0.5
+
+
+def test_a_half_turn_that_the_map_confirms_is_kept() -> None:
+    """With the partition, the scan near it fits only the true pose: wheels turned 150°
+    away are overridden by the relocation, and the wheels' side (± 60°) holds no pose that
+    fits 80 % as well."""
+    field = _box(partition=True)
+    true = np.array([-2.5, 0.5, math.radians(80.0)])
+    points = _seen(field, true, 3.0)
+    match = MapMatchConfig(sigma_hit=0.05)
+    wheels = true + np.array([0.0, 0.0, math.radians(150.0)])
+    turned = relocate_on_map(field, points, wheels, match)
+    assert turned is not None and turned.fit > 0.95
+    err = between(true, turned.match.pose)
+    assert math.hypot(err[0], err[1]) < RES and abs(math.degrees(err[2])) < 0.5
+    assert refuse_wide_turn(field, points, wheels, match, turned) is None

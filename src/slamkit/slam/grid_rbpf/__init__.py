@@ -1,6 +1,7 @@
 """Grid-based Rao-Blackwellized particle filter SLAM (Grisetti, Stachniss & Burgard 2007):
 particles with their own occupancy grids (tiles shared, copied on write), the improved
-proposal from scan matching, adaptive resampling."""
+proposal from scan matching, adaptive resampling; the guard against odometry glitches and
+the watch for lost loops."""
 
 from slamkit.slam.grid_rbpf.config import GridRbpfConfig
 from slamkit.slam.grid_rbpf.estimator import (
@@ -12,6 +13,7 @@ from slamkit.slam.grid_rbpf.estimator import (
     GridRbpf,
 )
 from slamkit.slam.grid_rbpf.guard import map_fit, relocate_on_map
+from slamkit.slam.grid_rbpf.loops import LoopCheck, LoopWatch, particle_spread
 from slamkit.slam.grid_rbpf.maps import TiledMap, TilePool, scan_cells
 from slamkit.slam.grid_rbpf.proposal import (
     MODE_NOISE,
@@ -40,6 +42,8 @@ __all__ = [
     "TILE_CELLS",
     "GridRbpf",
     "GridRbpfConfig",
+    "LoopCheck",
+    "LoopWatch",
     "Scan",
     "TilePool",
     "TiledMap",
@@ -49,6 +53,7 @@ __all__ = [
     "motion_covariance",
     "motion_log_density",
     "motion_proposal",
+    "particle_spread",
     "relocate_on_map",
     "scan_cells",
 ]

@@ -24,6 +24,10 @@ particle:
    ``x̂`` than the gate, falls back to the motion model (counted);
 4. integrate the scan into the particle's map from the drawn pose.
 
+Every few metres the watch (:mod:`.loops`) searches the scan on the best particle's old
+scans around its pose: a clear fit far from it is a loop the filter did not close (its map
+holds the place twice), counted and warned about.
+
 Weights are kept as logarithms and normalised with log-sum-exp; when ``N_eff = 1/Σ w²``
 drops below :data:`RESAMPLE_SHARE` ``· N`` the set is resampled (low variance), which only
 shares map tiles and copies poses. Paths are a parent-pointer tree: each update stores the
@@ -74,7 +78,13 @@ from slamkit.scanmatch.relocate import TRUSTED_FIT, WINDOW_XY, judge
 from slamkit.scanmatch.result import MatchResult, scan_points
 from slamkit.scanmatch.to_map import MapMatchConfig, match_to_map
 from slamkit.slam.grid_rbpf.config import GridRbpfConfig
-from slamkit.slam.grid_rbpf.guard import map_fit, relocate_on_map
+from slamkit.slam.grid_rbpf.guard import (
+    WIDE_TURN,
+    map_fit,
+    refuse_wide_turn,
+    relocate_on_map,
+)
+from slamkit.slam.grid_rbpf.loops import LoopWatch, particle_spread
 from slamkit.slam.grid_rbpf.maps import TiledMap, TilePool, scan_cells
 from slamkit.slam.grid_rbpf.proposal import (
     Scan,
@@ -162,7 +172,7 @@ class GridRbpf(EstimatorShell):
         self._counts: Counter[str] = Counter()
         self._neff: list[float] = []
         self._seconds: dict[str, float] = dict.fromkeys(
-            ("field", "match", "proposal", "integrate", "guard"), 0.0
+            ("field", "match", "proposal", "integrate", "guard", "loops"), 0.0
         )
         self._snapshots = SpreadSnapshots(cfg.snapshots)
         # The guard's record (:mod:`.guard`): overridden glitches (stamp, T_wheels_laser)
@@ -170,6 +180,10 @@ class GridRbpf(EstimatorShell):
         self._overrides: list[tuple[float, FloatArray]] = []
         self._stretch = UnmatchedStretch()
         self._last_t = dataset.start_time
+        # The lost-loop watch (:mod:`.loops`): every update's end points, the total travel.
+        self._distance = 0.0
+        self._loops = LoopWatch()
+        self._loops.add(np.zeros((0, 2)), 0.0)  # the start, before any scan
 
     # -- the Estimator protocol ---------------------------------------------------------
 
@@ -259,9 +273,11 @@ class GridRbpf(EstimatorShell):
             "dead_particles": c["dead"],
             "relocation_tried": c["relocation_tried"],
             "relocated": c["relocated"],
+            "turns_refused": c["turns_refused"],
             "odometry_overridden": len(self._overrides),
             "odometry_overrides": override_rows(self._overrides),
             "lost": c["lost"],
+            **self._loops.diagnostics(),
             "neff_mean": float(neff.mean()) if neff.size else None,
             "neff_min": float(neff.min()) if neff.size else None,
             "maps": self._pool.stats(),
@@ -273,8 +289,9 @@ class GridRbpf(EstimatorShell):
             diagnostics=diagnostics,
             particle_snapshots=self._snapshots.pick(snapshot),
             trajectory=SmoothedTrajectory(times, poses),
-            warnings=tuple(
-                tracking_warnings(self.updates, c["lost"], self._overrides, self._stretch)
+            warnings=(
+                *tracking_warnings(self.updates, c["lost"], self._overrides, self._stretch),
+                *self._loops.warnings(),
             ),
         )
 
@@ -305,6 +322,10 @@ class GridRbpf(EstimatorShell):
             self._maps[k].release()
             self._maps[k] = self._maps[0].share()
         self._store(np.tile(pose, (len(self._maps), 1)), event.t)
+        ranges = event.ranges[:: self._cfg.beam_stride]
+        self._loops.add(
+            self._points(ranges, self._angles[:: self._cfg.beam_stride]), self._distance
+        )
 
     def _field(self, tiled: TiledMap, predicted: FloatArray, points: FloatArray) -> LikelihoodField:
         """The likelihood field of ``tiled`` over the end points seen from ``predicted``."""
@@ -349,9 +370,7 @@ class GridRbpf(EstimatorShell):
         # which the likelihood field skips.
         ranges[(ranges <= cfg.min_range) | (ranges >= reach)] = cfg.max_range
         scan = Scan(ranges, angles, self._mounting)
-        points = scan_points(event.ranges[::stride], angles, reach, min_range=cfg.min_range)
-        if self._mounting.any():
-            points = transform_points(self._mounting, points)
+        points = self._points(event.ranges[::stride], angles)
         motion_cov = motion_covariance(delta, cfg, (self._travel, self._turn))
         finite_motion = bool(np.isfinite(motion_cov).all() and np.isfinite(delta).all())
         if finite_motion and points.shape[0]:
@@ -412,6 +431,24 @@ class GridRbpf(EstimatorShell):
                 self._integrate(k, drawn[k], event.ranges)
         self._logw = logw
         self._store(drawn, event.t)
+        self._watch(event.t, points)
+
+    def _points(self, ranges: FloatArray, angles: FloatArray) -> FloatArray:
+        """The end points ``(K, 2)`` in the robot frame of the readings used for matching."""
+        reach = min(self._cfg.max_range, self._laser_max)
+        points = scan_points(ranges, angles, reach, min_range=self._cfg.min_range)
+        if self._mounting.any():
+            points = transform_points(self._mounting, points)
+        return points
+
+    def _watch(self, t: float, points: FloatArray) -> None:
+        """Record the update's scan for the lost-loop watch, and check when it is due."""
+        self._loops.add(points, self._distance)
+        if self._loops.due():
+            tic = time.perf_counter()
+            spread = particle_spread(self._poses, self._weights())
+            self._loops.check(float(t), self.best_path(), spread)
+            self._seconds["loops"] += time.perf_counter() - tic
 
     def _within_gate(self, predicted: FloatArray, pose: FloatArray) -> bool:
         """Whether ``pose`` lies within the match gate around ``predicted``."""
@@ -445,6 +482,15 @@ class GridRbpf(EstimatorShell):
             wheels_fit = map_fit(field, points, wheels)
             laser = relocate_on_map(field, points, predicted, self._match_cfg)
             overrides = laser is not None and not self._within_gate(predicted, laser.match.pose)
+            if laser is not None and overrides:
+                turn = abs(wrap_angle_float(float(between(predicted, laser.match.pose)[2])))
+                side = None
+                if turn > WIDE_TURN:
+                    side = refuse_wide_turn(field, points, predicted, self._match_cfg, laser)
+                if side is not None:
+                    self._counts["turns_refused"] += 1
+                    laser = side
+                    overrides = not self._within_gate(predicted, laser.match.pose)
             verdict = judge(wheels_fit, laser, overrides)
             if verdict == "laser":
                 assert laser is not None
@@ -508,6 +554,7 @@ class GridRbpf(EstimatorShell):
         self._poses = drawn
         self._parent = np.arange(n)
         self._odom_at_update = self._odom.copy()
+        self._distance += self._travel
         self._travel = self._turn = 0.0
         w = self._weights()
         neff = float(1.0 / np.sum(w * w))
