@@ -8,6 +8,8 @@ import numpy as np
 
 from slamkit.estimation.health import LOST_SHARE, UNMATCHED_TRAVEL, UnmatchedStretch
 from slamkit.slam.laser_graph.health import (
+    CONTRADICTING_AT_LEAST,
+    CONTRADICTING_SHARE,
     REFUSED_AT_LEAST,
     STRAINED_AT_LEAST,
     STRAINED_CHI2,
@@ -15,12 +17,13 @@ from slamkit.slam.laser_graph.health import (
 )
 
 
-def _kinds(diagnostics, overrides=(), stretch=None, chi2=None):  # type: ignore[no-untyped-def]
+def _kinds(diagnostics, overrides=(), stretch=None, chi2=None, revisits=(0, 0)):  # type: ignore[no-untyped-def]
     found = run_warnings(
         diagnostics,
         list(overrides),
         stretch or UnmatchedStretch(),
         np.zeros(0) if chi2 is None else np.asarray(chi2, dtype=float),
+        revisits,
     )
     return [w.kind for w in found], found
 
@@ -69,3 +72,13 @@ def test_a_strained_graph_needs_more_than_one_odd_edge() -> None:
     many = np.r_[np.ones(100), np.full(STRAINED_AT_LEAST, 2 * STRAINED_CHI2)]
     kinds, found = _kinds({}, chi2=many)
     assert kinds == ["strained_graph"] and "3 of 103 loop closures" in found[0].message
+
+
+def test_a_map_contradicts_itself_above_its_share_of_the_revisits() -> None:
+    n = 200
+    at = int(CONTRADICTING_SHARE * n)
+    assert _kinds({}, revisits=(n, at))[0] == []
+    kinds, found = _kinds({}, revisits=(n, at + 1))
+    assert kinds == ["map_contradicts_itself"] and f"{at + 1} of {n} places" in found[0].message
+    few = CONTRADICTING_AT_LEAST - 1  # a short log: a share alone is not enough
+    assert _kinds({}, revisits=(few, few))[0] == []

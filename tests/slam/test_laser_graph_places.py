@@ -152,3 +152,25 @@ def test_a_loop_beyond_the_local_search_window_is_closed_by_place_recognition(mo
     monkeypatch.setattr(estimator, "GLOBAL_EVERY", 10**9)
     without = evaluate(run("graph-slam", data, config=narrow), data).scores.ate.rmse
     assert with_places < 0.2 < 0.5 < without
+
+
+def test_the_final_map_audit_finds_a_place_mapped_twice() -> None:
+    """Two visits of one hall: the audit checks the revisits and finds none contradicting.
+    Then the second visit's scans are of a narrow, deep room mapped onto the hall (a place
+    held twice): every revisit checked contradicts."""
+    from slamkit.slam.laser_graph.freespace import revisit_contradictions
+
+    room = _box(-4.0, -2.0, 4.0, 2.0)
+    away = _box(46.0, -2.0, 54.0, 2.0)  # the drive in between, far from the hall
+    truth = [np.array([-1.0 + 0.2 * i, 0.0, 0.0]) for i in range(11)]
+    truth += [np.array([49.0 + 0.2 * i, 0.0, 0.0]) for i in range(11)]
+    truth += [np.array([1.0 - 0.2 * i, 0.3, np.pi]) for i in range(11)]
+    points = [_scan(away if 11 <= i < 22 else room, p) for i, p in enumerate(truth)]
+    travelled = np.arange(33) * 0.2 + np.r_[np.zeros(11), np.full(11, 50.0), np.full(11, 100.0)]
+    poses = np.array(truth)
+    checked, bad = revisit_contradictions(poses, points, np.zeros(3), travelled, 3.0)
+    assert checked >= 2 and bad == []
+    narrow = _box(-2.0, -4.0, 2.0, 4.0)
+    points[22:] = [_scan(narrow, p) for p in truth[22:]]
+    checked, bad = revisit_contradictions(poses, points, np.zeros(3), travelled, 3.0)
+    assert checked >= 2 and len(bad) == checked

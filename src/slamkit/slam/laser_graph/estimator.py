@@ -61,6 +61,7 @@ from slamkit.slam.laser_graph.freespace import (
     contradiction,
     neighbourhood,
     neighbourhood_scans,
+    revisit_contradictions,
 )
 from slamkit.slam.laser_graph.frontend import (
     NORMAL_ICP,
@@ -227,11 +228,22 @@ class LaserGraphSlam(EstimatorShell):
             mapper.integrate_many(compose(poses, self._mounting), np.asarray(self._ranges))
             grid = mapper.occupancy_grid()
             diagnostics["mapping"] = mapper.stats.as_dict()
+        revisits = (0, 0)
+        if len(self._graph) and self._cfg.loops.enabled:
+            travelled = np.array([kf.travelled for kf in self._keys])
+            checked, bad = revisit_contradictions(
+                poses, [kf.points for kf in self._keys], self._mounting, travelled,
+                self._cfg.loops.min_travel,
+            )  # fmt: skip
+            revisits = (checked, len(bad))
+            diagnostics["revisits_checked"] = checked
+            diagnostics["revisits_contradicting"] = len(bad)
         warnings = run_warnings(
             {**diagnostics, "loops_refused": self._counts["loop_rejected:chi2"]},
             self._overrides,
             self._stretch,
             self._graph.loop_chi2(),
+            revisits,
         )
         if self._no_motion is not None:
             warnings = (still_odometry_warning(self._no_motion), *warnings)

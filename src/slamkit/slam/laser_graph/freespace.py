@@ -39,6 +39,7 @@ __all__ = [
     "contradiction",
     "neighbourhood",
     "neighbourhood_scans",
+    "revisit_contradictions",
 ]
 
 RESOLUTION = 0.1
@@ -53,6 +54,11 @@ MAX_CONTRADICTION = 0.04
 """A closure whose contradiction (the module docstring) exceeds this share is refused."""
 NEIGHBOURHOOD_KEYFRAMES = 11
 """The new keyframe's side: itself and the keyframes before it, this many in all."""
+AUDIT_EVERY = 4
+"""The final map's audit (:func:`revisit_contradictions`) looks at every this many
+keyframes ..."""
+REVISIT_RADIUS = 1.0
+"""... and the nearest earlier keyframe within this [m] of it in the final map."""
 
 _STRIDE = np.int64(1 << 32)
 
@@ -131,3 +137,40 @@ def _cell(points: FloatArray) -> np.ndarray:
 
 def _key(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     return rows * _STRIDE + cols
+
+
+def revisit_contradictions(
+    poses: FloatArray,
+    points: list[FloatArray],
+    mounting: FloatArray,
+    travelled: FloatArray,
+    min_travel: float,
+) -> tuple[int, list[int]]:
+    """The final map's audit: every :data:`AUDIT_EVERY`-th keyframe ``k`` that revisits a
+    place (an earlier keyframe at least ``min_travel`` [m] of path behind it lies within
+    :data:`REVISIT_RADIUS` of it, ``poses (K, 3)``, ``travelled (K,)``) is checked against
+    the nearest such keyframe by :func:`contradiction` of their neighbourhoods at those
+    poses. Returns the number of revisits checked and the keyframes that contradict (above
+    :data:`MAX_CONTRADICTION`): a map that holds one place twice, or bent, contradicts itself
+    where the robot came back."""
+    cache: dict[int, FreeSpace] = {}
+
+    def side(c: int) -> FreeSpace:
+        if c not in cache:
+            lo = c - NEIGHBOURHOOD_KEYFRAMES + 1
+            cache[c] = neighbourhood(poses, points, mounting, c, lo, c + 1)
+        return cache[c]
+
+    checked, contradicting = 0, []
+    for k in range(0, poses.shape[0], AUDIT_EVERY):
+        earlier = np.flatnonzero(travelled[k] - travelled[:k] >= min_travel)
+        if earlier.size == 0:
+            continue
+        d = np.hypot(*(poses[earlier, :2] - poses[k, :2]).T)
+        if d.min() > REVISIT_RADIUS:
+            continue
+        j = int(earlier[np.argmin(d)])
+        checked += 1
+        if contradiction(side(j), side(k), between(poses[j], poses[k])) > MAX_CONTRADICTION:
+            contradicting.append(k)
+    return checked, contradicting

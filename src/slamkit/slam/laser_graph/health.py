@@ -3,11 +3,16 @@ prints and lists under ``warnings`` in ``metrics.json``.
 
 A wrong map looks like a right one unless the run says what it saw. The front end's rules
 (odometry glitches, track lost, unmatched stretch) are every laser tracker's
-(:mod:`slamkit.estimation.health`); graph SLAM adds two of its own:
+(:mod:`slamkit.estimation.health`); graph SLAM adds three of its own:
 
 * **closures refused** — verified closures the consistency checks refused, when they are
   at least :data:`REFUSED_AT_LEAST` and outnumber those kept: places the map joins in two
   incompatible ways;
+* **a map that contradicts itself** — revisits of the final map
+  (:func:`~slamkit.slam.laser_graph.freespace.revisit_contradictions`) whose two visits lay
+  walls in each other's open space, when they are at least
+  :data:`CONTRADICTING_AT_LEAST` and more than :data:`CONTRADICTING_SHARE` of the revisits
+  checked;
 * **strained graph** — loop edges of the final graph whose residual exceeds
   :data:`STRAINED_CHI2` (ten standard deviations in their own metric), the map disagreeing
   with its own evidence, when they are more than :data:`STRAINED_SHARE` of the closures
@@ -31,6 +36,8 @@ from slamkit.estimation.contract import RunWarning
 from slamkit.estimation.health import UnmatchedStretch, tracking_warnings
 
 __all__ = [
+    "CONTRADICTING_AT_LEAST",
+    "CONTRADICTING_SHARE",
     "REFUSED_AT_LEAST",
     "STRAINED_AT_LEAST",
     "STRAINED_CHI2",
@@ -39,6 +46,10 @@ __all__ = [
     "run_warnings",
 ]
 
+CONTRADICTING_SHARE = 0.12
+"""Revisits of the final map that contradict it above this share of those checked ..."""
+CONTRADICTING_AT_LEAST = 5
+"""... and at least this many make a warning."""
 REFUSED_AT_LEAST = 10
 """Refused closures fewer than this are never a warning."""
 STRAINED_CHI2 = 100.0
@@ -54,10 +65,11 @@ def run_warnings(
     overrides: Sequence[tuple[float, FloatArray]],
     stretch: UnmatchedStretch,
     loop_chi2: FloatArray,
+    revisits: tuple[int, int] = (0, 0),
 ) -> tuple[RunWarning, ...]:
     """The warnings of a run (module docstring) from its diagnostics, the overridden
-    glitches ``(stamp, T_wheels_laser)``, the longest unmatched stretch and the final loop
-    edges' ``eᵀ Ω e``."""
+    glitches ``(stamp, T_wheels_laser)``, the longest unmatched stretch, the final loop
+    edges' ``eᵀ Ω e`` and the final map's revisits ``(checked, contradicting)``."""
     scans = int(diagnostics.get("scans", 0) or 0)  # type: ignore[call-overload]
     lost = int(diagnostics.get("lost", 0) or 0)  # type: ignore[call-overload]
     found = tracking_warnings(scans, lost, overrides, stretch)
@@ -69,6 +81,15 @@ def run_warnings(
                 "closures_refused",
                 f"{refused} verified loop closures were refused as inconsistent with the "
                 f"graph ({kept} kept): some places may be joined wrongly or not at all",
+            )
+        )
+    checked, contradicting = revisits
+    if contradicting >= CONTRADICTING_AT_LEAST and contradicting > CONTRADICTING_SHARE * checked:
+        found.append(
+            RunWarning(
+                "map_contradicts_itself",
+                f"{contradicting} of {checked} places the robot came back to are mapped "
+                "twice or bent: the two visits put walls in each other's open space",
             )
         )
     strained = int(np.count_nonzero(loop_chi2 > STRAINED_CHI2))
