@@ -58,7 +58,10 @@ AUDIT_EVERY = 4
 """The final map's audit (:func:`revisit_contradictions`) looks at every this many
 keyframes ..."""
 REVISIT_RADIUS = 1.0
-"""... and the nearest earlier keyframe within this [m] of it in the final map."""
+"""... and the nearest earlier keyframe within this [m] of it in the final map ..."""
+AUDIT_MAX = 200
+"""... and checks at most this many of the revisits it finds, evenly spread (its cost is
+two neighbourhoods' ray casting per revisit: Intel has 700 revisits)."""
 
 _STRIDE = np.int64(1 << 32)
 
@@ -148,11 +151,12 @@ def revisit_contradictions(
 ) -> tuple[int, list[int]]:
     """The final map's audit: every :data:`AUDIT_EVERY`-th keyframe ``k`` that revisits a
     place (an earlier keyframe at least ``min_travel`` [m] of path behind it lies within
-    :data:`REVISIT_RADIUS` of it, ``poses (K, 3)``, ``travelled (K,)``) is checked against
-    the nearest such keyframe by :func:`contradiction` of their neighbourhoods at those
-    poses. Returns the number of revisits checked and the keyframes that contradict (above
-    :data:`MAX_CONTRADICTION`): a map that holds one place twice, or bent, contradicts itself
-    where the robot came back."""
+    :data:`REVISIT_RADIUS` of it, ``poses (K, 3)``, ``travelled (K,)``; at most
+    :data:`AUDIT_MAX` of them) is checked against the nearest such keyframe by
+    :func:`contradiction` of their neighbourhoods at those poses. Returns the number of
+    revisits checked and the keyframes that contradict (above :data:`MAX_CONTRADICTION`): a
+    map that holds one place twice, or bent, contradicts itself where the robot came
+    back."""
     cache: dict[int, FreeSpace] = {}
 
     def side(c: int) -> FreeSpace:
@@ -161,16 +165,19 @@ def revisit_contradictions(
             cache[c] = neighbourhood(poses, points, mounting, c, lo, c + 1)
         return cache[c]
 
-    checked, contradicting = 0, []
+    revisits = []
     for k in range(0, poses.shape[0], AUDIT_EVERY):
         earlier = np.flatnonzero(travelled[k] - travelled[:k] >= min_travel)
         if earlier.size == 0:
             continue
         d = np.hypot(*(poses[earlier, :2] - poses[k, :2]).T)
-        if d.min() > REVISIT_RADIUS:
-            continue
-        j = int(earlier[np.argmin(d)])
-        checked += 1
-        if contradiction(side(j), side(k), between(poses[j], poses[k])) > MAX_CONTRADICTION:
-            contradicting.append(k)
-    return checked, contradicting
+        if d.min() <= REVISIT_RADIUS:
+            revisits.append((int(earlier[np.argmin(d)]), k))
+    if len(revisits) > AUDIT_MAX:
+        revisits = [revisits[i] for i in np.linspace(0, len(revisits) - 1, AUDIT_MAX).astype(int)]
+    contradicting = [
+        k
+        for j, k in revisits
+        if contradiction(side(j), side(k), between(poses[j], poses[k])) > MAX_CONTRADICTION
+    ]
+    return len(revisits), contradicting
