@@ -77,7 +77,7 @@ class PlaceIndex:
 
     def __init__(self) -> None:
         self._grids: list[np.ndarray] = []
-        self._keys = np.zeros((0, RINGS))
+        self._keys = np.zeros((64, RINGS))  # ring keys, rows doubled when full
         self._spectra: list[np.ndarray] = []
 
     def __len__(self) -> int:
@@ -85,8 +85,11 @@ class PlaceIndex:
 
     def add(self, grid: np.ndarray) -> None:
         """The next keyframe's :func:`signature`."""
+        n = len(self._grids)
+        if n == self._keys.shape[0]:
+            self._keys = np.vstack([self._keys, np.zeros_like(self._keys)])
+        self._keys[n] = grid.mean(axis=1)
         self._grids.append(grid)
-        self._keys = np.vstack([self._keys, grid.mean(axis=1)])
         self._spectra.append(np.fft.rfft(grid.astype(np.float64), axis=1))
 
     def candidates(self, k: int, eligible: np.ndarray, count: int) -> list[tuple[int, float]]:
