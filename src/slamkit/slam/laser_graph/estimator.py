@@ -346,7 +346,7 @@ class LaserGraphSlam(EstimatorShell):
                 self._counts["loop_rejected:free_space"] += 1
                 continue
             self._counts["loops_verified"] += 1
-            self._counts["places_verified"] += n >= len(local)
+            self._counts["places_verified"] += int(n >= len(local))  # beyond the local ones
             self._confirm(poses, (j, k, match))
         self._submaps.advance()
 
