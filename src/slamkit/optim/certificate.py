@@ -55,7 +55,7 @@ import scipy.sparse.linalg
 from numpy.typing import ArrayLike
 
 from slamkit._validation import as_array
-from slamkit.errors import InputError
+from slamkit.errors import ConvergenceError, InputError
 from slamkit.optim.data import FloatArray, GraphData
 from slamkit.optim.graph import GraphProblem, lookup_rows, sesync_row_weights
 from slamkit.optim.sparse import Factorizer, LinearSolverName, SingularSystem, factor_spd
@@ -307,15 +307,16 @@ def certify(
     cert = _Certifier(sesync_matrices(data, problem.pose_ids), p[:, 2], linear_solver)
     q_norm = cert.q_norm()
     tol = rtol * q_norm
-    certified = cert.factor(-tol) is not None
-    floor = -cert.lam_norm - tol  # below λ_min(S) since Q ⪰ 0: K(floor) ≻ 0
-    sigma = -tol if certified else floor
-    fac = cert.factor(sigma)
-    if fac is None:  # rounding at the floor: step further down, still a valid shift
-        sigma = floor = 2.0 * floor - tol
+    fac = cert.factor(-tol)  # the verdict: S + tol·I ≻ 0
+    certified, sigma = fac is not None, -tol
+    if fac is None:
+        sigma = -cert.lam_norm - tol  # below λ_min(S) since Q ⪰ 0: K(σ) ≻ 0
         fac = cert.factor(sigma)
+        if fac is None:  # rounding at that floor: step further down, still a valid shift
+            sigma = 2.0 * sigma - tol
+            fac = cert.factor(sigma)
         if fac is None:
-            raise InputError("certificate: K(σ) does not factor below every eigenvalue of S")
+            raise ConvergenceError("certificate: K(σ) does not factor below every eigenvalue of S")
     lam = cert.smallest(sigma, fac)
     # A verified lower bound: the first of λ - δ, δ = tol·10^k, whose K factors.
     lower, delta = sigma, 1e-4 * tol
