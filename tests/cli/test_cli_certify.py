@@ -86,15 +86,32 @@ def test_certify_needs_the_sesync_objective(tmp_path: Path) -> None:
     assert not (tmp_path / "o").exists()
 
 
-@pytest.mark.realdata
-def test_certify_refuses_a_3d_graph(data_root: Path, tmp_path: Path) -> None:
-    src = data_root / "posegraph3d" / "tinyGrid3D.g2o"
-    if not src.exists():
-        pytest.skip(f"{src} not found")
+def test_certify_refuses_a_landmark_graph(tmp_path: Path) -> None:
+    """SE-Sync's problem has no landmarks: refused before any work, nothing written."""
+    _, ring = _ring_file(tmp_path, winding=False)
+    xy = EdgeSet("se2_xy", np.array([0]), np.array([100]), np.array([[1.0, 0.5]]),
+                 np.eye(2)[None] * 100.0, np.zeros(1, dtype=np.int64))  # fmt: skip
+    graph = GraphData(dim=2, pose_ids=ring.pose_ids, poses=ring.poses,
+                      landmark_ids=np.array([100]), landmarks=np.array([[11.0, 0.5]]),
+                      edges=(*ring.edges, xy))  # fmt: skip
+    src = write_graph(graph, tmp_path / "landmarks.g2o", family="g2o")
     res = runner.invoke(
         app, ["optimize", str(src), "--out", str(tmp_path / "o"), "--objective", "sesync",
               "--certify"],
     )  # fmt: skip
     lines = [line for line in res.output.splitlines() if line.strip()]
-    assert res.exit_code == 1 and len(lines) == 1 and "2D pose graphs only" in lines[0]
+    assert res.exit_code == 1 and len(lines) == 1, res.output
+    assert "relative-pose (se2) edges only" in lines[0] and "se2_xy" in lines[0]
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.realdata
+def test_certify_a_3d_graph(data_root: Path, tmp_path: Path) -> None:
+    """tinyGrid3D (9 poses): certified, F = 18.5194 (SE-Sync's objective from chordal)."""
+    src = data_root / "posegraph3d" / "tinyGrid3D.g2o"
+    if not src.exists():
+        pytest.skip(f"{src} not found")
+    cert = _run(src, tmp_path / "o")["certificate"]
+    assert cert["certified"] and cert["poses"] == 9
+    assert cert["objective"] == pytest.approx(18.5194, abs=1e-4)
+    assert cert["lower_bound"] <= cert["objective"] < cert["lower_bound"] + 1e-4

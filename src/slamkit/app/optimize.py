@@ -126,7 +126,7 @@ class OptimizeRequest:
     overwrite: bool = False
     certify: bool = False
     """Certify the solution globally optimal (SE-Sync's certificate,
-    :func:`~slamkit.optim.certify`): needs ``objective="sesync"`` and a 2D graph of
+    :func:`~slamkit.optim.certify`): needs ``objective="sesync"`` and a graph of
     relative-pose edges only; the metrics' ``certificate`` holds the result."""
 
 
@@ -441,7 +441,7 @@ def optimize_graph_job(
         read = read_graph_report(path, repair_information=_repair_mode(request))
     data = read.graph
     if request.certify:
-        check_certifiable(data)  # before any work: 2D, relative-pose edges only
+        check_certifiable(data)  # before any work: relative-pose edges only
     repair = _repair_record(request.repair_information, path, read.repaired)
     t1 = time.perf_counter()
     problem = GraphProblem.from_data(data, objective=cfg.objective, gauge=cfg.gauge)

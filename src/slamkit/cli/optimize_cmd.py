@@ -110,7 +110,7 @@ def optimize_command(
         bool,
         typer.Option(
             help="Certify the solution globally optimal (SE-Sync's certificate; needs "
-            "--objective sesync and a 2D graph of relative-pose edges).",
+            "--objective sesync and a graph of relative-pose edges only).",
         ),
     ] = False,
     plots: Annotated[bool, typer.Option(help="Write graph.png (before and after).")] = True,

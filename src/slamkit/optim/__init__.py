@@ -16,7 +16,7 @@ and 2D landmarks, and over SE(3) poses.
   landmark graphs.
 * :mod:`~slamkit.optim.init`: odometry spanning tree and chordal initialisation.
 * :mod:`~slamkit.optim.objectives`: the g2o χ² and SE-Sync's ``F`` of any solution.
-* :mod:`~slamkit.optim.certificate`: SE-Sync's certificate of global optimality (2D) and the
+* :mod:`~slamkit.optim.certificate`: SE-Sync's certificate of global optimality (2D, 3D) and the
   lower bound on ``F*`` it gives.
 * :mod:`~slamkit.optim.robust`: Huber, Cauchy, Geman-McClure and DCS kernels (IRLS).
 * :mod:`~slamkit.optim.marginals`: marginal covariances from the factorisation.
