@@ -85,8 +85,8 @@ class Certificate:
     lambda_min: float
     """ARPACK's estimate of ``λ_min(S)`` (shift-invert, converged to 1e-10 relative)."""
     lambda_lower: float
-    """A lower bound on ``λ_min(S)`` verified by a successful Cholesky of ``K(lambda_lower)``
-    (or ``-max ‖Λ_i‖``, true by construction)."""
+    """A lower bound on ``λ_min(S)``: a shift at which ``K`` factored (at worst the shift the
+    eigenvalue search started from, which factored too)."""
     tolerance: float
     """``tol = CERTIFY_RTOL · q_norm``."""
     q_norm: float
@@ -274,9 +274,15 @@ class _Certifier:
     def q_norm(self) -> float:
         n2 = self.mats.dim * self.mats.n
         op = scipy.sparse.linalg.LinearOperator((n2, n2), matvec=self.q_times, dtype=float)
-        v0 = 1.0 + 0.5 * np.cos(0.7 * np.arange(n2))  # fixed start: the same answer every run
-        val = scipy.sparse.linalg.eigsh(op, k=1, which="LA", tol=1e-3, v0=v0)[0]
-        return float(val[0])
+        return float(self._eigsh(op, 1, 1e-3)[0])
+
+    @staticmethod
+    def _eigsh(op: scipy.sparse.linalg.LinearOperator, k: int, tol: float) -> FloatArray:
+        v0 = 1.0 + 0.5 * np.cos(0.7 * np.arange(op.shape[0]))  # fixed: the same answer every run
+        try:
+            return np.asarray(scipy.sparse.linalg.eigsh(op, k=k, which="LA", tol=tol, v0=v0)[0])
+        except scipy.sparse.linalg.ArpackNoConvergence as exc:
+            raise ConvergenceError(f"certificate: the eigenvalue search stopped ({exc})") from exc
 
     def smallest(self, sigma: float, fac: Factorizer) -> float:
         """``λ_min(S)`` by shift-invert Lanczos from ``σ`` (below every eigenvalue)."""
@@ -286,9 +292,7 @@ class _Certifier:
             return fac.solve(np.r_[np.zeros(m), np.ravel(x)])[m:]
 
         op = scipy.sparse.linalg.LinearOperator((n2, n2), matvec=inv, dtype=float)
-        v0 = 1.0 + 0.5 * np.cos(0.7 * np.arange(n2))
-        k = min(2, n2 - 1)
-        vals = scipy.sparse.linalg.eigsh(op, k=k, which="LA", tol=1e-10, v0=v0)[0]
+        vals = self._eigsh(op, min(2, n2 - 1), 1e-10)
         return float(sigma + 1.0 / vals.max())  # eigenvalues of (S - σI)⁻¹ are 1/(λ - σ)
 
 
