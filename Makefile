@@ -27,10 +27,12 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
-# No thread variables: the library sets its own BLAS thread policy (slamkit/runtime.py,
-# docs/performance.md), so the tests run what a user runs.
+# The library sets its own BLAS thread policy around slamkit.pipeline.run and optimize
+# (slamkit/runtime.py, docs/performance.md; tests/test_runtime.py checks it with the variable
+# cleared). Many tests also call kernels directly, outside that policy: one BLAS thread keeps
+# them from fighting over small matrices on a shared 2-core machine.
 pytest: $(STAMP)
-	$(BIN)/python -m pytest -q
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[bench]"
