@@ -76,7 +76,7 @@ def test_noise_free_graph_is_solved_exactly_from_odometry() -> None:
 
 def test_mlr_reaches_the_gauss_newton_chi2() -> None:
     """Noisy graph, odometry start (χ² 9,674): GN's minimum is χ² 108.1525 (4 iterations);
-    MLR reaches it to 1e-9 relative in as many linearisations (7 V-cycles in all)."""
+    MLR reaches it to 1e-9 relative in as many linearisations (12 V-cycles in all)."""
     data, _ = _lap_graph(np.random.default_rng(7), 0.05)
     gn = optimize(data, OptimizerConfig(solver="gn", initialization="odometry"))
     mlr = optimize(data, OptimizerConfig(solver="mlr", initialization="odometry"))
@@ -115,18 +115,19 @@ def _linear_system(data: GraphData) -> tuple[scipy.sparse.csr_matrix, np.ndarray
 
 
 def test_one_v_cycle_beats_as_many_gauss_seidel_sweeps() -> None:
-    """At the odometry start: one V-cycle with two sweeps before and after (four on the fine
-    level, 717 → 240 → 81 unknowns) leaves a relative residual of 0.0059 and an energy-norm
-    error of 0.009; four Gauss-Seidel sweeps leave 0.052 and 0.126, twelve still 0.012."""
+    """At the odometry start: one plain V-cycle with two sweeps before and after (four on the
+    fine level, 717 → 180 → 45 unknowns) leaves a relative residual of 0.0086 and an
+    energy-norm error of 0.018; four Gauss-Seidel sweeps leave 0.052 and 0.126, twelve still
+    0.012. Three cycles: 0.0016 plain, 0.00084 as CG's preconditioner."""
     A, b, frames = _linear_system(_lap_graph(np.random.default_rng(7), 0.05)[0])
     hierarchy = build_hierarchy(A, frames, sweeps=2)
-    assert hierarchy.sizes == (717, 240, 81)
-    v = multilevel_solve(hierarchy, b, tolerance=0.0, max_cycles=1)
+    assert hierarchy.sizes == (717, 180, 45)
+    v = multilevel_solve(hierarchy, b, tolerance=0.0, max_cycles=1, krylov=False)
     smoother = BlockGaussSeidel.of(A)
     gs = gauss_seidel_solve(smoother, b, tolerance=0.0, max_sweeps=12)
     assert v.iterations == 1 and gs.iterations == 12
     assert v.relative_residual < gs.residuals[4] / 5
-    assert v.relative_residual < gs.residuals[12] / 2
+    assert v.relative_residual < gs.residuals[12] / 1.4
     exact = scipy.sparse.linalg.spsolve(A.tocsc(), b)
 
     def energy(x: np.ndarray) -> float:
@@ -134,9 +135,11 @@ def test_one_v_cycle_beats_as_many_gauss_seidel_sweeps() -> None:
         return float(np.sqrt(e @ (A @ e) / (exact @ (A @ exact))))
 
     gs4 = gauss_seidel_solve(smoother, b, tolerance=0.0, max_sweeps=4)
-    assert energy(v.x) < energy(gs4.x) / 10
-    # the cycle converges: three cycles gain more than two orders of magnitude again
-    assert multilevel_solve(hierarchy, b, 0.0, 3).relative_residual < v.relative_residual / 50
+    assert energy(v.x) < energy(gs4.x) / 5
+    plain = multilevel_solve(hierarchy, b, 0.0, 3, krylov=False)
+    krylov = multilevel_solve(hierarchy, b, 0.0, 3)
+    assert plain.relative_residual < v.relative_residual / 4
+    assert krylov.relative_residual < plain.relative_residual / 1.5
 
 
 def test_a_sweep_solves_its_own_block_equations() -> None:
@@ -196,20 +199,22 @@ def _read(data_root: Path, name: str) -> GraphData:
 @pytest.mark.realdata
 def test_intel_reaches_the_published_optimum(data_root: Path) -> None:
     """SE-Sync's certified F* = 5.235e1 of intel.g2o (Rosen et al., IJRR 2019): MLR from the
-    auto (chordal) start ends at 52.3483, GN's value to 1e-8, in 8 linearisations."""
+    auto (chordal) start ends at 52.3483 in 8 linearisations (37 V-cycles), GN's value to
+    1e-7 (both stop at a relative cost change below 1e-6)."""
     graph = _read(data_root, "intel.g2o")
     res = optimize(graph, OptimizerConfig(solver="mlr", objective="sesync"))
     assert res.converged
     assert abs(res.sesync_objective / 5.235e1 - 1) < 0.01
     assert float(f"{res.sesync_objective:.4g}") == 5.235e1
     gn = optimize(graph, OptimizerConfig(solver="gn", objective="sesync"))
-    assert res.sesync_objective == pytest.approx(gn.sesync_objective, rel=1e-8)
+    assert res.sesync_objective == pytest.approx(gn.sesync_objective, rel=1e-6)
 
 
 @pytest.mark.realdata
 def test_m3500_from_odometry_reaches_the_published_optimum(data_root: Path) -> None:
-    """manhattan.g2o (M3500) from the odometry chain (F 2.3e10 → 6431.40 in 19 linearisations,
-    as GN): within 1 % of the published F* = 6.432e3 (our minimum is 6431.39, just below)."""
+    """manhattan.g2o (M3500) from the odometry chain (F 5.2e6 → 6431.40 in 19 linearisations,
+    as GN; 100 V-cycles): within 1 % of the published F* = 6.432e3 (our minimum is 6431.39,
+    just below)."""
     graph = _read(data_root, "manhattan.g2o")
     cfg = OptimizerConfig(solver="mlr", objective="sesync", initialization="odometry")
     res = optimize(graph, cfg)

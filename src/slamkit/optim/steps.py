@@ -42,7 +42,7 @@ solves ``H δ = -g``.
   ``Δ ← max(Δ, 3‖δ‖)`` when ``ϱ > 0.75``, ``Δ ← Δ / 2`` when ``ϱ < 0.25``
   (Madsen, Nielsen & Tingleff, 2004).
 * **MLR and Gauss-Seidel** (:class:`~slamkit.optim.mlr.RelaxationStep`): the Gauss-Newton
-  step found approximately by multigrid V-cycles or block Gauss-Seidel sweeps, no
+  step found approximately by multigrid-preconditioned CG or block Gauss-Seidel sweeps, no
   factorisation (:mod:`slamkit.optim.mlr`).
 * **GN with backtracking** (:class:`BacktrackingGaussNewtonStep`), the incremental
   optimiser's batch step: the GN step, halved up to five times while it raises ``f``; no
@@ -276,7 +276,11 @@ def make_step(
 ) -> GaussNewtonStep | LevenbergMarquardtStep | DoglegStep | RelaxationStep:
     """The strategy of ``config.solver``, with its section's settings."""
     if config.solver in ("mlr", "gauss_seidel"):
-        return RelaxationStep(config.relaxation, multilevel=config.solver == "mlr")
+        return RelaxationStep(
+            config.relaxation,
+            multilevel=config.solver == "mlr",
+            relative_tolerance=config.stopping.relative_tolerance,
+        )
     if config.solver == "gn":
         return GaussNewtonStep()
     if config.solver == "lm":
