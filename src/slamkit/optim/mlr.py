@@ -3,8 +3,9 @@ Gauss-Seidel: the Gauss-Newton step of a 2D pose graph found without a factorisa
 
 Each iteration of the least-squares loop (:mod:`slamkit.optim.loop`) linearises the graph as
 the other solvers do (``H``, ``g`` in the fixed pattern) and solves ``H δ = -g``
-approximately, then moves the poses by ``X ⊕ δ``. Memory is ``O(nnz H)`` at every level;
-nothing fills in.
+approximately, then moves the poses by ``X ⊕ δ``. No factor is formed, so nothing fills in:
+every level holds sparse matrices only (their total against the Cholesky factor's is
+measured in ``docs/estimators/optim.md``).
 
 **Block Gauss-Seidel** (the relaxation). Split ``H = D + L + U`` into its 3x3 diagonal
 blocks (one per pose), strict block-lower and block-upper parts. A forward sweep solves each
@@ -30,15 +31,13 @@ coordinates (the right update ``X ⊕ δ`` moves the position by ``R_i δ_t``), 
 For members with the group's heading and position ``T_i`` is the identity: the paper's
 piecewise-constant interpolation; the lever arm ``J (p_i - p_c)`` adds what a rotated group
 does to its members' positions, so bending modes are represented at every level. That
-tentative ``T`` alone makes a weak V-cycle (the energy norm of the error on Intel falls only
-from 1 to 0.52 in one cycle and to 0.10 in five), because a piecewise-rigid correction has
-kinks at the group borders that cost energy; so on every level the interpolation is smoothed
-by one damped block-Jacobi step,
-``P = (I - ω D⁻¹H) T`` with ``ω = 4 / (3 ρ(D⁻¹H))`` (smoothed aggregation; ``ρ`` by a few
-power iterations), which cuts the error to 0.10 in one cycle (measurements in
-``docs/estimators/optim.md``). The coarse system is Galerkin's,
-``H_c = Pᵀ H P`` with residual ``Pᵀ r``: the quadratic model restricted to the interpolated
-corrections, whose minimiser is the best coarse correction.
+tentative ``T`` alone makes a weak V-cycle, because a piecewise-rigid correction has kinks
+at the group borders that cost energy; so on every level the interpolation is smoothed by
+one damped block-Jacobi step, ``P = (I - ω D⁻¹H) T`` with ``ω = 4 / (3 ρ(D⁻¹H))`` (smoothed
+aggregation; ``ρ`` by a few power iterations), which cuts the error left by one cycle
+several-fold (the measurements are in ``docs/estimators/optim.md``). The coarse system is
+Galerkin's, ``H_c = Pᵀ H P`` with residual ``Pᵀ r``: the quadratic model restricted to the
+interpolated corrections, whose minimiser is the best coarse correction.
 
 **The V-cycle** (:meth:`Hierarchy.v_cycle`): ``sweeps`` forward sweeps, restrict the
 residual, recurse (a dense Cholesky solve on the coarsest level), add the prolongated
@@ -48,12 +47,12 @@ model; it makes up for an inexact coarse solve), ``sweeps`` backward sweeps.
 **Krylov acceleration.** The paper iterates V-cycles. Here each V-cycle preconditions a
 conjugate-gradient step instead (:func:`multilevel_solve`; ``krylov=False`` gives the plain
 iteration): near the minimum the gradient is made of the smoothest modes, which the plain
-cycles reduce slowly and not monotonically in the residual (Intel, g2o objective: residuals
-of 0.3-0.9 after ten cycles, and the loop stalled), while CG combines the cycles' corrections
-optimally. The coarse scaling ``α`` depends on the input, so ``β`` is the flexible
-(Polak-Ribière) one. Per linearisation MLR runs V-cycles, Gauss-Seidel sweeps alternately
-forward and backward, from ``δ = 0`` until ``‖H δ + g‖ ≤ linear_tolerance · ‖g‖`` or the
-budget is spent (:class:`~slamkit.optim.settings.RelaxationConfig`).
+cycles reduce slowly and not monotonically in the residual (on Intel's g2o objective the
+loop stalled), while CG combines the cycles' corrections optimally. The coarse scaling
+``α`` depends on the input, so ``β`` is the flexible (Polak-Ribière) one. Per
+linearisation MLR runs V-cycles, Gauss-Seidel sweeps alternately forward and backward, from
+``δ = 0`` until ``‖H δ + g‖ ≤ linear_tolerance · ‖g‖`` or the budget is spent
+(:class:`~slamkit.optim.settings.RelaxationConfig`).
 
 **The step.** The step is taken when it lowers the cost, else halved (up to
 :data:`MAX_HALVINGS` times); a step whose linear solve missed its tolerance, or that was
@@ -104,9 +103,9 @@ __all__ = [
 COARSEST_NODES = 48
 """The coarsest level has at most this many nodes (144 unknowns), solved by dense Cholesky."""
 GROUP_SIZE = 4
-"""Nodes per coarse node. Pairs make the smoothed coarse matrices dense (Manhattan: 6.4x the
-fine level's entries on the third level); runs of three keep the levels' total under 4.3x
-the fine one on the shared graphs (``docs/estimators/optim.md``)."""
+"""Nodes per coarse node. Smaller groups make the smoothed coarse matrices dense and the
+Galerkin products dominate the time; larger ones weaken the cycle until Intel no longer
+converges (measurements in ``docs/estimators/optim.md``)."""
 POWER_ITERATIONS = 15
 """Power iterations for ``ρ(D⁻¹H)``, the damping of the interpolation's smoothing."""
 MAX_HALVINGS = 5
