@@ -54,12 +54,16 @@ linearisation MLR runs V-cycles, Gauss-Seidel sweeps alternately forward and bac
 ``δ = 0`` until ``‖H δ + g‖ ≤ linear_tolerance · ‖g‖`` or the budget is spent
 (:class:`~slamkit.optim.settings.RelaxationConfig`).
 
-**The step.** The step is taken when it lowers the cost, else halved (up to
-:data:`MAX_HALVINGS` times); a step whose linear solve missed its tolerance, or that was
-halved, is *bounded* (:class:`~slamkit.optim.loop.Step`): its small cost change says the solve
-was short, not that the minimum is reached, so the stopping rule does not end the loop on it.
-A full step that raises the cost by less than ``relative_tolerance · f`` is rounding noise at
-the minimum: converged, as for the incremental optimiser's backtracking step.
+**The step.** The relaxed ``δ`` is damped as Levenberg-Marquardt damps the Gauss-Newton
+step with ``D = H`` (:mod:`slamkit.optim.steps`): the trial is ``δ / (1 + λ)``, taken when it
+lowers the cost; ``λ`` grows by Nielsen's ``ν`` on a rise and shrinks by the gain ratio on a
+decrease, and is kept across iterations. Halving the step afresh in each iteration instead
+left MLR at a local minimum on a hard start where GN and LM converge (measured in
+``docs/estimators/optim.md``). A step whose linear solve missed its tolerance is *bounded*
+(:class:`~slamkit.optim.loop.Step`): its small cost change says the solve was short, not that
+the minimum is reached, so the stopping rule does not end the loop on it. A first trial that
+raises the cost by less than ``relative_tolerance · f`` is rounding noise at the minimum:
+converged, as for the incremental optimiser's backtracking step.
 The measurements (where MLR wins over GN/LM and where not) are in
 ``docs/estimators/optim.md``.
 """
@@ -84,7 +88,8 @@ from slamkit.optim.settings import RelaxationConfig
 __all__ = [
     "COARSEST_NODES",
     "GROUP_SIZE",
-    "MAX_HALVINGS",
+    "LAMBDA_INITIAL",
+    "LAMBDA_MAX",
     "POWER_ITERATIONS",
     "BlockGaussSeidel",
     "Hierarchy",
@@ -108,8 +113,10 @@ Galerkin products dominate the time; larger ones weaken the cycle until Intel no
 converges (measurements in ``docs/estimators/optim.md``)."""
 POWER_ITERATIONS = 15
 """Power iterations for ``ρ(D⁻¹H)``, the damping of the interpolation's smoothing."""
-MAX_HALVINGS = 5
-"""A step that raises the cost is halved at most this many times before the solver gives up."""
+LAMBDA_INITIAL = 1e-5
+"""The first damping ``λ`` of the step ``δ / (1 + λ)`` (LM's default, ``D = H``)."""
+LAMBDA_MAX = 1e10
+"""No decrease with ``λ`` above this ends the loop (not converged), as for LM."""
 
 BLOCK = 3  # tangent size of a 2D pose
 
@@ -373,8 +380,8 @@ def gauss_seidel_solve(
 
 class RelaxationStep:
     """The step strategy of ``solver="mlr"`` (``multilevel=True``) and
-    ``solver="gauss_seidel"``: the approximate Gauss-Newton step, halved while it raises
-    the cost (module docstring); ``relative_tolerance`` is the stopping rule's, below which
+    ``solver="gauss_seidel"``: the approximate Gauss-Newton step, damped as LM damps it
+    with ``D = H`` (module docstring); ``relative_tolerance`` is the stopping rule's, below which
     a rise is rounding noise. The linear work joins ``ctx.factor_seconds`` and
     ``ctx.linear_iterations``; :attr:`solves` keeps every iteration's :class:`LinearSolve`."""
 
@@ -384,6 +391,8 @@ class RelaxationStep:
         self.config = config
         self.multilevel = multilevel
         self.relative_tolerance = relative_tolerance
+        self.lam = LAMBDA_INITIAL
+        self.nu = 2.0
         self.solves: list[LinearSolve] = []
 
     def _solve(self, ctx: SolverContext, current: Estimate) -> LinearSolve:
@@ -399,23 +408,38 @@ class RelaxationStep:
         return gauss_seidel_solve(smoother, -g, cfg.linear_tolerance, cfg.max_sweeps)
 
     def step(self, ctx: SolverContext, current: Estimate, iteration: int) -> Step | NoStep:
-        """``x ⊕ α δ`` with ``δ`` the relaxed solution of ``H δ = -g`` and ``α`` the first
-        of 1, ½, … (at most :data:`MAX_HALVINGS` halvings) that lowers the cost."""
+        """``x ⊕ δ / (1 + λ)`` with ``δ`` the relaxed solution of ``H δ = -g``: ``λ`` grows
+        until the cost falls, then shrinks by the gain ratio (module docstring)."""
         t0 = time.perf_counter()
         solve = self._solve(ctx, current)
         ctx.factor_seconds += time.perf_counter() - t0
         ctx.linear_iterations += solve.iterations
         self.solves.append(solve)
+        H, g = current.lin.H, current.lin.g
+        assert H is not None and g is not None
         delta = solve.x
         size = float(np.max(np.abs(delta))) if delta.shape[0] else 0.0
         short = solve.relative_residual > self.config.linear_tolerance
         f = current.lin.cost
-        alpha = 1.0
-        for _ in range(MAX_HALVINGS + 1):
-            new = ctx.move(current, alpha * delta)
+        first = True
+        while self.lam <= LAMBDA_MAX:
+            trial = delta / (1.0 + self.lam)  # (H + λH) δ' = -g
+            new = ctx.move(current, trial)
+            if (
+                first
+                and np.isfinite(new.lin.cost)
+                and 0 < new.lin.cost - f <= (self.relative_tolerance * abs(f))
+            ):
+                return NoStep("the cost rose by rounding noise at the minimum", True, self.lam)
+            first = False
             if np.isfinite(new.lin.cost) and new.lin.cost <= f:
-                return Step(new, alpha * size, 0.0, bounded=short or alpha < 1.0)
-            if alpha == 1.0 and new.lin.cost - f <= self.relative_tolerance * abs(f):
-                return NoStep("the cost rose by rounding noise at the minimum", True, 0.0)
-            alpha *= 0.5
-        return NoStep("no decrease along the relaxed Gauss-Newton step", False, 0.0)
+                # the model's reduction m(0) - m(δ') = -2gᵀδ' - δ'ᵀHδ'; Nielsen's update
+                predicted = -2.0 * float(g @ trial) - float(trial @ ctx.pattern.matvec(H, trial))
+                rho = (f - new.lin.cost) / predicted if predicted > 0 else 1.0
+                used = self.lam
+                self.lam = max(self.lam * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-20)
+                self.nu = 2.0
+                return Step(new, size / (1.0 + used), used, bounded=short)
+            self.lam *= self.nu
+            self.nu *= 2.0
+        return NoStep("no decrease along the relaxed Gauss-Newton step", False, self.lam)
