@@ -19,7 +19,8 @@ Files written (``OUT`` the output folder):
   robust kernel), ``start`` (``requested``, ``used``, the cost of every start compared in
   ``costs`` and the ``reason``), ``information_repair`` (``mode``, the exact count
   ``repaired`` of edges whose information was clamped, per tag, the first 20 as
-  ``file:line``), ``iterations``, ``factorizations``, ``converged``, ``reason``, counts,
+  ``file:line``), ``iterations``, ``factorizations``, ``linear_iterations`` (V-cycles or
+  sweeps of ``mlr`` / ``gauss_seidel``), ``converged``, ``reason``, counts,
   solver and linear solver, the per-iteration history and the times: ``solve_seconds`` is
   the optimiser alone (sparsity pattern, symbolic analysis and iterations; not reading,
   validating or initialising, which are ``read_seconds``, ``validate_seconds`` and
@@ -74,7 +75,7 @@ if TYPE_CHECKING:
 
 __all__ = ["OptimizeReport", "OptimizeRequest", "find_graph_file", "optimize_graph_job"]
 
-SOLVERS = ("lm", "gn", "dogleg")
+SOLVERS = ("lm", "gn", "dogleg", "mlr", "gauss_seidel")
 INITS = ("auto", "file", "odometry", "chordal", "grow")
 OBJECTIVES = ("g2o", "sesync")
 KERNELS = ("none", "huber", "cauchy", "geman_mcclure", "dcs")
@@ -98,7 +99,8 @@ class OptimizeRequest:
     out_dir: Path
     """The output folder (written atomically; an existing non-empty one needs ``overwrite``)."""
     solver: str = "lm"
-    """``"lm"``, ``"gn"`` or ``"dogleg"``."""
+    """``"lm"``, ``"gn"``, ``"dogleg"``, ``"mlr"`` (multilevel relaxation, 2D pose graphs) or
+    ``"gauss_seidel"`` (``"gauss-seidel"`` too)."""
     init: str | None = None
     """``"file"`` (the file's vertices), ``"odometry"`` (spanning tree), ``"chordal"`` or
     ``"grow"`` (batch solves over growing time-ordered prefixes,
@@ -155,7 +157,7 @@ def _optimizer_config(request: OptimizeRequest) -> OptimizerConfig:
         "kernel": _choice(request.robust_kernel.replace("-", "_"), "robust kernel", KERNELS)
     }
     settings: dict[str, Any] = {
-        "solver": _choice(request.solver, "solver", SOLVERS),
+        "solver": _choice(request.solver.replace("-", "_"), "solver", SOLVERS),
         "objective": _choice(request.objective, "objective", OBJECTIVES),
         "robust": robust,
     }
@@ -335,6 +337,7 @@ def _metrics(
         "cost_final": result.cost,
         "iterations": result.iterations,
         "factorizations": result.factorizations,
+        "linear_iterations": result.linear_iterations,
         "converged": result.converged,
         "reason": result.reason,
         "solve_seconds": result.total_seconds,

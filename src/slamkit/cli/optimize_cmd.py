@@ -45,6 +45,9 @@ def _table(m: dict[str, Any]) -> Table:
     add("converged", f"{'yes' if m['converged'] else 'no'}: {m['reason']}")
     add("solve time [s]", f"{m['solve_seconds']:.3f}")
     add("linear solver", m["linear_solver"])
+    if m.get("linear_iterations"):
+        unit = "V-cycles" if m["linear_solver"] == "multigrid" else "sweeps"
+        add(f"linear {unit}", str(m["linear_iterations"]))
     cert = m.get("certificate")
     if cert is not None:
         add("certificate", "globally optimal" if cert["certified"] else "not certified")
@@ -69,7 +72,9 @@ def optimize_command(
     solver: Annotated[
         str,
         typer.Option(
-            metavar="lm|gn|dogleg", help="lm (Levenberg-Marquardt), gn (Gauss-Newton) or dogleg."
+            metavar="lm|gn|dogleg|mlr|gauss-seidel",
+            help="lm (Levenberg-Marquardt), gn (Gauss-Newton), dogleg, mlr (multilevel "
+            "relaxation, no factorisation; 2D pose graphs) or gauss-seidel.",
         ),
     ] = "lm",
     init: Annotated[

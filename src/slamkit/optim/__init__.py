@@ -12,6 +12,8 @@ and 2D landmarks, and over SE(3) poses.
   accept/reject, stop) and its per-iteration record.
 * :mod:`~slamkit.optim.steps`: its step strategies: Gauss-Newton, Levenberg-Marquardt,
   Powell's dogleg, and backtracking Gauss-Newton (the incremental batch step).
+* :mod:`~slamkit.optim.mlr`: multilevel relaxation and block Gauss-Seidel, the Gauss-Newton
+  step of a 2D pose graph without a factorisation.
 * :mod:`~slamkit.optim.solvers`: :func:`optimize` and the grown-prefix start of long
   landmark graphs.
 * :mod:`~slamkit.optim.init`: odometry spanning tree and chordal initialisation.
@@ -50,6 +52,7 @@ from slamkit.optim.settings import (
     GrowConfig,
     LmConfig,
     OptimizerConfig,
+    RelaxationConfig,
     RobustConfig,
     StoppingConfig,
 )
@@ -80,6 +83,7 @@ __all__ = [
     "Marginals",
     "OptimizeResult",
     "OptimizerConfig",
+    "RelaxationConfig",
     "RobustConfig",
     "RobustKernel",
     "StartChoice",

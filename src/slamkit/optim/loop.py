@@ -112,7 +112,9 @@ class LoopOutcome:
 
 class SolverContext:
     """What the strategies share: the problem, the kernel, the factoriser (symbolic analysis
-    done once), and counters and clocks of linearisations and factorisations."""
+    done once), and counters and clocks of linearisations and factorisations (the relaxation
+    solvers count their V-cycles or sweeps in ``linear_iterations`` and their linear solves'
+    time in ``factor_seconds``)."""
 
     def __init__(self, problem: GraphProblem, kernel: RobustKernel, factorizer: Factorizer) -> None:
         self.problem = problem
@@ -123,6 +125,7 @@ class SolverContext:
         self.linearizations = 0
         self.factor_seconds = 0.0
         self.assembly_seconds = 0.0
+        self.linear_iterations = 0  # V-cycles or sweeps of the relaxation solvers
 
     def linearize(self, poses: FloatArray, landmarks: FloatArray) -> Estimate:
         """The estimate at ``(poses, landmarks)`` with its cost; ``H`` and ``g`` are formed

@@ -8,6 +8,7 @@ one section per concern::
         stopping=StoppingConfig(max_iterations=100, relative_tolerance=1e-6),
         lm=LmConfig(lambda_initial=1e-5),    # read only by solver="lm"
         dogleg=DoglegConfig(),               # read only by solver="dogleg"
+        relaxation=RelaxationConfig(),       # read only by solver="mlr" / "gauss_seidel"
         robust=RobustConfig(kernel="cauchy"),
         grow=GrowConfig(),                   # read only by initialization="grow"
     )
@@ -44,11 +45,12 @@ __all__ = [
     "LmConfig",
     "MethodName",
     "OptimizerConfig",
+    "RelaxationConfig",
     "RobustConfig",
     "StoppingConfig",
 ]
 
-MethodName = Literal["lm", "gn", "dogleg"]
+MethodName = Literal["lm", "gn", "dogleg", "mlr", "gauss_seidel"]
 InitName = Literal["auto", "vertices", "odometry", "chordal", "grow"]
 
 
@@ -126,6 +128,29 @@ class DoglegConfig(Section):
 
 
 @dataclass(frozen=True)
+class RelaxationConfig(Section):
+    """Multilevel relaxation (``solver="mlr"``) and block Gauss-Seidel
+    (``solver="gauss_seidel"``): per linearisation, ``H δ = -g`` is solved from ``δ = 0`` by
+    V-cycles (MLR) or sweeps (Gauss-Seidel) until ``‖H δ + g‖ ≤ linear_tolerance · ‖g‖`` or
+    the budget is spent (:mod:`slamkit.optim.mlr`). A step whose solve missed the tolerance
+    is not taken as evidence of convergence by the stopping rule."""
+
+    SECTION: ClassVar[str] = "relaxation"
+
+    linear_tolerance: float = setting(1e-2, finite_above(0.0), "a finite number > 0")
+    """Relative residual ``‖H δ + g‖ / ‖g‖`` at which the linear solve stops
+    (dimensionless)."""
+    sweeps: int = setting(2, int_at_least(1), "an integer >= 1")
+    """MLR: forward Gauss-Seidel sweeps before, and backward sweeps after, the coarse
+    correction on every level of a V-cycle."""
+    max_cycles: int = setting(10, int_at_least(1), "an integer >= 1")
+    """MLR: at most this many V-cycles per linearisation."""
+    max_sweeps: int = setting(200, int_at_least(1), "an integer >= 1")
+    """Gauss-Seidel: at most this many sweeps (alternately forward and backward) per
+    linearisation."""
+
+
+@dataclass(frozen=True)
 class RobustConfig(Section):
     """The robust kernel ``ρ`` applied to every edge's ``‖U e‖²`` (IRLS weights)."""
 
@@ -171,7 +196,10 @@ class OptimizerConfig(Section):
     """Settings of :func:`~slamkit.optim.optimize` (see the module docstring for the units)."""
 
     solver: MethodName = "lm"
-    """``"lm"`` (Levenberg-Marquardt), ``"gn"`` (Gauss-Newton) or ``"dogleg"`` (Powell)."""
+    """``"lm"`` (Levenberg-Marquardt), ``"gn"`` (Gauss-Newton), ``"dogleg"`` (Powell),
+    ``"mlr"`` (multilevel relaxation: Gauss-Newton steps solved by V-cycles, no
+    factorisation; 2D pose graphs) or ``"gauss_seidel"`` (the same with plain block
+    Gauss-Seidel sweeps)."""
     objective: ObjectiveName = "g2o"
     """``"g2o"``: ``Σ eᵀ Ω e`` with g2o's SE(2) error; ``"sesync"``: SE-Sync's ``F`` for the
     relative-pose edges (other edge kinds keep their g2o error)."""
@@ -193,6 +221,8 @@ class OptimizerConfig(Section):
     """Levenberg-Marquardt's damping (``solver="lm"``)."""
     dogleg: DoglegConfig = field(default_factory=DoglegConfig)
     """Dogleg's trust region (``solver="dogleg"``)."""
+    relaxation: RelaxationConfig = field(default_factory=RelaxationConfig)
+    """The linear solve of ``solver="mlr"`` and ``solver="gauss_seidel"``."""
     robust: RobustConfig = field(default_factory=RobustConfig)
     """The robust kernel (all solvers)."""
     grow: GrowConfig = field(default_factory=GrowConfig)
@@ -204,6 +234,7 @@ class OptimizerConfig(Section):
             ("stopping", StoppingConfig),
             ("lm", LmConfig),
             ("dogleg", DoglegConfig),
+            ("relaxation", RelaxationConfig),
             ("robust", RobustConfig),
             ("grow", GrowConfig),
         ):

@@ -36,6 +36,7 @@ from slamkit.optim.init import initial_values
 from slamkit.optim.loop import Callback as Callback  # re-exported: the old import path
 from slamkit.optim.loop import IterationInfo, SolverContext, run_least_squares
 from slamkit.optim.loop import indeterminate_error as indeterminate_error  # re-exported
+from slamkit.optim.mlr import check_relaxation_problem
 from slamkit.optim.settings import InitName as InitName  # re-exported
 from slamkit.optim.settings import MethodName, OptimizerConfig
 from slamkit.optim.sparse import make_factorizer
@@ -112,6 +113,11 @@ class OptimizeResult:
     """SE-Sync's ``F`` of the solution over the relative-pose edges
     (:func:`slamkit.optim.sesync_objective`; set by :func:`optimize` unless called with
     ``objectives=False``)."""
+    linear_iterations: int = 0
+    """``method="mlr"``: V-cycles, ``"gauss_seidel"``: sweeps, over all iterations (0 for
+    the factorising solvers, whose ``factorizations`` count their linear work; the
+    relaxation solvers factor nothing and their ``linear_solver`` is ``"multigrid"`` or
+    ``"gauss-seidel"``)."""
 
     def as_graph(self, data: GraphData) -> GraphData:
         """``data`` with its vertices replaced by the optimised values (for a writer)."""
@@ -154,6 +160,9 @@ def optimize(
     t_start = time.perf_counter()
     if problem is None:
         problem = GraphProblem.from_data(data, objective=cfg.objective, gauge=cfg.gauge)
+    relaxation = {"mlr": "multigrid", "gauss_seidel": "gauss-seidel"}.get(cfg.solver)
+    if relaxation is not None:
+        check_relaxation_problem(problem, cfg.solver)
     init_used, start_costs, start_reason = "given", _NO_COSTS, "initial values given"
     if initial_poses is None or (initial_landmarks is None and problem.landmark_ids.shape[0]):
         choice = choose_start(problem, cfg)
@@ -212,7 +221,7 @@ def optimize(
         reason=out.reason,
         method=cfg.solver,
         objective=cfg.objective,
-        linear_solver=ctx.factorizer.name,
+        linear_solver=relaxation or ctx.factorizer.name,
         anchored_first=problem.anchored_first,
         setup_seconds=setup,
         assembly_seconds=ctx.assembly_seconds,
@@ -224,6 +233,7 @@ def optimize(
         start_reason=start_reason,
         g2o_chi2=g2o_value,
         sesync_objective=sesync_value,
+        linear_iterations=ctx.linear_iterations,
     )
 
 

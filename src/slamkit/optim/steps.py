@@ -41,6 +41,9 @@ solves ``H δ = -g``.
   gain ratio ``ϱ = (f - f_new) / (m(0) - m(δ))``: accept when ``ϱ > 0``;
   ``Δ ← max(Δ, 3‖δ‖)`` when ``ϱ > 0.75``, ``Δ ← Δ / 2`` when ``ϱ < 0.25``
   (Madsen, Nielsen & Tingleff, 2004).
+* **MLR and Gauss-Seidel** (:class:`~slamkit.optim.mlr.RelaxationStep`): the Gauss-Newton
+  step found approximately by multigrid-preconditioned CG or block Gauss-Seidel sweeps, no
+  factorisation (:mod:`slamkit.optim.mlr`).
 * **GN with backtracking** (:class:`BacktrackingGaussNewtonStep`), the incremental
   optimiser's batch step: the GN step, halved up to five times while it raises ``f``; no
   decrease along it is a :class:`~slamkit.optim.loop.NoStep` (the caller falls back to LM).
@@ -52,6 +55,7 @@ import numpy as np
 
 from slamkit.errors import ConvergenceError, GeometryError
 from slamkit.optim.loop import Estimate, NoStep, SolverContext, Step, indeterminate_error
+from slamkit.optim.mlr import RelaxationStep
 from slamkit.optim.settings import DoglegConfig, LmConfig, OptimizerConfig
 from slamkit.optim.sparse import SingularSystem
 
@@ -267,8 +271,16 @@ class BacktrackingGaussNewtonStep:
         return Step(new, float(np.abs(delta).max()), 0.0)
 
 
-def make_step(config: OptimizerConfig) -> GaussNewtonStep | LevenbergMarquardtStep | DoglegStep:
+def make_step(
+    config: OptimizerConfig,
+) -> GaussNewtonStep | LevenbergMarquardtStep | DoglegStep | RelaxationStep:
     """The strategy of ``config.solver``, with its section's settings."""
+    if config.solver in ("mlr", "gauss_seidel"):
+        return RelaxationStep(
+            config.relaxation,
+            multilevel=config.solver == "mlr",
+            relative_tolerance=config.stopping.relative_tolerance,
+        )
     if config.solver == "gn":
         return GaussNewtonStep()
     if config.solver == "lm":
