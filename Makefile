@@ -27,8 +27,10 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
-# One BLAS thread: the tests' matrices are small, and on a shared 2-core machine a second
-# BLAS thread makes a 150x150 Cholesky 30x slower, not faster.
+# The library sets its own BLAS thread policy around slamkit.pipeline.run and optimize
+# (slamkit/runtime.py, docs/performance.md; tests/test_runtime.py checks it with the variable
+# cleared). Many tests also call kernels directly, outside that policy: one BLAS thread keeps
+# them from fighting over small matrices on a shared 2-core machine.
 pytest: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q
 

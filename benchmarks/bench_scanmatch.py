@@ -44,8 +44,9 @@ Published anchor (not run here): Censi's C implementation of PLICP (CSM) reports
 The compiled kernels are loaded (or compiled) by one warm-up match before any timing; the
 time of a cold compile is measured separately, in a child process with an empty numba cache.
 
-Run: ``OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 NUMBA_NUM_THREADS=1 python
-benchmarks/bench_scanmatch.py``.
+Run: ``python benchmarks/bench_scanmatch.py``, in the environment a user has (no thread
+variables): the matchers are timed as a Python caller gets them, with BLAS's own thread
+count, and Open3D with its own OpenMP threads; the notes record both.
 """
 
 from __future__ import annotations
@@ -68,6 +69,7 @@ from slamkit.datasets import find_data_root, load_dataset
 from slamkit.datasets.stream import LaserScan
 from slamkit.errors import DataNotFoundError, MatchError
 from slamkit.geometry.pose2 import between, compose
+from slamkit.runtime import blas_thread_counts
 from slamkit.scanmatch import correlative_match, icp, kernels, plicp, scan_points
 from slamkit.scanmatch.normal_icp import normal_icp
 from slamkit.scanmatch.point_map import PointMap
@@ -455,7 +457,8 @@ def main(n_sim: int = 50, real_step: int = 2, repeats: int = 7, seed: int = 0) -
             "Published anchor, not run here: Censi's C implementation of PLICP (CSM), "
             "8.7 ms per 180-beam match at 7.5 iterations (ICRA 2008, on the hardware of the "
             "time).",
-            f"Threads: {env}; Open3D {'absent' if o3d is None else o3d.__version__}. "
+            f"Threads: BLAS {blas_thread_counts()}, thread variables {env}; Open3D "
+            f"{'absent' if o3d is None else o3d.__version__}. "
             f"Machine load average (1 min) {load_before:.2f} before, "
             f"{os.getloadavg()[0]:.2f} after the run: the machine is shared, so compare "
             "the ratios within a run, not absolute times across runs.",

@@ -21,6 +21,7 @@ from slamkit.app.presets import get_preset
 from slamkit.datasets import find_data_root, load_dataset
 from slamkit.pipeline import run
 from slamkit.pipeline.evaluate import evaluate
+from slamkit.runtime import blas_thread_counts, blas_threads
 
 PRESET = get_preset("victoria-park-fastslam")
 CASES: tuple[tuple[str, str, dict[str, Any]], ...] = (
@@ -37,6 +38,8 @@ def main() -> str:
     ds = load_dataset("victoria-park", data_root=root)
     duration = ds.events[-1].t - ds.events[0].t
     load_before = os.getloadavg()[0]
+    with blas_threads():  # what run() holds BLAS to here: the policy, or the environment's
+        run_threads = blas_thread_counts()
     records, rows = [], []
     for label, name, config in CASES:
         wall, cpu = time.perf_counter(), time.process_time()
@@ -65,8 +68,9 @@ def main() -> str:
         f"detection events, ids withheld (the feature index scores the association only). "
         f"'peer' is the data's duration, so the ratio is the real-time factor. One run each, "
         f"seed 0. Load average (1 min) {load_before:.1f} before, {os.getloadavg()[0]:.1f} "
-        f"after, on {os.cpu_count()} CPUs (OPENBLAS_NUM_THREADS="
-        f"{os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}). GPS RMSE after SE(2) alignment "
+        f"after, on {os.cpu_count()} CPUs; BLAS threads in the runs {run_threads} (slamkit's "
+        f"policy in this environment, slamkit.runtime; no thread variable needed). GPS RMSE "
+        f"after SE(2) alignment "
         f"at the fixes, outliers rejected (slamkit.eval.gps); dead reckoning: {dead:.1f} m. "
         f"Settings: FastSLAM with the preset {PRESET.name} ({dict(PRESET.settings)}, see "
         f"docs/presets.md), 100 particles.\n\n"

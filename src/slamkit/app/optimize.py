@@ -23,7 +23,10 @@ Files written (``OUT`` the output folder):
   solver and linear solver, the per-iteration history and the times: ``solve_seconds`` is
   the optimiser alone (sparsity pattern, symbolic analysis and iterations; not reading,
   validating or initialising, which are ``read_seconds``, ``validate_seconds`` and
-  ``init_seconds``).
+  ``init_seconds``). With ``certify``: ``certificate`` (SE-Sync's global-optimality
+  certificate of the solution, :class:`~slamkit.optim.Certificate`: ``certified``,
+  ``lambda_min``, ``lambda_lower``, ``tolerance``, ``q_norm``, ``objective``, ``lower_bound``,
+  ``gap``, ``poses``, ``seconds``).
 * ``config.json`` — the resolved options and the full optimiser configuration
   (``optimizer``: :class:`~slamkit.optim.OptimizerConfig` with its sections as nested
   objects, readable by :func:`~slamkit.config.config_from_mapping`).
@@ -54,11 +57,13 @@ from slamkit.optim import (
     IterationInfo,
     OptimizerConfig,
     OptimizeResult,
+    certify,
     choose_start,
     g2o_chi2,
     optimize,
     sesync_objective,
 )
+from slamkit.optim.certificate import check_certifiable
 from slamkit.optim.repair import REPAIR_RTOL
 
 if TYPE_CHECKING:
@@ -119,6 +124,10 @@ class OptimizeRequest:
     ``information_repair``."""
     plots: bool = True
     overwrite: bool = False
+    certify: bool = False
+    """Certify the solution globally optimal (SE-Sync's certificate,
+    :func:`~slamkit.optim.certify`): needs ``objective="sesync"`` and a graph of
+    relative-pose edges only; the metrics' ``certificate`` holds the result."""
 
 
 @dataclass(frozen=True)
@@ -157,6 +166,10 @@ def _optimizer_config(request: OptimizeRequest) -> OptimizerConfig:
         robust["width"] = request.robust_width
     if request.max_iterations is not None:
         settings["stopping"] = {"max_iterations": request.max_iterations}
+    if request.certify and request.objective != "sesync":
+        raise ConfigError(
+            "certify: the certificate is for SE-Sync's objective; add --objective sesync"
+        )
     return config_from_mapping(OptimizerConfig, settings, "optimize")
 
 
@@ -427,6 +440,8 @@ def optimize_graph_job(
         warnings.simplefilter("ignore", RepairWarning)
         read = read_graph_report(path, repair_information=_repair_mode(request))
     data = read.graph
+    if request.certify:
+        check_certifiable(data)  # before any work: relative-pose edges only
     repair = _repair_record(request.repair_information, path, read.repaired)
     t1 = time.perf_counter()
     problem = GraphProblem.from_data(data, objective=cfg.objective, gauge=cfg.gauge)
@@ -462,6 +477,8 @@ def optimize_graph_job(
         seconds = {"read_seconds": t1 - t0, "validate_seconds": t2 - t1, "init_seconds": t3 - t2}
         metrics = _metrics(data, path, init, start_record, cfg, (p0, l0), result, output, seconds)
         metrics["information_repair"] = repair
+        if request.certify:
+            metrics["certificate"] = certify(data, result.poses).as_dict()
         resolved = {
             "file": str(path),
             "solver": result.method,
@@ -471,6 +488,7 @@ def optimize_graph_job(
             "objective": cfg.objective,
             "max_iterations": cfg.stopping.max_iterations,
             "repair_information": request.repair_information,
+            "certify": request.certify,
             "output": metrics["output"],
             "optimizer": config_to_dict(cfg),
         }

@@ -45,6 +45,12 @@ def _table(m: dict[str, Any]) -> Table:
     add("converged", f"{'yes' if m['converged'] else 'no'}: {m['reason']}")
     add("solve time [s]", f"{m['solve_seconds']:.3f}")
     add("linear solver", m["linear_solver"])
+    cert = m.get("certificate")
+    if cert is not None:
+        add("certificate", "globally optimal" if cert["certified"] else "not certified")
+        add("λ_min(S) / tolerance", f"{cert['lambda_min']:.3g} / {cert['tolerance']:.3g}")
+        add("F* ≥ (gap)", f"{cert['lower_bound']:.6g} ({cert['gap']:.3g})")
+        add("certificate time [s]", f"{cert['seconds']:.3f}")
     return table
 
 
@@ -100,6 +106,13 @@ def optimize_command(
             "repaired edge is counted in metrics.json and a warning printed).",
         ),
     ] = "none",
+    certify: Annotated[
+        bool,
+        typer.Option(
+            help="Certify the solution globally optimal (SE-Sync's certificate; needs "
+            "--objective sesync and a graph of relative-pose edges only).",
+        ),
+    ] = False,
     plots: Annotated[bool, typer.Option(help="Write graph.png (before and after).")] = True,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
     data_root: Annotated[
@@ -130,6 +143,7 @@ def optimize_command(
         objective=objective,
         max_iterations=max_iterations,
         repair_information=repair_information,
+        certify=certify,
         plots=plots,
         overwrite=overwrite,
     )

@@ -16,12 +16,15 @@ and 2D landmarks, and over SE(3) poses.
   landmark graphs.
 * :mod:`~slamkit.optim.init`: odometry spanning tree and chordal initialisation.
 * :mod:`~slamkit.optim.objectives`: the g2o χ² and SE-Sync's ``F`` of any solution.
+* :mod:`~slamkit.optim.certificate`: SE-Sync's certificate of global optimality (2D, 3D) and the
+  lower bound on ``F*`` it gives.
 * :mod:`~slamkit.optim.robust`: Huber, Cauchy, Geman-McClure and DCS kernels (IRLS).
 * :mod:`~slamkit.optim.marginals`: marginal covariances from the factorisation.
 * :mod:`~slamkit.optim.incremental`: poses and edges added in time order, window steps
   between periodic batch steps (iSAM-style), equal to batch at the end.
 """
 
+from slamkit.optim.certificate import Certificate, certify
 from slamkit.optim.data import EdgeKind, EdgeSet, GraphData
 from slamkit.optim.graph import GraphProblem
 from slamkit.optim.incremental import (
@@ -60,6 +63,7 @@ from slamkit.optim.solvers import (
 from slamkit.optim.sparse import cholmod_available
 
 __all__ = [
+    "Certificate",
     "DoglegConfig",
     "EdgeKind",
     "EdgeSet",
@@ -81,6 +85,7 @@ __all__ = [
     "StartChoice",
     "StoppingConfig",
     "UpdateInfo",
+    "certify",
     "cholmod_available",
     "choose_start",
     "chordal_initialization",

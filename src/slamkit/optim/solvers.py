@@ -27,6 +27,7 @@ from types import MappingProxyType
 
 import numpy as np
 
+from slamkit import runtime
 from slamkit.errors import ConvergenceError, GeometryError, SlamkitError
 from slamkit.geometry import pose2
 from slamkit.optim.data import EdgeSet, FloatArray, GraphData, IntArray
@@ -123,6 +124,7 @@ class OptimizeResult:
         )
 
 
+@runtime.blas_threads()  # the library's thread policy (docs/performance.md)
 def optimize(
     data: GraphData,
     config: OptimizerConfig | None = None,
@@ -144,6 +146,9 @@ def optimize(
     and SE-Sync's ``F`` of the solution (:attr:`OptimizeResult.g2o_chi2` and
     :attr:`OptimizeResult.sesync_objective` are then NaN): one residual evaluation per
     objective that a caller solving a growing graph after every change never reads.
+
+    It runs with one BLAS thread unless a caller or the environment chose a count
+    (:func:`slamkit.runtime.blas_threads`).
     """
     cfg = config if config is not None else OptimizerConfig()
     t_start = time.perf_counter()

@@ -41,6 +41,7 @@ __all__ = [
     "NormalPattern",
     "SingularSystem",
     "cholmod_available",
+    "factor_spd",
     "make_factorizer",
 ]
 
@@ -369,12 +370,11 @@ def make_factorizer(name: LinearSolverName, pattern: NormalPattern) -> Factorize
     raise ConfigError(f"linear_solver: unknown back-end {name!r}")
 
 
-def solve_spd(
-    A: scipy.sparse.spmatrix, B: FloatArray, name: LinearSolverName = "auto"
-) -> FloatArray:
-    """``A⁻¹ B`` for a one-off sparse symmetric positive definite ``A`` (both triangles given).
+def factor_spd(A: scipy.sparse.spmatrix, name: LinearSolverName = "auto") -> Factorizer:
+    """The factorisation of a one-off sparse symmetric ``A`` (both triangles given).
 
-    Used by the linear initialisations; the same back-ends as the solvers.
+    Raises :class:`SingularSystem` when ``A`` is not (numerically) positive definite, so a
+    successful call is also a definiteness test (the optimality certificate uses it so).
     """
     L = scipy.sparse.tril(A, format="csc")
     L.sort_indices()
@@ -390,4 +390,14 @@ def solve_spd(
     )
     fac = make_factorizer(name, pattern)
     fac.factor(np.asarray(L.data, dtype=np.float64))
-    return fac.solve(B)
+    return fac
+
+
+def solve_spd(
+    A: scipy.sparse.spmatrix, B: FloatArray, name: LinearSolverName = "auto"
+) -> FloatArray:
+    """``A⁻¹ B`` for a one-off sparse symmetric positive definite ``A`` (both triangles given).
+
+    Used by the linear initialisations; the same back-ends as the solvers.
+    """
+    return factor_spd(A, name).solve(B)

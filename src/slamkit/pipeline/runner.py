@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from slamkit import runtime
 from slamkit._validation import FloatArray
 from slamkit.config import config_to_dict
 from slamkit.datasets.stream import Dataset, group_by_time, with_known_poses
@@ -103,6 +104,7 @@ def run(
     progress: Progress | None = None,
     frames: int = 0,
     stage: Stage | None = None,
+    blas_threads: int | None = None,
 ) -> Result:
     """Run ``estimator`` (a registered name or entry) over ``dataset``.
 
@@ -116,7 +118,33 @@ def run(
     An estimator that revises its past (a pose graph) hands its final path back as
     :attr:`EstimatorOutput.trajectory`; :attr:`Result.poses` is then that path at the
     recorded times and :attr:`Result.online_poses` the estimates recorded during the run.
+
+    ``blas_threads``: BLAS threads during the run; ``None``, the library's policy
+    (:func:`slamkit.runtime.blas_threads`: one thread, unless the environment sets a count).
     """
+    with runtime.blas_threads(blas_threads):
+        return _run(
+            estimator,
+            dataset,
+            config=config,
+            seed=seed,
+            progress=progress,
+            frames=frames,
+            stage=stage,
+        )
+
+
+def _run(
+    estimator: str | EstimatorEntry,
+    dataset: Dataset,
+    *,
+    config: Mapping[str, Any] | Any | None,
+    seed: int,
+    progress: Progress | None,
+    frames: int,
+    stage: Stage | None,
+) -> Result:
+    """:func:`run` under its thread policy."""
     if not (isinstance(frames, int) and frames >= 0):
         raise InputError(f"frames: expected an integer >= 0, got {frames!r}")
     entry = get_estimator_entry(estimator) if isinstance(estimator, str) else estimator

@@ -54,7 +54,11 @@ BLAS_ENV = {
     "NUMBA_NUM_THREADS": "1",
 }
 """The environment of each local worker process: one BLAS thread, as the worker has one
-task thread (N processes on N cores, not N × cores threads fighting)."""
+task thread (N processes on N cores, not N × cores threads fighting). This is about
+process-level parallelism, so it stays an environment (inherited by the worker's job
+process) rather than :func:`slamkit.runtime.blas_threads`: it holds every step of a job to
+its core (loading, scoring, plots), not only the estimator's run, which the library policy
+already limits; and a thread count set in the environment is one the policy respects."""
 
 RUNS = "runs"
 FAILURES = "failures"
