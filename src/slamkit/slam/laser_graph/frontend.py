@@ -17,7 +17,11 @@ reference (``reference = "map"``, the default when there is odometry) a scan is 
 instead against the local map of the last few keyframes in the current keyframe's frame
 (:func:`local_map`), by point-to-normal ICP with the wheels' offset since the keyframe as
 an independent prior (:meth:`Tracker.match`), so that a direction the map leaves
-unconstrained (a corridor) follows the wheels.
+unconstrained (a corridor) follows the wheels. Two ways that can go wrong are checked: the
+map's points of people walking would pull the scan along with them (the estimator leaves
+out of the map the points neighbouring keyframes saw through,
+:mod:`slamkit.scanmatch.transient`), and wheels that stalled report no motion while the
+robot drives on (:meth:`Tracker._stalled`: the scan matched without them decides).
 """
 
 from __future__ import annotations
