@@ -398,7 +398,8 @@ class Tracker:
         they put it. Where that match is constrained in every direction (a scan that leaves
         one open, a corridor, is refused as degenerate and the wheels stand), lies within the
         gate, moved the pose by :data:`STALL_SHIFT` or more from the wheels' match and lays
-        at least as much of the scan on the map, the wheels stalled: the laser's pose is
+        at least as much of the scan on the map as they do, and no less than
+        :data:`~slamkit.scanmatch.relocate.TRUSTED_FIT`, the wheels stalled: the laser's pose is
         kept, as a glitch overridden (the wheels' offset starting again from it). A robot
         that does stand still matches where it stood, and the wheels' match is kept."""
         try:
@@ -406,10 +407,11 @@ class Tracker:
         except MatchError:
             return False
         shift = math.hypot(free.pose[0] - wheels_pose[0], free.pose[1] - wheels_pose[1])
+        fit = surface_fit(reference, points, free.pose)
         if (
             shift < STALL_SHIFT
             or not within_gate(self.offset, free.pose, self.settings)
-            or surface_fit(reference, points, free.pose) < wheels_fit
+            or fit < max(wheels_fit, TRUSTED_FIT)
         ):
             return False
         self.counts["odometry_overridden"] += 1
