@@ -5,13 +5,14 @@ good wheels."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
 from slamkit.datasets import load_dataset
-from slamkit.datasets.stream import Dataset
+from slamkit.datasets.stream import Control, Dataset
 from slamkit.geometry.pose2 import between
 from slamkit.pipeline import run
 from slamkit.pipeline.evaluate import evaluate
@@ -27,6 +28,7 @@ from slamkit.scanmatch.result import MatchResult
 
 JUMP_DEG = 60.0
 JUMP_AT = 0.4  # of the drive
+STALL_AT = 0.4
 
 
 @pytest.fixture(scope="module")
@@ -53,6 +55,42 @@ def test_a_heading_jump_is_overridden_and_the_loop_still_closes(
     assert hasattr(ate, "rmse") and hasattr(clean_ate, "rmse") and hasattr(dr, "rmse")
     assert dr.rmse > 3.0  # the wheels alone are lost after the jump ...
     assert ate.rmse < clean_ate.rmse + 0.05  # ... graph SLAM is as good as without it
+
+
+def _with_stall(data: Dataset, at: float, seconds: float) -> tuple[Dataset, int]:
+    """``data`` whose wheels report no motion for ``seconds`` from the fraction ``at`` of
+    its controls while the robot drives on (a stall), and the controls zeroed."""
+    controls = [k for k, e in enumerate(data.events) if isinstance(e, Control)]
+    t0 = data.events[controls[int(at * len(controls))]].t
+    events = list(data.events)
+    zeroed = 0
+    for k in controls:
+        e = events[k]
+        assert isinstance(e, Control)
+        if t0 <= e.t < t0 + seconds:
+            events[k] = dataclasses.replace(e, u=np.zeros_like(np.asarray(e.u, dtype=float)))
+            zeroed += 1
+    return dataclasses.replace(data, events=tuple(events)), zeroed
+
+
+def test_a_stall_of_the_wheels_is_overridden_by_the_laser(loop_world: Dataset) -> None:
+    """Three seconds of wheels reporting no motion while the robot drives on (1.5 m lost to
+    dead reckoning): the scans, matched without the wheels, moved, so graph SLAM's front
+    end follows them, reports the stall, and the path stays as good as without it."""
+    clean = run("graph-slam", loop_world, seed=0)
+    clean_ate = evaluate(clean, loop_world).scores.ate
+    stalled, zeroed = _with_stall(loop_world, STALL_AT, 3.0)
+    dr = evaluate(run("dead-reckoning", stalled, seed=0), stalled).scores.ate
+    result = run("graph-slam", stalled, seed=0)
+    ate = evaluate(result, stalled).scores.ate
+    d = result.output.diagnostics
+    assert zeroed >= 10
+    assert clean.output.diagnostics["odometry_stalls"] == 0
+    assert d["odometry_stalls"] >= 1 and d["odometry_overridden"] >= d["odometry_stalls"]
+    assert "odometry_glitches" in [w.kind for w in result.output.warnings]
+    assert hasattr(ate, "rmse") and hasattr(clean_ate, "rmse") and hasattr(dr, "rmse")
+    assert dr.rmse > 3.0
+    assert ate.rmse < clean_ate.rmse + 0.02
 
 
 def test_laser_odometry_overrides_a_heading_jump_too(loop_world: Dataset, heading_jump) -> None:

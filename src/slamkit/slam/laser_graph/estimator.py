@@ -20,6 +20,7 @@ optimised poses, the graph is :attr:`EstimatorOutput.graph`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import Counter
 
@@ -44,6 +45,7 @@ from slamkit.scanmatch.icp import prepare_scan
 from slamkit.scanmatch.normal_icp import NormalCloud
 from slamkit.scanmatch.point_map import ScanNormals, scan_normals
 from slamkit.scanmatch.result import scan_points
+from slamkit.scanmatch.transient import ScanView
 from slamkit.slam.laser_graph.backend import (
     MAX_CHI2,
     MAX_EDGE_CHI2,
@@ -64,6 +66,7 @@ from slamkit.slam.laser_graph.freespace import (
     revisit_contradictions,
 )
 from slamkit.slam.laser_graph.frontend import (
+    LOCAL_MAP_KEYFRAMES,
     NORMAL_ICP,
     Keyframe,
     Tracker,
@@ -103,6 +106,9 @@ GLOBAL_CANDIDATES = 2
 # through doors and windows fill a grid with free space that a short-range view does not
 # contradict).
 MAP_MAX_RANGE = 30.0
+# A keyframe whose points the recent keyframes saw through by more than this fraction keeps
+# them all (_clear_transient): people walk through a few of a scan's beams, not most.
+MAX_TRANSIENT = 0.25
 
 
 class LaserGraphSlam(EstimatorShell):
@@ -139,6 +145,7 @@ class LaserGraphSlam(EstimatorShell):
         self._keys: list[Keyframe] = []
         self._ranges: list[FloatArray] = []
         self._normals: dict[int, ScanNormals] = {}  # each keyframe's, once in a submap
+        self._views: dict[int, ScanView] = {}  # the recent keyframes' free space
         self._submaps = SubmapCache(config.loops, self._scan_normals)
         self._places = PlaceIndex()
         self._counts: Counter[str] = Counter()
@@ -298,6 +305,7 @@ class LaserGraphSlam(EstimatorShell):
         self._keys.append(Keyframe(event.t, points, reference, travelled))
         self._ranges.append(np.asarray(event.ranges, dtype=np.float64))
         self._tracker.reset()
+        self._clear_transient(k)
         if self._cfg.loops.enabled:
             self._add_signature(k)
         if self._cfg.loops.enabled and k > 0:
@@ -309,6 +317,38 @@ class LaserGraphSlam(EstimatorShell):
                 self._graph.poses, [kf.points for kf in self._keys], k,
                 scan_normals=self._scan_normals,
             )  # fmt: skip
+
+    def _clear_transient(self, k: int) -> None:
+        """Take out of keyframe ``k`` the points the recent keyframes saw through, and out
+        of theirs the points ``k`` saw through: people walking, doors that opened
+        (:mod:`slamkit.scanmatch.transient`). A keyframe that would lose more than
+        :data:`MAX_TRANSIENT` of its points keeps them all (the poses, not the world, are
+        then in doubt)."""
+        self._views[k] = ScanView(
+            self._ranges[k], self._laser.beam_angles, self._max_range, self._cfg.min_range,
+            self._mounting,
+        )  # fmt: skip
+        recent = range(max(k - LOCAL_MAP_KEYFRAMES + 1, 0), k)
+        self._views.pop(k - LOCAL_MAP_KEYFRAMES, None)
+        if not recent:
+            return
+        poses = self._graph.poses
+        points = self._keys[k].points
+        gone = np.zeros(points.shape[0], dtype=bool)
+        for j in recent:
+            gone |= self._views[j].seen_through_from(between(poses[j], poses[k]), points)
+        self._drop_points(k, gone)
+        for j in recent:
+            pts = self._keys[j].points
+            self._drop_points(j, self._views[k].seen_through_from(between(poses[k], poses[j]), pts))
+
+    def _drop_points(self, k: int, gone: np.ndarray) -> None:
+        n = int(gone.sum())
+        if n == 0 or n > MAX_TRANSIENT * gone.size:
+            return
+        self._keys[k] = dataclasses.replace(self._keys[k], points=self._keys[k].points[~gone])
+        self._normals.pop(k, None)
+        self._counts["transient_points"] += n
 
     def _close_loops(self, k: int) -> None:
         s = self._cfg.loops
@@ -440,7 +480,9 @@ class LaserGraphSlam(EstimatorShell):
             "relocated": c["relocated"],
             "odometry_overridden": len(self._overrides),
             "odometry_overrides": override_rows(self._overrides),
+            "odometry_stalls": c["stalled"],
             "lost": c["lost"],
+            "transient_points": c["transient_points"],
             "odometry_edges": c["odometry_edges"],
             "loop_candidates": c["loop_candidates"],
             "place_candidates": c["place_candidates"],

@@ -17,7 +17,11 @@ reference (``reference = "map"``, the default when there is odometry) a scan is 
 instead against the local map of the last few keyframes in the current keyframe's frame
 (:func:`local_map`), by point-to-normal ICP with the wheels' offset since the keyframe as
 an independent prior (:meth:`Tracker.match`), so that a direction the map leaves
-unconstrained (a corridor) follows the wheels.
+unconstrained (a corridor) follows the wheels. Two ways that can go wrong are checked: the
+map's points of people walking would pull the scan along with them (the estimator leaves
+out of the map the points neighbouring keyframes saw through,
+:mod:`slamkit.scanmatch.transient`), and wheels that stalled report no motion while the
+robot drives on (:meth:`Tracker._stalled`: the scan matched without them decides).
 """
 
 from __future__ import annotations
@@ -58,6 +62,7 @@ __all__ = [
     "MIN_OVERLAP",
     "NORMAL_ICP",
     "PLICP",
+    "STALL_SHIFT",
     "Keyframe",
     "Tracker",
     "coast_window",
@@ -73,6 +78,9 @@ LOCAL_MAP_KEYFRAMES = 20
 LOCAL_MAP_VOXEL = 0.05
 # A scan also becomes a keyframe when its match paired less than this fraction of its points.
 MIN_OVERLAP = 0.6
+# Wheels that report no motion while the scan, matched without them, moved this far [m] from
+# their match have stalled (Tracker._stalled).
+STALL_SHIFT = 0.05
 # The standard deviations added (in quadrature) to a match's covariance in x and y [m] and in
 # heading [deg] before it weights an edge or a prior: scan matchers' own covariances ignore
 # the map's systematic errors.
@@ -188,6 +196,7 @@ class Tracker:
         """The correction ``T_wheels_laser`` of the last scan whose wheels were overridden
         by the laser (a glitch), or None when the last scan's were not."""
         self._relocation: tuple[NormalCloud, CorrelativeReference] | None = None
+        self._controls = (0, False)  # since the last scan: controls, whether any moved
 
     def reset(self) -> None:
         """A new keyframe: the offset and its uncertainty start again from zero."""
@@ -208,6 +217,8 @@ class Tracker:
     def predict(self, u: FloatArray, dt: float) -> None:
         if self.model is None:
             raise InputError("a control reached a tracker without a motion model")
+        n, moved_any = self._controls
+        self._controls = (n + 1, moved_any or bool(np.any(np.asarray(u) != 0.0)))
         moved = np.asarray(self.model.apply(self.offset, u, dt), dtype=np.float64)
         if not np.isfinite(moved).all():
             raise ConvergenceError(f"the control {u} over {dt} s moved the pose to {moved}")
@@ -234,8 +245,10 @@ class Tracker:
         that slid along a corridor would pull every later prior along with it (ACES, one
         range noise seed: 3.3 m along a corridor in 10 s, the wheels saying otherwise)."""
         self.last_override = None
+        still = self._controls[0] > 0 and not self._controls[1]
+        self._controls = (0, False)
         if isinstance(reference, NormalCloud) and self.model is not None:
-            return self._match_map(reference, points)
+            return self._match_map(reference, points, still)
         fused = False
         try:
             start = self.offset if self.velocity is None else self._search(reference, points)
@@ -318,14 +331,17 @@ class Tracker:
         pose[:2] += e * float(e @ (self.offset[:2] - pose[:2]))
         return replace(result, pose=pose)
 
-    def _match_map(self, reference: NormalCloud, points: FloatArray) -> bool:
+    def _match_map(self, reference: NormalCloud, points: FloatArray, still: bool) -> bool:
         """The local-map match with the wheels: point-to-normal ICP held to the wheels'
         offset, judged by its fit to the map; where it fits poorly, fails or is gated, the
         scan is relocated on the map without the wheels (:mod:`slamkit.scanmatch.relocate`)
         and the better-fitting hypothesis kept. When the laser's wins against a prediction
         outside the gate, the wheels glitched: the step is overridden (counted, and the
         correction kept in ``last_override``) and the wheels' offset starts again from the
-        laser's pose, so the glitch does not pull later priors back."""
+        laser's pose, so the glitch does not pull later priors back. Where the wheels
+        reported no motion at all since the last scan (``still``) but the scan, matched
+        without them, moved (:meth:`_stalled`), the wheels stalled: that is a glitch
+        overridden too."""
         prior = self.odometry_cov + cov_floor()
         result: MatchResult | None = None
         try:
@@ -341,6 +357,8 @@ class Tracker:
             result = None
         wheels_pose = self.offset if result is None else result.pose
         wheels_fit = surface_fit(reference, points, wheels_pose)
+        if still and self._stalled(reference, points, wheels_pose, wheels_fit):
+            return True
         if result is not None and wheels_fit >= TRUSTED_FIT:
             self._accept(result)
             return True
@@ -371,6 +389,37 @@ class Tracker:
         if result is None:
             return self._unmatched()
         self._accept(result)
+        return True
+
+    def _stalled(
+        self, reference: NormalCloud, points: FloatArray, wheels_pose: FloatArray, wheels_fit: float
+    ) -> bool:
+        """The wheels said the robot stood still: match the scan without them, from where
+        they put it. Where that match is constrained in every direction (a scan that leaves
+        one open, a corridor, is refused as degenerate and the wheels stand), lies within the
+        gate, moved the pose by :data:`STALL_SHIFT` or more from the wheels' match and lays
+        at least as much of the scan on the map as they do, and no less than
+        :data:`~slamkit.scanmatch.relocate.TRUSTED_FIT`, the wheels stalled: the laser's pose is
+        kept, as a glitch overridden (the wheels' offset starting again from it). A robot
+        that does stand still matches where it stood, and the wheels' match is kept."""
+        try:
+            free = normal_icp(reference, points, self.offset, self.normal_icp)
+        except MatchError:
+            return False
+        shift = math.hypot(free.pose[0] - wheels_pose[0], free.pose[1] - wheels_pose[1])
+        fit = surface_fit(reference, points, free.pose)
+        if (
+            shift < STALL_SHIFT
+            or not within_gate(self.offset, free.pose, self.settings)
+            or fit < max(wheels_fit, TRUSTED_FIT)
+        ):
+            return False
+        self.counts["odometry_overridden"] += 1
+        self.counts["stalled"] += 1
+        self.last_override = between(wheels_pose, free.pose)
+        self._accept(free)
+        self.odometry_offset = free.pose.copy()
+        self.odometry_cov = np.asarray(free.cov, dtype=np.float64).copy()
         return True
 
     def _accept(self, result: MatchResult) -> None:
