@@ -24,16 +24,20 @@ import math
 
 import numpy as np
 
+from scipy.ndimage import minimum_filter1d
+
 from slamkit._validation import FloatArray, as_array
 from slamkit.geometry.pose2 import transform_points
 
-__all__ = ["SEE_THROUGH_FRACTION", "SEE_THROUGH_MARGIN", "ScanView"]
+__all__ = ["SEE_THROUGH_BEAMS", "SEE_THROUGH_FRACTION", "SEE_THROUGH_MARGIN", "ScanView"]
 
 SEE_THROUGH_MARGIN = 0.15
 """[m] A beam must pass this far beyond a point (plus :data:`SEE_THROUGH_FRACTION` of its
 range) to clear it."""
 SEE_THROUGH_FRACTION = 0.03
 """... plus this fraction of the point's range."""
+SEE_THROUGH_BEAMS = 1
+"""... on the nearest beam and this many on either side of it."""
 
 
 class ScanView:
@@ -55,7 +59,9 @@ class ScanView:
         self._angles = a[order]
         r = r[order]
         returned = np.isfinite(r) & (r > min_range) & (r < max_range)
-        self._ranges = np.where(returned, r, -np.inf)  # -inf: no return, clears nothing
+        ranges = np.where(returned, r, -np.inf)  # -inf: no return, clears nothing
+        # The nearest of the beams around each one: a point is cleared only by them all.
+        self._ranges = minimum_filter1d(ranges, 2 * SEE_THROUGH_BEAMS + 1, mode="nearest")
         self._mounting = None if mounting is None or not np.any(mounting) else mounting
         step = float(np.median(np.diff(self._angles))) if self._angles.size > 1 else 0.0
         self._half_step = 0.5 * step
@@ -78,8 +84,7 @@ class ScanView:
         inside = bearing <= self._angles[-1] + self._half_step
         k = np.clip(np.searchsorted(self._angles, bearing), 1, n - 1)
         k -= bearing - self._angles[k - 1] < self._angles[k] - bearing  # the nearest beam
-        lo, hi = np.clip(k - 1, 0, n - 1), np.clip(k + 1, 0, n - 1)
-        seen = np.minimum(np.minimum(self._ranges[lo], self._ranges[k]), self._ranges[hi])
+        seen = self._ranges[k]
         beyond = r + SEE_THROUGH_MARGIN + SEE_THROUGH_FRACTION * r
         return inside & (seen > beyond)
 

@@ -109,6 +109,9 @@ MAP_MAX_RANGE = 30.0
 # A keyframe whose points the recent keyframes saw through by more than this fraction keeps
 # them all (_clear_transient): people walk through a few of a scan's beams, not most.
 MAX_TRANSIENT = 0.25
+# ... judged by the keyframes at most this far back along the path [m]: farther ones see the
+# place from other sides, through the errors of a longer stretch of the chain.
+TRANSIENT_TRAVEL = 3.0
 
 
 class LaserGraphSlam(EstimatorShell):
@@ -319,8 +322,9 @@ class LaserGraphSlam(EstimatorShell):
             )  # fmt: skip
 
     def _clear_transient(self, k: int) -> None:
-        """Take out of keyframe ``k`` the points the recent keyframes saw through, and out
-        of theirs the points ``k`` saw through: people walking, doors that opened
+        """Take out of keyframe ``k`` the points the recent keyframes (within
+        :data:`TRANSIENT_TRAVEL` of path) saw through, and out of theirs the points ``k`` saw
+        through: people walking, doors that opened
         (:mod:`slamkit.scanmatch.transient`). A keyframe that would lose more than
         :data:`MAX_TRANSIENT` of its points keeps them all (the poses, not the world, are
         then in doubt)."""
@@ -328,8 +332,13 @@ class LaserGraphSlam(EstimatorShell):
             self._ranges[k], self._laser.beam_angles, self._max_range, self._cfg.min_range,
             self._mounting,
         )  # fmt: skip
-        recent = range(max(k - LOCAL_MAP_KEYFRAMES + 1, 0), k)
         self._views.pop(k - LOCAL_MAP_KEYFRAMES, None)
+        here = self._keys[k].travelled
+        recent = [
+            j
+            for j in range(max(k - LOCAL_MAP_KEYFRAMES + 1, 0), k)
+            if here - self._keys[j].travelled <= TRANSIENT_TRAVEL
+        ]
         if not recent:
             return
         poses = self._graph.poses
