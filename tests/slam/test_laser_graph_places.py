@@ -134,8 +134,10 @@ def test_the_place_index_finds_the_revisited_room_and_the_turn_whatever_the_esti
 
 def test_a_loop_beyond_the_local_search_window_is_closed_by_place_recognition(monkeypatch) -> None:
     """Generated building 12 with the corpus's odometry errors (seed 1) and the local search
-    held to 0.3 m, below the front end's drift at its revisits: only place recognition can
-    close its loops (without it 0.84 m ATE, with it 0.12 m when this test was written)."""
+    held to 0.1 m, below the front end's drift at its revisits: only place recognition can
+    close its loops (without it 0.330 m ATE, with it 0.124 m when this test was written;
+    with the third session's front end, which followed people and stalls, 0.84 m and 0.12 m
+    at 0.3 m)."""
     from slamkit.pipeline import run
     from slamkit.pipeline.evaluate import evaluate
     from slamkit.sim.buildings import build_building_dataset
@@ -145,13 +147,13 @@ def test_a_loop_beyond_the_local_search_window_is_closed_by_place_recognition(mo
     data, _ = corrupt_odometry(
         build_building_dataset(12), OdometryErrorModel(), np.random.default_rng(1)
     )
-    narrow = {"loops": {"max_radius": 0.3}}
+    narrow = {"loops": {"max_radius": 0.1}}
     found = run("graph-slam", data, config=narrow)
     assert found.output.diagnostics["places_verified"] > 10
     with_places = evaluate(found, data).scores.ate.rmse
     monkeypatch.setattr(estimator, "GLOBAL_EVERY", 10**9)
     without = evaluate(run("graph-slam", data, config=narrow), data).scores.ate.rmse
-    assert with_places < 0.2 < 0.5 < without
+    assert with_places < 0.2 < 0.25 < without and without > 2.0 * with_places
 
 
 def test_the_final_map_audit_finds_a_place_mapped_twice() -> None:
