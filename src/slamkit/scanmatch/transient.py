@@ -23,7 +23,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
 from scipy.ndimage import minimum_filter1d
 
 from slamkit._validation import FloatArray, as_array
