@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import html
 import json
-import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -28,7 +27,7 @@ from typing import Any
 
 from slamkit.datasets.reading import FEW_DROPPED, MAX_DROPPED_SHARE, ReadingSummary
 from slamkit.errors import InputError
-from slamkit.eval.glossary import GROUPS, MetricRow, metric_rows
+from slamkit.eval.glossary import GROUPS, MetricRow, format_number, metric_rows
 
 __all__ = [
     "FIGURE_CAPTIONS",
@@ -215,22 +214,10 @@ def read_run_folder(
 
 
 def _format_value(value: Any) -> str:
-    if isinstance(value, bool) or value is None:
-        return str(value).lower()
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            return str(value)
-        if value != 0 and (abs(value) >= 1e6 or abs(value) < 1e-3):
-            return f"{value:.3e}"
-        return f"{value:.4g}" if abs(value) < 1000 else f"{value:.1f}"
-    if isinstance(value, str):
-        return value
-    if isinstance(value, (list, tuple)):
-        if len(value) <= 4 and all(isinstance(v, (int, float)) for v in value):
-            return ", ".join(_format_value(v) for v in value)
-        return f"[{len(value)} values]"
+    """A value of the page's tables: numbers, flags, text and short lists as the glossary
+    shows them (:func:`~slamkit.eval.glossary.format_number`), anything else as JSON."""
+    if value is None or isinstance(value, (bool, int, float, str, list, tuple)):
+        return format_number(value)
     return json.dumps(value)
 
 
