@@ -341,15 +341,16 @@ class LaserGraphSlam(EstimatorShell):
         ]
         if not recent:
             return
-        poses = self._graph.poses
+        pose_k = self._graph.pose(k)  # (the recent poses alone: not a copy of them all)
+        near = {j: self._graph.pose(j) for j in recent}
         points = self._keys[k].points
         gone = np.zeros(points.shape[0], dtype=bool)
         for j in recent:
-            gone |= self._views[j].seen_through_from(between(poses[j], poses[k]), points)
+            gone |= self._views[j].seen_through_from(between(near[j], pose_k), points)
         self._drop_points(k, gone)
         for j in recent:
-            pts = self._keys[j].points
-            self._drop_points(j, self._views[k].seen_through_from(between(poses[k], poses[j]), pts))
+            seen = self._views[k].seen_through_from(between(pose_k, near[j]), self._keys[j].points)
+            self._drop_points(j, seen)
 
     def _drop_points(self, k: int, gone: np.ndarray) -> None:
         n = int(gone.sum())
