@@ -14,6 +14,9 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+import scipy.sparse
+import scipy.sparse.csgraph
+import scipy.stats
 
 from slamkit._validation import FloatArray
 from slamkit.errors import ConvergenceError, ShapeError
@@ -34,6 +37,7 @@ __all__ = [
     "edge_chi2",
     "optimize_consistent",
     "rejudge",
+    "retract_inconsistent",
 ]
 
 # Constants that were settings until 2026-12-07 (docs/estimators/laser_graph.md, "Settings").
@@ -44,6 +48,10 @@ __all__ = [
 # deviations).
 MAX_CHI2 = 100.0
 MAX_EDGE_CHI2 = 100.0
+# The whole-graph check (retract_inconsistent): a group of closures whose removal lowers the
+# optimum's Σ eᵀ Ω e by more than the 99.9 % point of χ² with 3 degrees of freedom per closure
+# is taken out (the statistic and why its bound needs no tuning: the function's docstring).
+RETRACT_CHI2 = float(scipy.stats.chi2.ppf(0.999, 3))
 
 
 def default_optimizer() -> OptimizerConfig:
@@ -387,3 +395,86 @@ def rejudge(
     out = [c for c, e in zip(pool, offered, strict=True) if e in removed]
     lost = [RefusedClosure(int(i[e]), int(j[e]), z[e], info[e]) for e in contested if e in removed]
     return out + lost, len(pool) - len(out), len(lost)
+
+
+def closure_groups(graph: PoseGraph, window: int) -> list[list[int]]:
+    """The loop-closure edges of ``graph`` in groups that join the same two places: two
+    closures are in one group when both their ends lie within ``window`` keyframes of each
+    other's (and groups are closed under that relation). Edge indices, each group sorted."""
+    i, j, _, _ = graph.edges()
+    loops = np.flatnonzero(np.array([kind == "loop" for kind in graph.edge_kinds()], bool))
+    if loops.size == 0:
+        return []
+    a, b = i[loops], j[loops]
+    near = (np.abs(a[:, None] - a[None, :]) <= window) & (np.abs(b[:, None] - b[None, :]) <= window)
+    n, label = scipy.sparse.csgraph.connected_components(scipy.sparse.csr_matrix(near))
+    return [loops[label == c].tolist() for c in range(n)]
+
+
+def retract_inconsistent(
+    graph: PoseGraph, window: int, bound: float = RETRACT_CHI2
+) -> list[tuple[int, int]]:
+    """Judge every group of closures (:func:`closure_groups`) against the whole graph, and
+    take out those the rest of the graph contradicts.
+
+    A group ``G`` of ``n`` closures is judged by how much the optimum's cost falls without
+    it, ``Δ = min Σ_all eᵀ Ω e − min Σ_{all∖G} eᵀ Ω e``: with the graph's stated
+    uncertainties right and ``G`` true, ``Δ`` is χ² with ``3n`` degrees of freedom when the
+    closures are independent and ``n`` times χ² with 3 when they measure the same relation,
+    so ``Δ / n`` beyond the 99.9 % point of χ² with 3 degrees of freedom refuses a true group
+    less than once in a thousand in either case. ``Δ`` is divided first by the graph's
+    a-posteriori variance factor (its cost per degree of freedom of redundancy, without
+    ``G``) when that exceeds 1: a graph whose stated uncertainties are too tight everywhere
+    does not make every group look wrong. (It is not raised when below 1: a graph that is
+    loose on average may be tight in the stretch a group strains.)
+
+    Every group is scored once; those beyond the bound are then taken out worst first, each
+    scored again just before, without the ones already out: a true group strained only by
+    a wrong one that was worse is kept. (Groups below the bound are not scored again: one
+    solve per group, and one or two per suspect, keep this to a few seconds on Intel.)
+
+    Unlike :func:`optimize_consistent`, which judges new closures against the graph as it
+    is when they arrive, this sees every closure found since: a group taken early, while
+    the chain it bent was loose, is judged again once later loops have fixed that chain.
+    Solves start from the current optimum; the graph ends at the optimum without the
+    retracted groups. Returns their ends ``(i, j)``."""
+    groups = closure_groups(graph, window)
+    if not groups:
+        return []
+    graph.optimize()
+    scores = _group_scores(graph, groups, [])
+    off: list[int] = []
+    for g in sorted(np.flatnonzero(scores > bound), key=lambda g: -scores[g]):
+        if off and _group_scores(graph, [groups[g]], off)[0] <= bound:
+            continue
+        off += groups[g]
+        graph.disable_edges(off)
+        graph.optimize()
+    i, j, _, _ = graph.edges()
+    ends = [(int(i[e]), int(j[e])) for e in off]
+    graph.remove_edges(off)
+    return ends
+
+
+def _group_scores(graph: PoseGraph, groups: list[list[int]], off: list[int]) -> FloatArray:
+    """``Δ / n`` of each group (:func:`retract_inconsistent`), at the graph's current
+    estimate (the optimum without the edges ``off``), which it leaves as it found it."""
+    start = graph.poses
+    cost = graph.chi2()
+    kept = np.ones(cost.size, dtype=bool)
+    kept[off] = False
+    total = float(cost[kept].sum())
+    scores = np.zeros(len(groups))
+    for g, group in enumerate(groups):
+        graph.set_poses(start)
+        graph.disable_edges(off + group)
+        graph.optimize()
+        rest = kept.copy()
+        rest[group] = False
+        without = float(graph.chi2()[rest].sum())
+        redundancy = 3 * (int(rest.sum()) - len(graph) + 1)
+        factor = max(1.0, without / redundancy) if redundancy > 0 else 1.0
+        scores[g] = (total - without) / factor / len(group)
+    graph.set_poses(start)
+    graph.disable_edges(off)
+    return scores

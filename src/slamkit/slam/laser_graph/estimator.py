@@ -54,6 +54,7 @@ from slamkit.slam.laser_graph.backend import (
     default_optimizer,
     optimize_consistent,
     rejudge,
+    retract_inconsistent,
 )
 from slamkit.slam.laser_graph.config import LaserGraphConfig
 from slamkit.slam.laser_graph.freespace import (
@@ -198,7 +199,8 @@ class LaserGraphSlam(EstimatorShell):
             self._tracker.coast(event.t - last)  # only without odometry
         reference = self._local if self._local is not None else self._keys[-1].reference
         before = self._last_offset
-        matched = self._tracker.match(reference, points)
+        since = 0.0 if last is None else float(event.t) - last
+        matched = self._tracker.match(reference, points, since)
         moved = between(before, self._tracker.odometry_offset)
         self._stretch.add(event.t, matched, math.hypot(moved[0], moved[1]))
         if self._tracker.last_override is not None:
@@ -216,6 +218,9 @@ class LaserGraphSlam(EstimatorShell):
             raise MatchError(laser_unusable(self._counts, self._tracker.counts), "laser_unusable")
         if len(self._graph) > 1:
             self._optimize()
+            # Every closure judged once more with all the others in view (backend).
+            retracted = retract_inconsistent(self._graph, PAIR_KEYFRAMES)
+            self._counts["loops_retracted"] += len(retracted)
         poses = self._graph.poses
         anchors = np.asarray(self._anchors)
         offsets = np.asarray(self._offsets, dtype=np.float64).reshape(-1, 3)
@@ -503,6 +508,7 @@ class LaserGraphSlam(EstimatorShell):
             "loops_kept": len(self.loop_closures()),
             "loops_readmitted": c["loops_readmitted"],
             "loops_reversed": c["loops_reversed"],
+            "loops_retracted": c["loops_retracted"],
             "loops_rejected": {
                 k[len("loop_rejected:") :]: v
                 for k, v in c.items()

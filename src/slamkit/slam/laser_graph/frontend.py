@@ -36,7 +36,7 @@ import numpy as np
 from slamkit._validation import FloatArray
 from slamkit.errors import ConvergenceError, InputError, MatchError
 from slamkit.geometry.angles import wrap_angle_float
-from slamkit.geometry.pose2 import between
+from slamkit.geometry.pose2 import between, compose
 from slamkit.models.constant_velocity import ConstantVelocity
 from slamkit.models.motion import MotionModel
 from slamkit.scanmatch.correlative import (
@@ -48,7 +48,13 @@ from slamkit.scanmatch.icp import PreparedScan
 from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp, surface_fit
 from slamkit.scanmatch.plicp import PlIcpConfig, plicp
 from slamkit.scanmatch.point_map import PointMap, ScanNormals
-from slamkit.scanmatch.relocate import RELOCATE_SEARCH, TRUSTED_FIT, judge, relocate
+from slamkit.scanmatch.relocate import (
+    FIT_MARGIN,
+    RELOCATE_SEARCH,
+    TRUSTED_FIT,
+    judge,
+    relocate,
+)
 from slamkit.scanmatch.result import MatchResult
 from slamkit.slam.laser_graph.config import FrontEndSettings
 
@@ -197,6 +203,13 @@ class Tracker:
         by the laser (a glitch), or None when the last scan's were not."""
         self._relocation: tuple[NormalCloud, CorrelativeReference] | None = None
         self._controls = (0, False)  # since the last scan: controls, whether any moved
+        self.speed = 0.0
+        """The speed of the last scan interval in which the wheels moved [m/s]."""
+        self._scan_offset = np.zeros(3)  # the offset at the last scan
+        self.doubt = 0.0
+        """Since the keyframe, the distance [m] the robot may have covered unseen: at
+        :attr:`speed` through each scan interval that the wheels reported as a standstill
+        and the laser could not confirm, its scan leaving a direction open (a corridor)."""
 
     def reset(self) -> None:
         """A new keyframe: the offset and its uncertainty start again from zero."""
@@ -206,6 +219,8 @@ class Tracker:
         self.track_cov = np.zeros((3, 3))
         self.match_cov = None
         self.overlap = 1.0
+        self._scan_offset = np.zeros(3)
+        self.doubt = 0.0
 
     def coast(self, dt: float) -> None:
         """No odometry: move the offset by the held velocity over ``dt`` seconds."""
@@ -232,7 +247,9 @@ class Tracker:
             self.model.apply(self.odometry_offset, u, dt), dtype=np.float64
         )
 
-    def match(self, reference: PreparedScan | NormalCloud, points: FloatArray) -> bool:
+    def match(
+        self, reference: PreparedScan | NormalCloud, points: FloatArray, seconds: float = 0.0
+    ) -> bool:
         """Register ``points`` to the keyframe (its scan, or the local map in its frame:
         point-to-normal ICP with the wheels' offset since the keyframe as a prior) from the
         predicted offset (the last match moved by the wheels); on success the offset
@@ -243,12 +260,19 @@ class Tracker:
         ``odometry_cov`` (plus the floor), not the prediction: the prediction carries the
         last match, so a prior about it would count the map's evidence twice, and a match
         that slid along a corridor would pull every later prior along with it (ACES, one
-        range noise seed: 3.3 m along a corridor in 10 s, the wheels saying otherwise)."""
+        range noise seed: 3.3 m along a corridor in 10 s, the wheels saying otherwise).
+        ``seconds``: since the last scan (the speed and a doubted standstill's distance)."""
         self.last_override = None
-        still = self._controls[0] > 0 and not self._controls[1]
+        n, moved_any = self._controls
+        still = n > 0 and not moved_any
         self._controls = (0, False)
         if isinstance(reference, NormalCloud) and self.model is not None:
-            return self._match_map(reference, points, still)
+            matched = self._match_map(reference, points, still, seconds)
+            if matched and not still and seconds > 0.0:
+                moved = self.offset[:2] - self._scan_offset[:2]
+                self.speed = math.hypot(moved[0], moved[1]) / seconds
+            self._scan_offset = self.offset.copy()
+            return matched
         fused = False
         try:
             start = self.offset if self.velocity is None else self._search(reference, points)
@@ -331,7 +355,9 @@ class Tracker:
         pose[:2] += e * float(e @ (self.offset[:2] - pose[:2]))
         return replace(result, pose=pose)
 
-    def _match_map(self, reference: NormalCloud, points: FloatArray, still: bool) -> bool:
+    def _match_map(
+        self, reference: NormalCloud, points: FloatArray, still: bool, seconds: float
+    ) -> bool:
         """The local-map match with the wheels: point-to-normal ICP held to the wheels'
         offset, judged by its fit to the map; where it fits poorly, fails or is gated, the
         scan is relocated on the map without the wheels (:mod:`slamkit.scanmatch.relocate`)
@@ -341,7 +367,8 @@ class Tracker:
         laser's pose, so the glitch does not pull later priors back. Where the wheels
         reported no motion at all since the last scan (``still``) but the scan, matched
         without them, moved (:meth:`_stalled`), the wheels stalled: that is a glitch
-        overridden too."""
+        overridden too; where that match leaves a direction open, the standstill cannot be
+        confirmed and adds to :attr:`doubt` (``seconds``: since the last scan)."""
         prior = self.odometry_cov + cov_floor()
         result: MatchResult | None = None
         try:
@@ -357,7 +384,7 @@ class Tracker:
             result = None
         wheels_pose = self.offset if result is None else result.pose
         wheels_fit = surface_fit(reference, points, wheels_pose)
-        if still and self._stalled(reference, points, wheels_pose, wheels_fit):
+        if still and self._stalled(reference, points, wheels_pose, wheels_fit, seconds):
             return True
         if result is not None and wheels_fit >= TRUSTED_FIT:
             self._accept(result)
@@ -392,7 +419,12 @@ class Tracker:
         return True
 
     def _stalled(
-        self, reference: NormalCloud, points: FloatArray, wheels_pose: FloatArray, wheels_fit: float
+        self,
+        reference: NormalCloud,
+        points: FloatArray,
+        wheels_pose: FloatArray,
+        wheels_fit: float,
+        seconds: float,
     ) -> bool:
         """The wheels said the robot stood still: match the scan without them, from where
         they put it. Where that match is constrained in every direction (a scan that leaves
@@ -401,17 +433,23 @@ class Tracker:
         at least as much of the scan on the map as they do, and no less than
         :data:`~slamkit.scanmatch.relocate.TRUSTED_FIT`, the wheels stalled: the laser's pose is
         kept, as a glitch overridden (the wheels' offset starting again from it). A robot
-        that does stand still matches where it stood, and the wheels' match is kept."""
+        that does stand still matches where it stood, and the wheels' match is kept.
+
+        A corridor can leave the laser unable to say: the scan then fits about as well where
+        the robot would be had it kept its last speed over ``seconds`` (within
+        :data:`~slamkit.scanmatch.relocate.FIT_MARGIN`, the margin either side must win by)
+        as where the wheels put it. The wheels' pose is kept, doubted (:attr:`doubt`) by
+        that distance."""
         try:
             free = normal_icp(reference, points, self.offset, self.normal_icp)
         except MatchError:
+            free = None
+        if free is None or math.hypot(*(free.pose[:2] - wheels_pose[:2])) < STALL_SHIFT:
+            self._doubt_standstill(reference, points, wheels_pose, wheels_fit, seconds)
             return False
-        shift = math.hypot(free.pose[0] - wheels_pose[0], free.pose[1] - wheels_pose[1])
         fit = surface_fit(reference, points, free.pose)
-        if (
-            shift < STALL_SHIFT
-            or not within_gate(self.offset, free.pose, self.settings)
-            or fit < max(wheels_fit, TRUSTED_FIT)
+        if not within_gate(self.offset, free.pose, self.settings) or fit < max(
+            wheels_fit, TRUSTED_FIT
         ):
             return False
         self.counts["odometry_overridden"] += 1
@@ -421,6 +459,24 @@ class Tracker:
         self.odometry_offset = free.pose.copy()
         self.odometry_cov = np.asarray(free.cov, dtype=np.float64).copy()
         return True
+
+    def _doubt_standstill(
+        self,
+        reference: NormalCloud,
+        points: FloatArray,
+        wheels_pose: FloatArray,
+        wheels_fit: float,
+        seconds: float,
+    ) -> None:
+        """Add to :attr:`doubt` the distance ``speed · seconds`` when the scan fits where
+        that would have taken the robot within ``FIT_MARGIN`` of its fit where it stood."""
+        distance = self.speed * seconds
+        if distance < STALL_SHIFT:
+            return
+        moving = compose(wheels_pose, np.array([distance, 0.0, 0.0]))
+        if surface_fit(reference, points, moving) > wheels_fit - FIT_MARGIN:
+            self.doubt += distance
+            self.counts["standstill_doubted"] += 1
 
     def _accept(self, result: MatchResult) -> None:
         self.counts["matched"] += 1
@@ -464,10 +520,15 @@ class Tracker:
 
     def edge(self) -> tuple[FloatArray, FloatArray, bool]:
         """The edge from the keyframe to the current scan: measurement, information, and
-        whether it came from the scan match (else the odometry)."""
-        if self.match_cov is not None:
-            return self.offset.copy(), floored_information(self.match_cov), True
-        return self.offset.copy(), floored_information(self.odometry_cov), False
+        whether it came from the scan match (else the odometry). A standstill the laser
+        could not confirm (:attr:`doubt`) widens it along the robot's heading by the
+        distance it may have covered."""
+        matched = self.match_cov is not None
+        cov = np.array(self.match_cov if self.match_cov is not None else self.odometry_cov)
+        if self.doubt > 0.0:
+            heading = np.array([math.cos(self.offset[2]), math.sin(self.offset[2])])
+            cov[:2, :2] += self.doubt**2 * np.outer(heading, heading)
+        return self.offset.copy(), floored_information(cov), matched
 
 
 def local_map(
