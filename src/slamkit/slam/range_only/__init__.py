@@ -14,6 +14,7 @@ from slamkit.slam.range_only.estimator import RangeOnlySlam, RangeOnlySlamConfig
 from slamkit.slam.range_only.problem import (
     INIT_EVERY,
     INIT_MIN_READINGS,
+    ODOMETRY_FLOOR,
     BeaconStart,
     RangeOnlyProblem,
     RangeOnlySolution,
@@ -27,6 +28,7 @@ __all__ = [
     "INIT_EVERY",
     "INIT_MIN_READINGS",
     "MIRROR_GAP",
+    "ODOMETRY_FLOOR",
     "SAME_POINT_M",
     "BeaconFix",
     "BeaconHypothesis",
