@@ -188,3 +188,23 @@ def test_a_data_set_without_ranges_is_refused() -> None:
 def test_bad_settings_are_refused(field: str, value: float) -> None:
     with pytest.raises(ConfigError, match=field):
         RangeOnlySlamConfig(**{field: value})
+
+
+def test_a_beacon_seen_only_from_a_straight_path_is_left_out_with_a_warning() -> None:
+    """Driven along the x axis only, a beacon beside the line is never resolved (its mirror
+    fits as well): its readings are left out, counted, and the run says so."""
+    cfg = LandmarkScenarioConfig(
+        dt=0.2, speed=1.0, sigma_v=0.0, sigma_omega_deg=0.0, sensor="range",
+        sigma_range=0.3, max_range=100.0, min_range=0.0, observe_every=5,
+        initial_sigma_theta_deg=0.0, initial_sigma_xy=0.0,
+    )  # fmt: skip
+    world = LandmarkMap(np.array([[15.0, 6.0]]), np.array([0]))
+    ds = landmark_dataset(
+        "line", "test", cfg, world, np.zeros(3), np.array([[30.0, 0.0]]),
+        np.random.default_rng(0),
+    )  # fmt: skip
+    res = run("range-only-slam", ds, seed=0)
+    d = res.output.diagnostics
+    assert d["beacons_started"] == 0 and d["readings_of_unstarted_beacons"] > 20
+    assert [w.kind for w in res.output.warnings] == ["beacons_not_started"]
+    assert res.output.landmarks is None

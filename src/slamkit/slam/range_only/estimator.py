@@ -19,6 +19,7 @@ from slamkit.estimation.contract import (
     LandmarkEstimate,
     LandmarkIds,
     PoseEstimate,
+    RunWarning,
     SmoothedTrajectory,
 )
 from slamkit.estimation.shell import EstimatorShell
@@ -182,7 +183,29 @@ class RangeOnlySlam(EstimatorShell):
             landmark_numbering=LandmarkIds.DATASET,
             trajectory=path,
             diagnostics=_diagnostics(sol, self._unlabelled),
+            warnings=_warnings(sol),
         )
+
+
+def _warnings(sol: RangeOnlySolution) -> tuple[RunWarning, ...]:
+    """The run's doubts about itself: beacons never started, a solve that did not converge."""
+    out = []
+    if sol.readings_unfixed:
+        out.append(
+            RunWarning(
+                "beacons_not_started",
+                f"{sol.readings_unfixed} readings of beacons that were never started (too few "
+                "readings, too short a path, or the mirror never resolved) were left out",
+            )
+        )
+    if sol.optimizer is not None and not sol.optimizer.converged:
+        out.append(
+            RunWarning(
+                "not_converged",
+                f"the batch solve stopped without converging ({sol.optimizer.reason})",
+            )
+        )
+    return tuple(out)
 
 
 def _diagnostics(sol: RangeOnlySolution, unlabelled: int) -> dict[str, object]:
