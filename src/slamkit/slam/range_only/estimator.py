@@ -1,9 +1,10 @@
 """The range-only SLAM estimator: collects the run into a :class:`RangeOnlyProblem` (nodes at
 the reading times, odometry between them, ranges), then solves it in one batch at the end
 (:func:`~slamkit.slam.range_only.problem.solve_range_only`). Online, its estimate is dead
-reckoning; its result is the optimised path (a :class:`SmoothedTrajectory`) and the beacons
-with the data set's ids. It never reads the data set's known landmarks: the beacons are
-withheld by construction."""
+reckoning, or, with ``resolve_every_s > 0``, the latest of periodic warm-started solves of
+the run so far with the odometry since; its result is the optimised path (a
+:class:`SmoothedTrajectory`) and the beacons with the data set's ids. It never reads the
+data set's known landmarks: the beacons are withheld by construction."""
 
 from __future__ import annotations
 
@@ -50,6 +51,10 @@ class RangeOnlySlamConfig:
     """A beacon's first fix is taken once its standard deviation is at most this [m]."""
     max_iterations: int = 100
     """Levenberg-Marquardt iterations of the batch solve, at most."""
+    resolve_every_s: float = 0.0
+    """``0``: one batch solve at the end, dead reckoning online. ``T > 0``: also solve the
+    run so far every ``T`` seconds of data, each solve warm-started from the previous one,
+    and estimate online from the latest solution (the final solve too is warm-started)."""
 
     def __post_init__(self) -> None:
         for name in ("motion_cov_scale", "range_cov_scale", "robust_width", "init_max_sigma"):
@@ -57,6 +62,10 @@ class RangeOnlySlamConfig:
             if not (np.isfinite(value) and value > 0):
                 raise ConfigError(f"{name}: expected a number > 0, got {value}")
         _ = RobustKernel(self.robust_kernel, self.robust_width)
+        if not (np.isfinite(self.resolve_every_s) and self.resolve_every_s >= 0):
+            raise ConfigError(
+                f"resolve_every_s: expected a number >= 0, got {self.resolve_every_s}"
+            )
         if not self.max_iterations >= 1:
             raise ConfigError(
                 f"max_iterations: expected an integer >= 1, got {self.max_iterations}"
@@ -101,6 +110,12 @@ class RangeOnlySlam(EstimatorShell):
         self._stamps = [float(dataset.start_time)]
         self._anchors = [0]
         self._offsets: list[FloatArray] = [np.zeros(3)]
+        # the latest solution (resolve_every_s > 0): its node poses and beacons, and the
+        # online pose of the current node (chained from it with the odometry)
+        self._solved: RangeOnlySolution | None = None
+        self._solved_at = float(dataset.start_time)
+        self._node_online = self._pose.copy()
+        self._solves = 0
         super().__init__()
 
     # -- events -------------------------------------------------------------------------
@@ -125,6 +140,7 @@ class RangeOnlySlam(EstimatorShell):
             self._odo_cov.append(self._rel.cov.copy())
             self._node_t.append(float(event.t))
             self._node_pose.append(self._pose.copy())
+            self._node_online = compose(self._node_online, self._rel.pose)
             self._rel = GaussianBelief.from_pose(np.zeros(3))
             self._moved = False
         node = len(self._node_t) - 1
@@ -135,12 +151,20 @@ class RangeOnlySlam(EstimatorShell):
             self._r_node.append(node)
             self._r_id.append(int(b))
             self._r_z.append(float(z))
+        every = self._cfg.resolve_every_s
+        if every > 0 and event.t - self._solved_at >= every:
+            self._solved = self.solve()
+            self._solved_at = float(event.t)
+            self._solves += 1
+            self._node_online = self._solved.node_poses[-1].copy()
 
     def after_event(self, step: int) -> None:
         if not np.isfinite(self._pose).all():  # the shell stamps it with the step
             raise ConvergenceError("the dead-reckoned pose became non-finite")
 
     def estimate(self) -> PoseEstimate:
+        if self._cfg.resolve_every_s > 0:
+            return PoseEstimate(compose(self._node_online, self._rel.pose))
         return PoseEstimate(self._pose.copy())
 
     # -- the batch solve ----------------------------------------------------------------
@@ -160,10 +184,26 @@ class RangeOnlySlam(EstimatorShell):
         )
 
     def solve(self) -> RangeOnlySolution:
-        """The batch solution of :attr:`problem`."""
+        """The batch solution of :attr:`problem`: from the dead-reckoned path, or warm-started
+        from the latest solution (nodes since then chained on with the odometry)."""
+        problem = self.problem
         kernel = RobustKernel(self._cfg.robust_kernel, self._cfg.robust_width)
+        poses, beacons = None, None
+        last = self._solved
+        if last is not None:
+            m = last.node_poses.shape[0]
+            poses = problem.node_poses.copy()
+            poses[:m] = last.node_poses
+            for k in range(m, poses.shape[0]):  # X_k = X_{k-1} ⊕ U_{k-1,k}
+                poses[k] = compose(poses[k - 1], problem.odometry[k - 1])
+            beacons = {int(b): p for b, p in zip(last.beacon_ids, last.beacons, strict=True)}
         return solve_range_only(
-            self.problem, kernel, self._cfg.init_max_sigma, self._cfg.max_iterations
+            problem,
+            kernel,
+            self._cfg.init_max_sigma,
+            self._cfg.max_iterations,
+            initial_poses=poses,
+            initial_beacons=beacons,
         )
 
     def finish(self) -> EstimatorOutput:
@@ -182,7 +222,7 @@ class RangeOnlySlam(EstimatorShell):
             landmarks=landmarks,
             landmark_numbering=LandmarkIds.DATASET,
             trajectory=path,
-            diagnostics=_diagnostics(sol, self._unlabelled),
+            diagnostics=_diagnostics(sol, self._unlabelled, self._solves),
             warnings=_warnings(sol),
         )
 
@@ -208,7 +248,7 @@ def _warnings(sol: RangeOnlySolution) -> tuple[RunWarning, ...]:
     return tuple(out)
 
 
-def _diagnostics(sol: RangeOnlySolution, unlabelled: int) -> dict[str, object]:
+def _diagnostics(sol: RangeOnlySolution, unlabelled: int, solves: int) -> dict[str, object]:
     res = sol.optimizer
     out: dict[str, object] = {
         "nodes": int(sol.node_poses.shape[0]),
@@ -217,6 +257,7 @@ def _diagnostics(sol: RangeOnlySolution, unlabelled: int) -> dict[str, object]:
         "readings_of_unstarted_beacons": sol.readings_unfixed,
         "readings_unlabelled": unlabelled,
         "init_seconds": sol.init_seconds,
+        "solves": solves + 1,
         "beacon_starts": {
             str(b): {
                 "time_s": s.time,

@@ -29,6 +29,7 @@ starting from the dead-reckoned path and the fixes.
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -226,9 +227,17 @@ def range_only_graph(
 
 
 def solve_range_only(
-    problem: RangeOnlyProblem, kernel: RobustKernel, max_sigma: float, max_iterations: int = 100
+    problem: RangeOnlyProblem,
+    kernel: RobustKernel,
+    max_sigma: float,
+    max_iterations: int = 100,
+    *,
+    initial_poses: FloatArray | None = None,
+    initial_beacons: Mapping[int, FloatArray] | None = None,
 ) -> RangeOnlySolution:
-    """Start the beacons, build the graph, one batch solve from the dead-reckoned path."""
+    """Start the beacons, build the graph, one batch solve from the dead-reckoned path —
+    or from ``initial_poses (N, 3)`` and, for the beacons it names, ``initial_beacons`` (a
+    warm start from an earlier solution; other beacons start where they were started)."""
     t0 = time.perf_counter()
     starts = initialise_beacons(problem, kernel, max_sigma)
     t_init = time.perf_counter() - t0
@@ -250,7 +259,12 @@ def solve_range_only(
         robust=RobustConfig(kernel=kernel.name, width=kernel.width),
     )
     cfg = _with_iterations(cfg, max_iterations)
-    res = optimize(graph, cfg, initial_poses=graph.poses, initial_landmarks=graph.landmarks)
+    poses = graph.poses if initial_poses is None else np.asarray(initial_poses, np.float64)
+    beacons = graph.landmarks.copy()
+    for row, b in enumerate(ids):
+        if initial_beacons is not None and int(b) in initial_beacons:
+            beacons[row] = initial_beacons[int(b)]
+    res = optimize(graph, cfg, initial_poses=poses, initial_landmarks=beacons)
     marg = marginal_covariances(graph, res, landmark_ids=graph.landmark_ids, config=cfg)
     return RangeOnlySolution(
         node_poses=res.poses,
