@@ -9,10 +9,13 @@ turn its mirror image 6 m to the right fits the ranges as well as itself.
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
+from slamkit.cli.main import app
 from slamkit.datasets import Dataset
 from slamkit.datasets.stream import LandmarkReadings
 from slamkit.errors import ConfigError, InputError
@@ -235,3 +238,21 @@ def test_periodic_solves_track_online_and_end_at_the_batch_optimum(solved) -> No
             batch.output.landmarks.landmarks.positions,
             atol=0.01,
         )
+
+
+def test_slamkit_run_range_only_slam_writes_a_scored_run(tmp_path) -> None:
+    """The registered estimator through the command line, on the registered range-only
+    world (8 m range, 120° view): the standard files, the beacons scored against the truth
+    (measured seed 1: ATE 0.130 m aligned, 5 of 5 beacons, 0.107 m)."""
+    out = tmp_path / "run"
+    res = CliRunner().invoke(
+        app,
+        ["run", "range-only-slam", "--data", "five-features-range", "--seed", "1",
+         "--out", str(out), "--no-plots"],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["ate"]["rmse"] < 0.2
+    assert metrics["landmarks"]["n_matched"] == 5 and metrics["landmarks"]["rmse"] < 0.15
+    assert metrics["diagnostics"]["beacons_started"] == 5
+    assert (out / "landmarks.csv").exists() and (out / "trajectory.tum").exists()
