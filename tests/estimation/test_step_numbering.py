@@ -36,6 +36,7 @@ DATA = {
     "laser-odometry": "rooms-laser",
     "graph-slam": "rooms-laser",
     "grid-rbpf": "rooms-laser",
+    "range-only-slam": "five-features-range",
 }
 """The simulated world each estimator runs on (default: five-features)."""
 

@@ -225,6 +225,15 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             requires=("motion", "landmark_sensor"),
             work="readings",
         ),
+        EstimatorEntry(
+            "range-only-slam",
+            "range-only SLAM: beacons at unknown positions started from the ranges along the "
+            "path (mirror ambiguity kept until it resolves), one robust batch solve",
+            "slamkit.slam.range_only:RangeOnlySlam",
+            "slamkit.slam.range_only:RangeOnlySlamConfig",
+            requires=("motion", "landmark_sensor"),
+            work="readings",
+        ),
     )
 }
 
