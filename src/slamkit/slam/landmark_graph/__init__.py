@@ -20,7 +20,9 @@ from slamkit.slam.landmark_graph.solve import (
     LandmarkGraphConfig,
     antenna_positions,
     fuse_gps,
+    fused_start,
     solve_fused,
+    solve_unfused,
     without_gps,
 )
 
@@ -33,7 +35,9 @@ __all__ = [
     "antenna_positions",
     "build_landmark_graph",
     "fuse_gps",
+    "fused_start",
     "odometry_segments",
     "solve_fused",
+    "solve_unfused",
     "without_gps",
 ]

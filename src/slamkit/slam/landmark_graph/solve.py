@@ -35,7 +35,9 @@ __all__ = [
     "LandmarkGraphConfig",
     "antenna_positions",
     "fuse_gps",
+    "fused_start",
     "solve_fused",
+    "solve_unfused",
     "without_gps",
 ]
 
@@ -145,7 +147,10 @@ def _solution(
     )
 
 
-def _solve_unfused(built: LandmarkGraph, config: LandmarkGraphConfig) -> GraphSolution:
+def solve_unfused(built: LandmarkGraph, config: LandmarkGraphConfig | None = None) -> GraphSolution:
+    """Solve ``built`` without its fixes (:func:`without_gps`), started by solves over growing
+    prefixes (module docstring, step 1)."""
+    config = config or LandmarkGraphConfig()
     t0 = time.perf_counter()
     res = optimize(without_gps(built), replace(config.optimizer, initialization="grow"))
     return _solution(built, res, None, 1, res.iterations, time.perf_counter() - t0)
@@ -221,17 +226,23 @@ def fuse_gps(
         measurement_cov_scale=cfg.measurement_cov_scale,
     )
     build_seconds = time.perf_counter() - t0
-    unfused = _solve_unfused(built, cfg)
-    start = _gps_frame_start(built, unfused.poses)
-    # The map follows its poses: re-place each landmark by the same transform.
+    unfused = solve_unfused(built, cfg)
+    poses, landmarks = fused_start(built, unfused)
+    fused = solve_fused(built, poses, landmarks, cfg)
+    return FusionResult(built, unfused, fused, build_seconds)
+
+
+def fused_start(built: LandmarkGraph, unfused: GraphSolution) -> tuple[FloatArray, FloatArray]:
+    """The fused solve's start (module docstring, step 2): ``unfused`` moved into the GPS
+    frame, its landmarks with it, the lever arm at the graph's initial value; rows as
+    ``graph.pose_ids`` / ``graph.landmark_ids``."""
     g = built.graph
+    start = _gps_frame_start(built, unfused.poses)
     lm_start = np.array(g.landmarks, copy=True)
     keep = g.landmark_ids != built.lever_id
     order = np.searchsorted(unfused.landmark_ids, g.landmark_ids[keep])
-    moved = _moved_points(unfused.poses, start, unfused.landmarks[order])
-    lm_start[keep] = moved
-    fused = solve_fused(built, start, lm_start, cfg)
-    return FusionResult(built, unfused, fused, build_seconds)
+    lm_start[keep] = _moved_points(unfused.poses, start, unfused.landmarks[order])
+    return start, lm_start
 
 
 def _moved_points(before: FloatArray, after: FloatArray, points: FloatArray) -> FloatArray:
