@@ -49,6 +49,12 @@ def test_landmark_graph_on_the_simulated_loop(tmp_path: Path) -> None:
     assert poses.shape == (metrics["unfused"]["poses"], 3)
     refused = runner.invoke(app, ["landmark-graph", "--data", "landmark-loop", "--out", str(out)])
     assert refused.exit_code == 1 and "no GPS track" in refused.output
+    typo = runner.invoke(
+        app, ["landmark-graph", "--data", "landmark-loop", "--weighting", "tukey", "--out",
+              str(tmp_path / "typo")],
+    )  # fmt: skip
+    assert typo.exit_code == 1 and "weighting: expected one of" in typo.output
+    assert not (tmp_path / "typo").exists()
 
 
 @pytest.mark.realdata

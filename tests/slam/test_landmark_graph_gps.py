@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from slamkit.errors import InputError
+from slamkit.errors import ConfigError, InputError
 from slamkit.optim import optimize
 from slamkit.optim.gps import GpsWeighting, reweight
 from slamkit.optim.marginals import marginal_covariances
@@ -103,3 +103,23 @@ def test_readings_without_ids_are_refused() -> None:
     ds = build_landmark_clutter({}, seed=1)  # its readings come without ids
     with pytest.raises(InputError, match="without a landmark id"):
         build_landmark_graph(ds)
+
+
+def test_gps_fixes_are_checked() -> None:
+    t = np.arange(20.0)
+    xy = np.zeros((20, 2))
+    fixes = GpsFixes(t, xy, holdout_every=10)
+    np.testing.assert_array_equal(np.flatnonzero(fixes.held_out), [9, 19])
+    assert not GpsFixes(t, xy).held_out.any()
+    with pytest.raises(InputError, match="increasing"):
+        GpsFixes(t[::-1], xy)
+    bad = xy.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(InputError, match="NaN"):
+        GpsFixes(t, bad)
+    with pytest.raises(InputError, match="positions"):
+        GpsFixes(t, xy[:5])
+    with pytest.raises(ConfigError, match="sigma"):
+        GpsFixes(t, xy, sigma=0.0)
+    with pytest.raises(ConfigError, match="holdout_every"):
+        GpsFixes(t, xy, holdout_every=1)
