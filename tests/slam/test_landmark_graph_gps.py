@@ -123,3 +123,24 @@ def test_gps_fixes_are_checked() -> None:
         GpsFixes(t, xy, sigma=0.0)
     with pytest.raises(ConfigError, match="holdout_every"):
         GpsFixes(t, xy, holdout_every=1)
+
+
+def test_fixes_with_their_own_covariances() -> None:
+    """A fix's own covariance becomes its edge's information; a wrong shape or a matrix that
+    is not positive definite is refused."""
+    ds, gps, _ = _drive_with_gps(1)
+    m = gps.times.shape[0]
+    cov = np.tile(np.diag([0.09, 0.25]), (m, 1, 1))
+    own = GpsFixes(gps.times, gps.positions, covariances=cov, holdout_every=10)
+    built = build_landmark_graph(ds, gps=own)
+    edges = next(e for e in built.graph.edges if e.kind == "gps")
+    assert len(edges) == int(built.fix_in_graph.sum()) == m - m // 10
+    np.testing.assert_allclose(
+        edges.information, np.tile(np.diag([1 / 0.09, 1 / 0.25]), (len(edges), 1, 1))
+    )
+    with pytest.raises(InputError, match="covariances"):
+        GpsFixes(gps.times, gps.positions, covariances=cov[:3])
+    bad = cov.copy()
+    bad[2] = np.diag([0.1, -0.1])
+    with pytest.raises(InputError, match="covariances"):
+        GpsFixes(gps.times, gps.positions, covariances=bad)

@@ -30,8 +30,8 @@ association as given (the readings' ids): a data set without ids is refused.
 
 **GPS** (:class:`GpsFixes`, optional). Each fix not held out is a ``gps`` edge (a
 :mod:`slamkit.optim.gps` factor) from its node to the lever-arm variable, with covariance
-``sigma² I``; ``holdout_every = k`` keeps every ``k``-th fix (``k - 1``, ``2k - 1``, …) out of
-the graph for scoring.
+``sigma² I`` or the fix's own; ``holdout_every = k`` keeps every ``k``-th fix (``k - 1``,
+``2k - 1``, …) out of the graph for scoring.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from typing import cast
 import numpy as np
 from numpy.typing import NDArray
 
-from slamkit._validation import FloatArray
+from slamkit._validation import FloatArray, as_covariance
 from slamkit.datasets.stream import Control, Dataset, LandmarkReadings
 from slamkit.errors import ConfigError, InputError
 from slamkit.geometry.angles import wrap_angle
@@ -69,6 +69,9 @@ class GpsFixes:
     """Keep every ``k``-th fix out of the graph (0: use all)."""
     lever_arm: tuple[float, float] = (0.0, 0.0)
     """Initial lever arm (antenna in the robot frame) [m]; estimated by the graph."""
+    covariances: FloatArray | None = None
+    """Each fix's own covariance ``(M, 2, 2)`` [m²] (a receiver's reported accuracy), used
+    instead of ``sigma² I`` when given."""
 
     def __post_init__(self) -> None:
         t = np.asarray(self.times, dtype=np.float64)
@@ -85,6 +88,18 @@ class GpsFixes:
             raise ConfigError(f"gps holdout_every: expected 0 or >= 2, got {self.holdout_every}")
         object.__setattr__(self, "times", t)
         object.__setattr__(self, "positions", p)
+        if self.covariances is not None:
+            cov = as_covariance(self.covariances, "gps covariances", 2)
+            if cov.shape != (t.shape[0], 2, 2):
+                raise InputError(f"gps covariances: expected ({t.shape[0]}, 2, 2), got {cov.shape}")
+            object.__setattr__(self, "covariances", cov)
+
+    def information(self) -> FloatArray:
+        """The information ``Σ⁻¹`` of every fix ``(M, 2, 2)``."""
+        m = self.times.shape[0]
+        if self.covariances is None:
+            return np.tile(np.eye(2) / float(self.sigma) ** 2, (m, 1, 1))
+        return np.asarray(np.linalg.inv(self.covariances), dtype=np.float64)
 
     @property
     def held_out(self) -> NDArray[np.bool_]:
@@ -308,7 +323,7 @@ def build_landmark_graph(
                 fix_nodes[in_graph],
                 np.full(k, lever_id, dtype=np.int64),
                 gps.positions[in_graph],
-                np.tile(np.eye(2) / float(gps.sigma) ** 2, (k, 1, 1)).astype(np.float64),
+                gps.information()[in_graph],
                 np.zeros(k, dtype=np.int64),
             )
         )
