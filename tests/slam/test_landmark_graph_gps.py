@@ -144,3 +144,12 @@ def test_fixes_with_their_own_covariances() -> None:
     bad[2] = np.diag([0.1, -0.1])
     with pytest.raises(InputError, match="covariances"):
         GpsFixes(gps.times, gps.positions, covariances=bad)
+
+
+def test_fusion_needs_fixes_in_the_graph() -> None:
+    """Fixes all before the drive (outside the controls' span): a one-line error, not a
+    solve of a graph without its frame."""
+    ds, gps, _ = _drive_with_gps(1)
+    early = GpsFixes(gps.times - 1e4, gps.positions)
+    with pytest.raises(InputError, match="fewer than two GPS fixes"):
+        fuse_gps(ds, early)

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset
+from slamkit.errors import InputError
 from slamkit.geometry.alignment import align_points_2d
 from slamkit.optim import OptimizerConfig, OptimizeResult, optimize
 from slamkit.optim.data import GraphData
@@ -81,6 +82,7 @@ class GraphSolution:
     chi2: float
     """χ² of the final solve (fixes at their final weights)."""
     converged: bool
+    """The last solve converged and (with GPS) the weights settled within ``max_rounds``."""
     seconds: float
     """Wall time of the solves (building not included)."""
 
@@ -127,6 +129,7 @@ def _solution(
     rounds: int,
     iterations: int,
     seconds: float,
+    settled: bool = True,
 ) -> GraphSolution:
     lm_keep = res.landmark_ids != built.lever_id
     lever = None
@@ -142,7 +145,7 @@ def _solution(
         rounds=rounds,
         iterations=iterations,
         chi2=res.cost,
-        converged=res.converged,
+        converged=res.converged and settled,
         seconds=seconds,
     )
 
@@ -158,7 +161,7 @@ def solve_unfused(built: LandmarkGraph, config: LandmarkGraphConfig | None = Non
 
 def _gps_frame_start(built: LandmarkGraph, poses: FloatArray) -> FloatArray:
     """``poses`` moved into the GPS frame (module docstring, step 2)."""
-    gps = next(e for e in built.graph.edges if e.kind == "gps")
+    gps = built.graph.edges[_gps_edges(built)]
     src = poses[gps.i, :2]
     dst = gps.measurement
     w = np.ones(src.shape[0])
@@ -181,7 +184,7 @@ def solve_fused(
     fixes between solves until no weight moves by more than ``weighting.tolerance``."""
     cfg = config or LandmarkGraphConfig()
     g = built.graph
-    k_gps = next(k for k, e in enumerate(g.edges) if e.kind == "gps")
+    k_gps = _gps_edges(built)
     base = g.edges[k_gps]
     lever_row = int(np.flatnonzero(g.landmark_ids == built.lever_id)[0])
     opt = replace(cfg.optimizer, initialization="vertices")
@@ -191,6 +194,7 @@ def solve_fused(
     iterations = 0
     rounds = 0
     res: OptimizeResult | None = None
+    settled = False
     while rounds < cfg.weighting.max_rounds:
         rounds += 1
         edges = list(g.edges)
@@ -200,6 +204,7 @@ def solve_fused(
         iterations += res.iterations
         poses, landmarks = res.poses, res.landmarks
         if cfg.weighting.name == "none":
+            settled = True
             break
         lever = landmarks[lever_row]
         s = whitened_squares(poses[base.i], lever, base.measurement, base.information)
@@ -207,9 +212,23 @@ def solve_fused(
         moved = float(np.max(np.abs(new - weights))) if new.size else 0.0
         weights = new
         if moved <= cfg.weighting.tolerance:
+            settled = True
             break
     assert res is not None
-    return _solution(built, res, weights, rounds, iterations, time.perf_counter() - t0)
+    seconds = time.perf_counter() - t0
+    return _solution(built, res, weights, rounds, iterations, seconds, settled)
+
+
+def _gps_edges(built: LandmarkGraph) -> int:
+    """Index of the graph's ``gps`` edge set; :class:`InputError` unless it holds at least
+    two fixes (fewer do not place the graph in the GPS frame)."""
+    for k, e in enumerate(built.graph.edges):
+        if e.kind == "gps" and len(e) >= 2:
+            return k
+    raise InputError(
+        f"{built.graph.source or 'the graph'}: fewer than two GPS fixes in the graph (none "
+        "given, all held out, or all outside the controls' time span)"
+    )
 
 
 def fuse_gps(
