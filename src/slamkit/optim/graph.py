@@ -379,8 +379,8 @@ class GraphProblem:
             raise InputError("the graph has no variables")
         src, dst = [alias], [np.arange(n_p)]  # aliases join their representative
         anchored = fixed.copy()
-        for _es, a, b, b_lm in blocks_raw:
-            if b is None or _es.kind == "gps":
+        for es, a, b, b_lm in blocks_raw:
+            if b is None or es.kind == "gps":
                 anchored[a] = True  # a prior (or a GPS fix) fixes the gauge of its component
             if b is None:
                 continue
