@@ -29,6 +29,7 @@ from slamkit.cli.compare_cmd import compare_command
 from slamkit.cli.config_cmd import config_app
 from slamkit.cli.data_cmd import data_app
 from slamkit.cli.eval_cmd import eval_app
+from slamkit.cli.landmark_graph_cmd import landmark_graph_command
 from slamkit.cli.map_cmd import map_app
 from slamkit.cli.optimize_cmd import optimize_command
 from slamkit.cli.sweep_cmd import sweep_app
@@ -326,6 +327,7 @@ def demo_command(
 
 app.command("optimize")(optimize_command)
 app.command("compare")(compare_command)
+app.command("landmark-graph")(landmark_graph_command)
 
 
 @app.command("estimators")

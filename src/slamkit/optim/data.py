@@ -35,6 +35,7 @@ EdgeKind = Literal[
     "range_bearing",  # (range, bearing) of landmark j from pose i; information (E, 2, 2)
     "range",  # range from pose i to landmark j, measurement (E, 1); information (E, 1, 1)
     "bearing",  # bearing of landmark j from pose i, measurement (E, 1); information (E, 1, 1)
+    "gps",  # fix (x, y) of the antenna at lever arm j (a 2D point) of pose i; info (E, 2, 2)
 ]
 
 GraphFamily = Literal["g2o", "toro", "isam", "gtsam", "memory"]

@@ -34,7 +34,7 @@ import scipy.sparse
 import scipy.sparse.csgraph
 
 from slamkit.errors import CovarianceError, GeometryError, InputError, NonFiniteError, ShapeError
-from slamkit.optim import factors, factors3d
+from slamkit.optim import factors, factors3d, gps
 from slamkit.optim.data import EdgeSet, FloatArray, GraphData, IntArray
 from slamkit.optim.linearization import Linearization, WeightedBlock, normal_equations
 from slamkit.optim.robust import RobustKernel, robust_rho_and_weight
@@ -55,9 +55,10 @@ _KINDS: dict[str, tuple[int, int, str | None]] = {
     "range_bearing": (2, 2, "landmark"),
     "range": (1, 1, "landmark"),
     "bearing": (1, 1, "landmark"),
+    "gps": (2, 2, "landmark"),  # the lever arm is a point of the landmark block (optim.gps)
 }
 _KINDS_3D = ["se3", "se3_prior"]
-_PRIOR_KINDS = ("se2_prior", "se3_prior")
+_PRIOR_KINDS = ("se2_prior", "se3_prior", "gps")  # "gps": absolute, fixes the gauge
 
 
 def edge_location(data: GraphData, edges: EdgeSet, k: int) -> str:
@@ -378,9 +379,10 @@ class GraphProblem:
             raise InputError("the graph has no variables")
         src, dst = [alias], [np.arange(n_p)]  # aliases join their representative
         anchored = fixed.copy()
-        for _es, a, b, b_lm in blocks_raw:
+        for es, a, b, b_lm in blocks_raw:
+            if b is None or es.kind == "gps":
+                anchored[a] = True  # a prior (or a GPS fix) fixes the gauge of its component
             if b is None:
-                anchored[a] = True  # a prior fixes the gauge of its component
                 continue
             src.append(a)
             dst.append(b + n_p if b_lm else b)
@@ -548,6 +550,7 @@ class GraphProblem:
                 "range_bearing": factors.range_bearing_error,
                 "range": factors.range_error,
                 "bearing": factors.bearing_error,
+                "gps": gps.gps_error,
             }[blk.kind]
             e, Ja, Jb = fn(xa, landmarks[blk.b], z)
         if blk.batch_first:

@@ -1,0 +1,43 @@
+"""Landmark SLAM as a factor graph (GraphSLAM) over a landmark data set, with GPS fusion.
+
+* :mod:`~slamkit.slam.landmark_graph.build`: the graph of a data set (odometry integrated
+  between nodes, associated range-bearing readings, GPS fixes at nodes of their own times).
+* :mod:`~slamkit.slam.landmark_graph.solve`: solving it without and with the fixes, the fixes
+  re-weighted against outliers (:mod:`slamkit.optim.gps`).
+
+Derivations and measurements on Victoria Park: ``docs/estimators/gps.md``.
+"""
+
+from slamkit.slam.landmark_graph.build import (
+    GpsFixes,
+    LandmarkGraph,
+    build_landmark_graph,
+    odometry_segments,
+)
+from slamkit.slam.landmark_graph.solve import (
+    FusionResult,
+    GraphSolution,
+    LandmarkGraphConfig,
+    antenna_positions,
+    fuse_gps,
+    fused_start,
+    solve_fused,
+    solve_unfused,
+    without_gps,
+)
+
+__all__ = [
+    "FusionResult",
+    "GpsFixes",
+    "GraphSolution",
+    "LandmarkGraph",
+    "LandmarkGraphConfig",
+    "antenna_positions",
+    "build_landmark_graph",
+    "fuse_gps",
+    "fused_start",
+    "odometry_segments",
+    "solve_fused",
+    "solve_unfused",
+    "without_gps",
+]
