@@ -156,6 +156,7 @@ class LaserGraphSlam(EstimatorShell):
         self._pending = 0  # closures added since the last optimisation
         self._waiting: list[tuple[int, int, LoopMatch]] = []  # verified, no partner yet
         self._confirmed: list[tuple[int, int, LoopMatch]] = []  # recent ones in the graph
+        self._doubted = np.zeros(0, dtype=bool)  # per keyframe: its chain edge doubted
         self._refused: list[RefusedClosure] = []  # by the Δχ² check, recently
         self._last_solve = 0  # the keyframe count at the last optimisation
         # (stamp, keyframe index or -1 for the start pose, offset) of every time stamp.
@@ -308,6 +309,9 @@ class LaserGraphSlam(EstimatorShell):
         if k > 0:
             z, info, matched = self._tracker.edge()
             self._graph.add_edge(k - 1, k, z, info, "odometry")
+            if self._tracker.doubt > 0.0:
+                self._doubted = np.append(self._doubted, np.zeros(k + 1 - self._doubted.size, bool))
+                self._doubted[k] = True
             self._counts["odometry_edges" if not matched else "matched_edges"] += 1
             travelled = self._keys[-1].travelled + math.hypot(z[0], z[1])
         self._keys.append(Keyframe(event.t, points, reference, travelled))
@@ -427,7 +431,10 @@ class LaserGraphSlam(EstimatorShell):
         near = [
             w
             for w in [*self._waiting, *self._confirmed]
-            if abs(w[0] - j) <= PAIR_KEYFRAMES and 0 < k - w[1] <= PAIR_KEYFRAMES
+            if abs(w[0] - j) <= PAIR_KEYFRAMES
+            and 0 < k - w[1] <= PAIR_KEYFRAMES
+            and not self._doubt_between(w[0], j)
+            and not self._doubt_between(w[1], k)
         ]
         agree = consistent_partners(
             poses, (j, k, found.pose), [(w[0], w[1], w[2].pose) for w in near]
@@ -446,6 +453,13 @@ class LaserGraphSlam(EstimatorShell):
             if w in self._waiting:
                 self._waiting.remove(w)
         self._confirmed = [*self._confirmed[-4 * PAIR_KEYFRAMES :], *partners, new]
+
+    def _doubt_between(self, a: int, b: int) -> bool:
+        """Whether a chain edge between keyframes ``a`` and ``b`` was doubted (a standstill
+        the laser could not confirm, :attr:`Tracker.doubt`): a cycle through it agrees with
+        a closure shifted along the robot's way, so it confirms nothing."""
+        lo, hi = min(a, b) + 1, max(a, b) + 1
+        return bool(self._doubted[lo:hi].any())
 
     def _optimize(self) -> None:
         kinds = self._graph.edge_kinds()
@@ -496,6 +510,7 @@ class LaserGraphSlam(EstimatorShell):
             "odometry_overridden": len(self._overrides),
             "odometry_overrides": override_rows(self._overrides),
             "odometry_stalls": c["stalled"],
+            "standstills_doubted": c["standstill_doubted"],
             "lost": c["lost"],
             "transient_points": c["transient_points"],
             "odometry_edges": c["odometry_edges"],
