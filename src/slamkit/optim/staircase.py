@@ -73,9 +73,10 @@ from slamkit.optim.certificate import (
 )
 from slamkit.optim.data import FloatArray, GraphData
 from slamkit.optim.graph import GraphProblem
-from slamkit.optim.sparse import Factorizer, LinearSolverName, SingularSystem, factor_spd
+from slamkit.optim.sparse import LinearSolverName, SingularSystem, factor_spd
 
 __all__ = [
+    "LiftedProblem",
     "RankStep",
     "StaircaseConfig",
     "StaircaseResult",
@@ -187,15 +188,26 @@ class StaircaseResult:
         }
 
 
-class _Lifted:
-    """``F``, its Riemannian gradient and Hessian on ``St(d, r)^n`` in the module's terms.
+class LiftedProblem:
+    """``F(Y) = tr(Y Q Yᵀ)``, its Riemannian gradient and Hessian on ``St(d, r)^n``
+    (module docstring). A point is ``(n, r, d)`` blocks ``Y_i``; tangent vectors have the
+    same shape."""
 
-    A point is ``(n, r, d)`` blocks ``Y_i``; tangent vectors have the same shape."""
-
-    def __init__(self, q: SchurQ, precond: Factorizer):
-        self.q, self.precond = q, precond
-        self.n, self.d = q.mats.n, q.mats.dim
-        self.m = q.mats.laplacian.shape[0]
+    def __init__(self, q: SchurQ, q_norm: float):
+        """``q``: the data matrix's products; ``q_norm``: ``‖Q‖₂`` (sets the preconditioner's
+        shift ``ε = 1e-6 ‖Q‖₂``)."""
+        mats = q.mats
+        self.q = q
+        self.n, self.d = mats.n, mats.dim
+        self.m = mats.laplacian.shape[0]
+        shift = np.r_[np.zeros(self.m), np.full(self.d * self.n, _PRECONDITIONER_SHIFT * q_norm)]
+        k = scipy.sparse.bmat(
+            [[mats.laplacian, mats.coupling], [mats.coupling.T, mats.rotation]], format="csc"
+        ) + scipy.sparse.diags(shift, format="csc")
+        try:  # Schur complement Q + εI ≻ 0 and L_r ≻ 0: only a broken graph fails here
+            self.precond = factor_spd(k, q.solver)
+        except SingularSystem as exc:
+            raise InputError("staircase: the preconditioner's matrix does not factor") from exc
 
     def _right(self, y: FloatArray, op: Callable[[FloatArray], FloatArray]) -> FloatArray:
         """``(Y A)`` blockwise for a symmetric dn x dn operator ``A`` applied to ``Yᵀ``."""
@@ -208,7 +220,19 @@ class _Lifted:
         return self._right(y, self.q)
 
     def objective(self, y: FloatArray) -> float:
-        return float(np.sum(y * self.q_right(y)))  # tr(Y Q Yᵀ)
+        """``F(Y) = tr(Y Q Yᵀ)``."""
+        return float(np.sum(y * self.q_right(y)))
+
+    def gradient(self, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``grad F = 2 Y S`` and the multipliers ``Λ_i = sym(Y_iᵀ (Y Q)_i)`` it used."""
+        yq = self.q_right(y)
+        yy = np.swapaxes(y, 1, 2) @ yq
+        lam = 0.5 * (yy + np.swapaxes(yy, 1, 2))
+        return 2.0 * (yq - y @ lam), lam  # 2 P_Y(Y Q) = 2 (Y Q - Y Λ), tangent already
+
+    def hessian(self, y: FloatArray, lam: FloatArray, eta: FloatArray) -> FloatArray:
+        """``Hess F[η] = 2 P_Y(η S) = 2 P_Y(η Q - η Λ)`` (``lam`` from :meth:`gradient`)."""
+        return self.project(y, 2.0 * (self.q_right(eta) - eta @ lam))
 
     @staticmethod
     def project(y: FloatArray, z: FloatArray) -> FloatArray:
@@ -228,7 +252,8 @@ class _Lifted:
 
     @staticmethod
     def retract(y: FloatArray, eta: FloatArray) -> FloatArray:
-        """Each block ``Y_i + η_i`` replaced by its polar factor ``U Vᵀ``."""
+        """Each block ``Y_i + η_i`` replaced by its polar factor ``U Vᵀ`` (a second-order
+        retraction)."""
         u, _, vt = np.linalg.svd(y + eta, full_matrices=False)
         return np.asarray(u @ vt)
 
@@ -238,7 +263,7 @@ def _inner(a: FloatArray, b: FloatArray) -> float:
 
 
 def _trust_region(
-    f: _Lifted, y: FloatArray, grad_tol: float, max_iterations: int, radius0: float
+    f: LiftedProblem, y: FloatArray, grad_tol: float, max_iterations: int, radius0: float
 ) -> tuple[FloatArray, int, float]:
     """Riemannian trust region with preconditioned truncated CG from ``y``: the point, the
     iterations and the final gradient norm (module docstring)."""
@@ -247,17 +272,14 @@ def _trust_region(
     it = 0
     gnorm = np.inf
     while it < max_iterations:
-        yq = f.q_right(y)
-        yy = np.swapaxes(y, 1, 2) @ yq
-        lam = 0.5 * (yy + np.swapaxes(yy, 1, 2))  # Λ_i = sym(Y_iᵀ (Y Q)_i)
-        grad = 2.0 * (yq - y @ lam)  # 2 Y S (tangent already)
+        grad, lam = f.gradient(y)
         gnorm = np.sqrt(_inner(grad, grad))
         if gnorm <= grad_tol:
             break
         it += 1
 
         def hess(eta: FloatArray, y: FloatArray = y, lam: FloatArray = lam) -> FloatArray:
-            return f.project(y, 2.0 * (f.q_right(eta) - eta @ lam))  # 2 P_Y(Ẏ S)
+            return f.hessian(y, lam, eta)
 
         eta, h_eta, boundary = _truncated_cg(f, y, grad, hess, radius)
         predicted = -(_inner(grad, eta) + 0.5 * _inner(eta, h_eta))
@@ -280,7 +302,7 @@ def _trust_region(
 
 
 def _truncated_cg(
-    f: _Lifted,
+    f: LiftedProblem,
     y: FloatArray,
     grad: FloatArray,
     hess: Callable[[FloatArray], FloatArray],
@@ -325,7 +347,7 @@ def _truncated_cg(
     return eta, h_eta, False
 
 
-def _escape(f: _Lifted, y: FloatArray, vector: FloatArray, lam: float) -> FloatArray:
+def _escape(f: LiftedProblem, y: FloatArray, vector: FloatArray, lam: float) -> FloatArray:
     """Rank ``r`` → ``r + 1`` along the eigenvector ``v`` of ``λ_min(S) < 0``: ``[Y; 0]`` moved
     along the new row ``vᵀ`` by the first ``α = √n / 2^k`` that lowers ``F`` by
     ``10⁻⁴ α² |λ|``."""
@@ -407,16 +429,7 @@ def riemannian_staircase(
     mats = sesync_matrices(data, problem.pose_ids)
     q = SchurQ(mats, linear_solver)
     q_norm = q.norm()
-    m = mats.laplacian.shape[0]
-    shift = np.r_[np.zeros(m), np.full(d * n, _PRECONDITIONER_SHIFT * q_norm)]
-    k = scipy.sparse.bmat(
-        [[mats.laplacian, mats.coupling], [mats.coupling.T, mats.rotation]], format="csc"
-    ) + scipy.sparse.diags(shift, format="csc")
-    try:
-        precond = factor_spd(k, linear_solver)
-    except SingularSystem as exc:  # Q ⪰ 0 and L_r ≻ 0 make it ≻ 0: only a broken graph fails
-        raise InputError("staircase: the preconditioner's matrix does not factor") from exc
-    f = _Lifted(q, precond)
+    f = LiftedProblem(q, q_norm)
     grad_tol = cfg.gradient_rtol * q_norm * np.sqrt(d * n)
     radius0 = 0.1 * np.sqrt(q_norm * d * n)  # a turn of ~0.1 rad at every pose, in the P⁻¹ norm
     start_rots = rotation_blocks(p, d)
