@@ -155,3 +155,33 @@ def test_staircase_is_skipped_when_already_certified_and_needs_certify(tmp_path:
     assert res.exit_code == 1 and len(lines) == 1, res.output
     assert "add --certify" in lines[0]
     assert not (tmp_path / "x").exists()
+
+
+def test_staircase_not_certified_keeps_the_optimisers_poses(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With the staircase stopped at rank 2 (below the 4 the winding minimum needs) nothing
+    is certified: metrics.json records it with ``written: false`` and the graph file holds
+    LM's poses, as a note says."""
+    import slamkit.app.optimize as job
+    from slamkit.optim import StaircaseConfig, riemannian_staircase
+
+    def rank_two(data: GraphData, poses: np.ndarray) -> object:
+        return riemannian_staircase(data, poses, StaircaseConfig(max_rank=2))
+
+    monkeypatch.setattr(job, "riemannian_staircase", rank_two)
+    src, graph = _ring_file(tmp_path, winding=True)
+    res = runner.invoke(
+        app, ["optimize", str(src), "--out", str(tmp_path / "o"), "--objective", "sesync",
+              "--certify", "--staircase", "--init", "file", "--no-plots"],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    metrics = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    stair = metrics["staircase"]
+    assert not stair["certified"] and stair["written"] is False
+    assert stair["final_rank"] == 2 and stair["ranks_climbed"] == 0
+    written = read_graph(tmp_path / "o" / "optimized.g2o").poses
+    assert sesync_objective(graph, written) == pytest.approx(
+        metrics["sesync_objective_final"], rel=1e-9
+    )
+    assert "the optimiser's poses are written" in res.output

@@ -30,9 +30,9 @@ Files written (``OUT`` the output folder):
   ``gap``, ``poses``, ``seconds``). With ``staircase`` as well, when that certificate fails:
   ``staircase`` (:class:`~slamkit.optim.StaircaseResult`: ``certified``, ``objective`` = the
   certified ``F*``, ``relaxation_objective``, ``ranks_climbed``, ``final_rank``, each rank's
-  ``steps``, the rounded poses' ``certificate``, ``seconds``, and ``chi2`` of those poses);
-  the graph file and ``graph.png`` then hold the staircase's poses (the other ``*_final``
-  keys stay LM's).
+  ``steps``, the rounded poses' ``certificate``, ``seconds``, ``chi2`` of those poses and
+  ``written``); when it certifies, the graph file and ``graph.png`` hold the staircase's
+  poses (the other ``*_final`` keys stay LM's), else LM's.
 * ``config.json`` — the resolved options and the full optimiser configuration
   (``optimizer``: :class:`~slamkit.optim.OptimizerConfig` with its sections as nested
   objects, readable by :func:`~slamkit.config.config_from_mapping`).
@@ -418,22 +418,29 @@ def _figure(
 
 
 def _staircase(
-    data: GraphData, result: OptimizeResult, metrics: dict[str, Any]
+    data: GraphData, result: OptimizeResult, output: _Output, metrics: dict[str, Any]
 ) -> tuple[OptimizeResult, _Output]:
-    """The staircase from ``result``'s refused poses: its record in ``metrics`` and the
-    result and output that carry its poses."""
+    """The staircase from ``result``'s refused poses, recorded in ``metrics``; when it
+    certifies, the result and output that carry its poses, else the given ones (an
+    uncertified rounding is no better evidence than LM's answer)."""
     sc = riemannian_staircase(data, result.poses)
     chi2 = g2o_chi2(data, sc.poses, result.landmarks)
-    metrics["staircase"] = {**sc.as_dict(), "chi2": chi2}
-    result = dataclasses.replace(
-        result, poses=sc.poses, sesync_objective=sc.objective, g2o_chi2=chi2
-    )
-    output = _output(data, result)
-    verdict = "certified globally optimal" if sc.certified else "not certified"
-    note = (
-        f"the solution was not certified; the Riemannian staircase's poses are written "
-        f"(F = {sc.objective:.6g}, {verdict}, rank {sc.steps[-1].rank})"
-    )
+    metrics["staircase"] = {**sc.as_dict(), "chi2": chi2, "written": sc.certified}
+    rank = sc.steps[-1].rank
+    if sc.certified:
+        result = dataclasses.replace(
+            result, poses=sc.poses, sesync_objective=sc.objective, g2o_chi2=chi2
+        )
+        output = _output(data, result)
+        note = (
+            "the solution was not certified; the Riemannian staircase's certified global "
+            f"optimum is written (F = {sc.objective:.6g}, found at rank {rank})"
+        )
+    else:
+        note = (
+            f"the solution was not certified, nor was the Riemannian staircase's by rank {rank} "
+            f"(F = {sc.objective:.6g}); the optimiser's poses are written"
+        )
     output = dataclasses.replace(output, notes=(*output.notes, note))
     metrics["output"]["notes"] = list(output.notes)
     return result, output
@@ -517,7 +524,7 @@ def optimize_graph_job(
         if request.certify:
             metrics["certificate"] = certify(data, result.poses).as_dict()
             if request.staircase and not metrics["certificate"]["certified"]:
-                result, output = _staircase(data, result, metrics)
+                result, output = _staircase(data, result, output, metrics)
         resolved = {
             "file": str(path),
             "solver": result.method,
