@@ -115,3 +115,95 @@ def test_certify_a_3d_graph(data_root: Path, tmp_path: Path) -> None:
     assert cert["certified"] and cert["poses"] == 9
     assert cert["objective"] == pytest.approx(18.5194, abs=1e-4)
     assert cert["lower_bound"] <= cert["objective"] < cert["lower_bound"] + 1e-4
+
+
+def test_staircase_writes_the_certified_optimum_from_the_winding_minimum(tmp_path: Path) -> None:
+    """``--init file --staircase``: LM's winding minimum (F ≈ 1.3e5) is refused, the
+    staircase climbs to a certifying rank and the written graph holds its poses, whose F is
+    the chordal run's certified optimum."""
+    src, graph = _ring_file(tmp_path, winding=True)
+    best = _run(src, tmp_path / "best")["certificate"]
+    res = runner.invoke(
+        app, ["optimize", str(src), "--out", str(tmp_path / "o"), "--objective", "sesync",
+              "--certify", "--staircase", "--init", "file", "--no-plots"],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    metrics = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    assert not metrics["certificate"]["certified"]  # LM's answer, as before
+    stair = metrics["staircase"]
+    assert stair["certified"] and stair["certificate"]["certified"]
+    assert stair["ranks_climbed"] >= 1 and stair["final_rank"] == 2 + stair["ranks_climbed"]
+    assert stair["objective"] == pytest.approx(best["objective"], rel=1e-8)
+    assert stair["relaxation_objective"] == pytest.approx(best["objective"], rel=1e-8)
+    written = read_graph(tmp_path / "o" / "optimized.g2o").poses
+    assert sesync_objective(graph, written) == pytest.approx(best["objective"], rel=1e-6)
+    assert "staircase ranks" in res.output and "climbed" in res.output
+    assert f"{stair['objective']:.6g}" in res.output
+    assert "Riemannian staircase" in res.output  # the note on what the file holds
+    assert json.loads((tmp_path / "o" / "config.json").read_text())["staircase"] is True
+
+
+def test_staircase_is_skipped_when_already_certified_and_needs_certify(tmp_path: Path) -> None:
+    src, _ = _ring_file(tmp_path, winding=False)
+    metrics = _run(src, tmp_path / "o", "--staircase")
+    assert metrics["certificate"]["certified"] and "staircase" not in metrics
+    res = runner.invoke(
+        app, ["optimize", str(src), "--out", str(tmp_path / "x"), "--objective", "sesync",
+              "--staircase"],
+    )  # fmt: skip
+    lines = [line for line in res.output.splitlines() if line.strip()]
+    assert res.exit_code == 1 and len(lines) == 1, res.output
+    assert "add --certify" in lines[0]
+    assert not (tmp_path / "x").exists()
+
+
+def test_staircase_not_certified_keeps_the_optimisers_poses(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With the staircase stopped at rank 2 (below the 4 the winding minimum needs) nothing
+    is certified: metrics.json records it with ``written: false`` and the graph file holds
+    LM's poses, as a note says."""
+    import slamkit.app.optimize as job
+    from slamkit.optim import StaircaseConfig, riemannian_staircase
+
+    def rank_two(data: GraphData, poses: np.ndarray) -> object:
+        return riemannian_staircase(data, poses, StaircaseConfig(max_rank=2))
+
+    monkeypatch.setattr(job, "riemannian_staircase", rank_two)
+    src, graph = _ring_file(tmp_path, winding=True)
+    res = runner.invoke(
+        app, ["optimize", str(src), "--out", str(tmp_path / "o"), "--objective", "sesync",
+              "--certify", "--staircase", "--init", "file", "--no-plots"],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    metrics = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    stair = metrics["staircase"]
+    assert not stair["certified"] and stair["written"] is False
+    assert stair["final_rank"] == 2 and stair["ranks_climbed"] == 0
+    written = read_graph(tmp_path / "o" / "optimized.g2o").poses
+    assert sesync_objective(graph, written) == pytest.approx(
+        metrics["sesync_objective_final"], rel=1e-9
+    )
+    assert "the optimiser's poses are written" in res.output
+
+
+@pytest.mark.realdata
+def test_staircase_on_mit_from_its_vertices(data_root: Path, tmp_path: Path) -> None:
+    """MIT.g2o from its vertices: LM stops uncertified at F ≈ 1298 (a local minimum); the
+    staircase climbs 2 → 3 → 4 and writes the certified optimum F* = 61.1541 (LM's from the
+    chordal start, docs/estimators/optim.md)."""
+    src = data_root / "posegraph2d" / "MIT.g2o"
+    if not src.exists():
+        pytest.skip(f"{src} not found")
+    metrics = _run(src, tmp_path / "o", "--staircase", "--init", "file")
+    assert not metrics["certificate"]["certified"]
+    assert metrics["sesync_objective_final"] > 1000.0
+    stair = metrics["staircase"]
+    assert stair["certified"] and stair["written"]
+    assert [s["rank"] for s in stair["steps"]] == [2, 3, 4]
+    assert stair["objective"] == pytest.approx(61.1541, abs=1e-4)
+    assert stair["certificate"]["lower_bound"] <= stair["objective"]
+    assert stair["certificate"]["gap"] < 1e-3
+    graph = read_graph(src)
+    written = read_graph(tmp_path / "o" / "optimized.g2o").poses
+    assert sesync_objective(graph, written) == pytest.approx(61.1541, abs=1e-3)

@@ -27,7 +27,12 @@ Files written (``OUT`` the output folder):
   ``init_seconds``). With ``certify``: ``certificate`` (SE-Sync's global-optimality
   certificate of the solution, :class:`~slamkit.optim.Certificate`: ``certified``,
   ``lambda_min``, ``lambda_lower``, ``tolerance``, ``q_norm``, ``objective``, ``lower_bound``,
-  ``gap``, ``poses``, ``seconds``).
+  ``gap``, ``poses``, ``seconds``). With ``staircase`` as well, when that certificate fails:
+  ``staircase`` (:class:`~slamkit.optim.StaircaseResult`: ``certified``, ``objective`` = the
+  certified ``F*``, ``relaxation_objective``, ``ranks_climbed``, ``final_rank``, each rank's
+  ``steps``, the rounded poses' ``certificate``, ``seconds``, ``chi2`` of those poses and
+  ``written``); when it certifies, the graph file and ``graph.png`` hold the staircase's
+  poses (the other ``*_final`` keys stay LM's), else LM's.
 * ``config.json`` — the resolved options and the full optimiser configuration
   (``optimizer``: :class:`~slamkit.optim.OptimizerConfig` with its sections as nested
   objects, readable by :func:`~slamkit.config.config_from_mapping`).
@@ -62,6 +67,7 @@ from slamkit.optim import (
     choose_start,
     g2o_chi2,
     optimize,
+    riemannian_staircase,
     sesync_objective,
 )
 from slamkit.optim.certificate import check_certifiable
@@ -130,6 +136,10 @@ class OptimizeRequest:
     """Certify the solution globally optimal (SE-Sync's certificate,
     :func:`~slamkit.optim.certify`): needs ``objective="sesync"`` and a graph of
     relative-pose edges only; the metrics' ``certificate`` holds the result."""
+    staircase: bool = False
+    """With ``certify``: when the solution is not certified, run the Riemannian staircase
+    (:func:`~slamkit.optim.riemannian_staircase`) from it and write its certified optimum;
+    the metrics' ``staircase`` holds the ranks climbed and ``F*``."""
 
 
 @dataclass(frozen=True)
@@ -172,6 +182,8 @@ def _optimizer_config(request: OptimizeRequest) -> OptimizerConfig:
         raise ConfigError(
             "certify: the certificate is for SE-Sync's objective; add --objective sesync"
         )
+    if request.staircase and not request.certify:
+        raise ConfigError("staircase: it runs when the certificate fails; add --certify")
     return config_from_mapping(OptimizerConfig, settings, "optimize")
 
 
@@ -405,6 +417,35 @@ def _figure(
     )
 
 
+def _staircase(
+    data: GraphData, result: OptimizeResult, output: _Output, metrics: dict[str, Any]
+) -> tuple[OptimizeResult, _Output]:
+    """The staircase from ``result``'s refused poses, recorded in ``metrics``; when it
+    certifies, the result and output that carry its poses, else the given ones (an
+    uncertified rounding is no better evidence than LM's answer)."""
+    sc = riemannian_staircase(data, result.poses)
+    chi2 = g2o_chi2(data, sc.poses, result.landmarks)
+    metrics["staircase"] = {**sc.as_dict(), "chi2": chi2, "written": sc.certified}
+    rank = sc.steps[-1].rank
+    if sc.certified:
+        result = dataclasses.replace(
+            result, poses=sc.poses, sesync_objective=sc.objective, g2o_chi2=chi2
+        )
+        output = _output(data, result)
+        note = (
+            "the solution was not certified; the Riemannian staircase's certified global "
+            f"optimum is written (F = {sc.objective:.6g}, found at rank {rank})"
+        )
+    else:
+        note = (
+            f"the solution was not certified, nor was the Riemannian staircase's by rank {rank} "
+            f"(F = {sc.objective:.6g}); the optimiser's poses are written"
+        )
+    output = dataclasses.replace(output, notes=(*output.notes, note))
+    metrics["output"]["notes"] = list(output.notes)
+    return result, output
+
+
 def find_graph_file(path: str | Path, data_root: str | Path | None = None) -> Path:
     """``path`` if it exists, else the same relative path under the data folder
     (``SLAMKIT_DATA``, :func:`~slamkit.datasets.paths.find_data_file`), so
@@ -482,6 +523,8 @@ def optimize_graph_job(
         metrics["information_repair"] = repair
         if request.certify:
             metrics["certificate"] = certify(data, result.poses).as_dict()
+            if request.staircase and not metrics["certificate"]["certified"]:
+                result, output = _staircase(data, result, output, metrics)
         resolved = {
             "file": str(path),
             "solver": result.method,
@@ -492,6 +535,7 @@ def optimize_graph_job(
             "max_iterations": cfg.stopping.max_iterations,
             "repair_information": request.repair_information,
             "certify": request.certify,
+            "staircase": request.staircase,
             "output": metrics["output"],
             "optimizer": config_to_dict(cfg),
         }

@@ -54,6 +54,15 @@ def _table(m: dict[str, Any]) -> Table:
         add("λ_min(S) / tolerance", f"{cert['lambda_min']:.3g} / {cert['tolerance']:.3g}")
         add("F* ≥ (gap)", f"{cert['lower_bound']:.6g} ({cert['gap']:.3g})")
         add("certificate time [s]", f"{cert['seconds']:.3f}")
+    stair = m.get("staircase")
+    if stair is not None:
+        ranks = " → ".join(str(step["rank"]) for step in stair["steps"])
+        add("staircase ranks", f"{ranks} ({stair['ranks_climbed']} climbed)")
+        verdict = "globally optimal" if stair["certified"] else "not certified"
+        add("staircase F (rounded)", f"{stair['objective']:.6g}: {verdict}")
+        bound, gap = stair["certificate"]["lower_bound"], stair["certificate"]["gap"]
+        add("staircase F* ≥ (gap)", f"{bound:.6g} ({gap:.3g})")
+        add("staircase time [s]", f"{stair['seconds']:.3f}")
     return table
 
 
@@ -118,6 +127,13 @@ def optimize_command(
             "--objective sesync and a graph of relative-pose edges only).",
         ),
     ] = False,
+    staircase: Annotated[
+        bool,
+        typer.Option(
+            help="With --certify: when the solution is not certified, run the Riemannian "
+            "staircase from it and write its certified global optimum.",
+        ),
+    ] = False,
     plots: Annotated[bool, typer.Option(help="Write graph.png (before and after).")] = True,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
     data_root: Annotated[
@@ -149,6 +165,7 @@ def optimize_command(
         max_iterations=max_iterations,
         repair_information=repair_information,
         certify=certify,
+        staircase=staircase,
         plots=plots,
         overwrite=overwrite,
     )

@@ -20,6 +20,8 @@ and 2D landmarks, and over SE(3) poses.
 * :mod:`~slamkit.optim.objectives`: the g2o χ² and SE-Sync's ``F`` of any solution.
 * :mod:`~slamkit.optim.certificate`: SE-Sync's certificate of global optimality (2D, 3D) and the
   lower bound on ``F*`` it gives.
+* :mod:`~slamkit.optim.staircase`: the Riemannian staircase, SE-Sync's certified global optimum
+  from any start (a refused local minimum included).
 * :mod:`~slamkit.optim.robust`: Huber, Cauchy, Geman-McClure and DCS kernels (IRLS).
 * :mod:`~slamkit.optim.marginals`: marginal covariances from the factorisation.
 * :mod:`~slamkit.optim.incremental`: poses and edges added in time order, window steps
@@ -64,6 +66,7 @@ from slamkit.optim.solvers import (
     optimize,
 )
 from slamkit.optim.sparse import cholmod_available
+from slamkit.optim.staircase import StaircaseConfig, StaircaseResult, riemannian_staircase
 
 __all__ = [
     "Certificate",
@@ -86,6 +89,8 @@ __all__ = [
     "RelaxationConfig",
     "RobustConfig",
     "RobustKernel",
+    "StaircaseConfig",
+    "StaircaseResult",
     "StartChoice",
     "StoppingConfig",
     "UpdateInfo",
@@ -98,6 +103,7 @@ __all__ = [
     "initial_values",
     "marginal_covariances",
     "optimize",
+    "riemannian_staircase",
     "robust_rho_and_weight",
     "sesync_objective",
     "spanning_tree_initialization",

@@ -48,6 +48,7 @@ behind ``1e-6`` are in docs/estimators/optim.md. The reported bound uses a lower
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -66,9 +67,14 @@ from slamkit.optim.sparse import Factorizer, LinearSolverName, SingularSystem, f
 __all__ = [
     "CERTIFY_RTOL",
     "Certificate",
+    "LiftedCertificate",
+    "SchurQ",
     "SesyncMatrices",
     "certify",
+    "certify_blocks",
     "check_certifiable",
+    "multipliers",
+    "rotation_blocks",
     "sesync_matrices",
 ]
 
@@ -172,7 +178,7 @@ def sesync_matrices(data: GraphData, pose_ids: ArrayLike) -> SesyncMatrices:
     else:
         w = factors3d.sesync_row_weights_3d(es.information)
         kappa, tau = w[:, 0] ** 2, w[:, 9] ** 2
-    rt = _rotation_blocks(es.measurement, d)  # (E, d, d) R̃
+    rt = rotation_blocks(es.measurement, d)  # (E, d, d) R̃
     tt = es.measurement[:, :d]  # (E, d) t̃
     r2 = np.arange(d)
 
@@ -213,7 +219,7 @@ def sesync_matrices(data: GraphData, pose_ids: ArrayLike) -> SesyncMatrices:
     return SesyncMatrices(d, lap.tocsc(), coupling.tocsc(), rotation)
 
 
-def _rotation_blocks(poses: FloatArray, d: int) -> FloatArray:
+def rotation_blocks(poses: FloatArray, d: int) -> FloatArray:
     """``(N, d, d)`` rotation matrices of file-format poses or measurements (2D ``(x, y, θ)``,
     3D ``(x, y, z, qw, qx, qy, qz)``)."""
     if d == 3:
@@ -231,10 +237,10 @@ def _block_diag(blocks: FloatArray) -> scipy.sparse.csc_matrix:
     return scipy.sparse.csc_matrix((blocks.ravel(), (r, c)), shape=(d * n, d * n))
 
 
-class _Certifier:
-    """``Q x``, the multipliers and the factorisations of ``K(σ)`` for one ``R``."""
+class SchurQ:
+    """``Q x = B x - V_rᵀ L_r⁻¹ V_r x`` without forming ``Q`` (one Cholesky factor of ``L_r``)."""
 
-    def __init__(self, mats: SesyncMatrices, rots: FloatArray, solver: LinearSolverName):
+    def __init__(self, mats: SesyncMatrices, solver: LinearSolverName = "auto"):
         self.mats, self.solver = mats, solver
         try:
             self.lap = factor_spd(mats.laplacian, solver)
@@ -243,11 +249,56 @@ class _Certifier:
                 "certificate: the translational Laplacian is singular (a pose without a "
                 "translation-carrying edge path to the others)"
             ) from exc
+
+    def __call__(self, x: FloatArray) -> FloatArray:
+        """``Q x`` for ``x`` of shape ``(dn,)`` or ``(dn, k)``."""
+        m = self.mats
+        return np.asarray(m.rotation @ x - m.coupling.T @ self.lap.solve(m.coupling @ x))
+
+    def translations(self, stacked: FloatArray) -> FloatArray:
+        """The ``(n, d)`` translations minimising ``F`` for the rotations ``stacked``
+        (``R = [R_1 … R_n]``, d x dn), pose 0 at the origin: ``∂F/∂T = 2 T L_r + 2 R V_rᵀ = 0``
+        gives ``Tᵀ = -L_r⁻¹ V_r Rᵀ``."""
+        t = -self.lap.solve(np.asarray(self.mats.coupling @ stacked.T))
+        return np.vstack([np.zeros((1, stacked.shape[0])), t])
+
+    def norm(self) -> float:
+        """``‖Q‖₂ = λ_max(Q)`` (Lanczos, 1e-3 relative)."""
+        n2 = self.mats.dim * self.mats.n
+        op = scipy.sparse.linalg.LinearOperator((n2, n2), matvec=self, dtype=float)
+        return float(_eigsh(op, 1, 1e-3)[0][0])
+
+
+def _eigsh(
+    op: scipy.sparse.linalg.LinearOperator, k: int, tol: float
+) -> tuple[FloatArray, FloatArray]:
+    v0 = 1.0 + 0.5 * np.cos(0.7 * np.arange(op.shape[0]))  # fixed: the same answer every run
+    try:
+        vals, vecs = scipy.sparse.linalg.eigsh(op, k=k, which="LA", tol=tol, v0=v0)
+    except scipy.sparse.linalg.ArpackNoConvergence as exc:
+        raise ConvergenceError(f"certificate: the eigenvalue search stopped ({exc})") from exc
+    return np.asarray(vals), np.asarray(vecs)
+
+
+def multipliers(q: SchurQ, blocks: FloatArray) -> FloatArray:
+    """``Λ_i = sym((Q Yᵀ)_i Y_i)`` for ``(n, r, d)`` blocks ``Y_i`` (``r = d``: rotations
+    ``R_i``): the ``(n, d, d)`` Lagrange multipliers of ``Y_iᵀ Y_i = I``."""
+    n, r, d = blocks.shape
+    stacked = blocks.transpose(1, 0, 2).reshape(r, n * d)  # Y = [Y_1 … Y_n]
+    gy = q(stacked.T).reshape(n, d, r) @ blocks  # (Q Yᵀ)_i Y_i
+    return np.asarray(0.5 * (gy + gy.transpose(0, 2, 1)))
+
+
+class _Certifier:
+    """The multipliers and the factorisations of ``K(σ)`` for one ``Y`` (rotations or a
+    lifted point, ``(n, r, d)`` blocks)."""
+
+    def __init__(self, q: SchurQ, blocks: FloatArray):
+        self.q, self.mats, self.solver = q, q.mats, q.solver
+        mats = q.mats
         n, d = mats.n, mats.dim
-        stacked = rots.transpose(1, 0, 2).reshape(d, n * d)  # R = [R_1 … R_n]
-        gr = self.q_times(stacked.T).reshape(n, d, d) @ rots  # G_i R_i, G = Q Rᵀ (dn x d)
-        self.lam = 0.5 * (gr + gr.transpose(0, 2, 1))  # (n, d, d) Λ_i = sym(G_i R_i)
-        self.objective = float(np.trace(self.lam, axis1=1, axis2=2).sum())  # tr Λ = F(R)
+        self.lam = multipliers(q, blocks)  # (n, d, d)
+        self.objective = float(np.trace(self.lam, axis1=1, axis2=2).sum())  # tr Λ = F(Y)
         self.lam_norm = float(np.abs(np.linalg.eigvalsh(self.lam)).max())
         m = mats.laplacian.shape[0]
         self.k0 = scipy.sparse.bmat(
@@ -259,11 +310,6 @@ class _Certifier:
         )
         self.shift = scipy.sparse.diags(np.r_[np.zeros(m), np.ones(d * n)], format="csc")
 
-    def q_times(self, x: FloatArray) -> FloatArray:
-        """``Q x = B x - V_rᵀ L_r⁻¹ V_r x`` (x: (dn,) or (dn, k))."""
-        m = self.mats
-        return np.asarray(m.rotation @ x - m.coupling.T @ self.lap.solve(m.coupling @ x))
-
     def factor(self, sigma: float) -> Factorizer | None:
         """The Cholesky factor of ``K(σ)``, or ``None`` when ``S - σI`` is not ``≻ 0``."""
         try:
@@ -271,29 +317,77 @@ class _Certifier:
         except SingularSystem:
             return None
 
-    def q_norm(self) -> float:
-        n2 = self.mats.dim * self.mats.n
-        op = scipy.sparse.linalg.LinearOperator((n2, n2), matvec=self.q_times, dtype=float)
-        return float(self._eigsh(op, 1, 1e-3)[0])
-
-    @staticmethod
-    def _eigsh(op: scipy.sparse.linalg.LinearOperator, k: int, tol: float) -> FloatArray:
-        v0 = 1.0 + 0.5 * np.cos(0.7 * np.arange(op.shape[0]))  # fixed: the same answer every run
-        try:
-            return np.asarray(scipy.sparse.linalg.eigsh(op, k=k, which="LA", tol=tol, v0=v0)[0])
-        except scipy.sparse.linalg.ArpackNoConvergence as exc:
-            raise ConvergenceError(f"certificate: the eigenvalue search stopped ({exc})") from exc
-
-    def smallest(self, sigma: float, fac: Factorizer) -> float:
-        """``λ_min(S)`` by shift-invert Lanczos from ``σ`` (below every eigenvalue)."""
+    def smallest(self, sigma: float, fac: Factorizer) -> tuple[float, FloatArray]:
+        """``λ_min(S)`` and its unit eigenvector by shift-invert Lanczos from ``σ`` (below
+        every eigenvalue)."""
         n2, m = self.mats.dim * self.mats.n, self.mats.laplacian.shape[0]
 
         def inv(x: FloatArray) -> FloatArray:  # (S - σI)⁻¹ x: K(σ) [y; z] = [0; x]
             return fac.solve(np.r_[np.zeros(m), np.ravel(x)])[m:]
 
         op = scipy.sparse.linalg.LinearOperator((n2, n2), matvec=inv, dtype=float)
-        vals = self._eigsh(op, min(2, n2 - 1), 1e-10)
-        return float(sigma + 1.0 / vals.max())  # eigenvalues of (S - σI)⁻¹ are 1/(λ - σ)
+        vals, vecs = _eigsh(op, min(2, n2 - 1), 1e-10)
+        k = int(np.argmax(vals))  # eigenvalues of (S - σI)⁻¹ are 1/(λ - σ)
+        return float(sigma + 1.0 / vals[k]), vecs[:, k]
+
+
+@dataclass(frozen=True)
+class LiftedCertificate:
+    """:func:`certify_blocks`' verdict and the eigenvector of ``λ_min(S)``."""
+
+    certificate: Certificate
+    eigenvector: FloatArray
+    """Unit ``(dn,)`` eigenvector of ``S`` for ``lambda_min`` (a descent direction of the
+    lifted problem when ``lambda_min < 0``: :mod:`slamkit.optim.staircase`)."""
+
+
+def certify_blocks(
+    q: SchurQ,
+    blocks: FloatArray,
+    *,
+    rtol: float = CERTIFY_RTOL,
+    q_norm: float | None = None,
+) -> LiftedCertificate:
+    """The certificate of ``(n, r, d)`` blocks ``Y_i`` (``Y_iᵀ Y_i = I``; ``r = d``: the
+    rotations, else a point of the rank-``r`` relaxation, whose ``Z = YᵀY`` the same bound
+    covers) and the eigenvector of ``λ_min(S)``; ``q_norm``: ``‖Q‖₂`` if already known."""
+    t0 = time.perf_counter()
+    if not (np.isfinite(rtol) and rtol > 0):
+        raise InputError(f"rtol: expected a positive number, got {rtol!r}")
+    cert = _Certifier(q, blocks)
+    q_norm = q.norm() if q_norm is None else q_norm
+    tol = rtol * q_norm
+    fac = cert.factor(-tol)  # the verdict: S + tol·I ≻ 0
+    certified, sigma = fac is not None, -tol
+    if fac is None:
+        sigma = -cert.lam_norm - tol  # below λ_min(S) since Q ⪰ 0: K(σ) ≻ 0
+        fac = cert.factor(sigma)
+        if fac is None:  # rounding at that floor: step further down, still a valid shift
+            sigma = 2.0 * sigma - tol
+            fac = cert.factor(sigma)
+        if fac is None:
+            raise ConvergenceError("certificate: K(σ) does not factor below every eigenvalue of S")
+    lam, vec = cert.smallest(sigma, fac)
+    # A verified lower bound: the first of λ - δ, δ = tol·10^k, whose K factors.
+    lower, delta = sigma, 1e-4 * tol
+    while lam - delta > sigma:
+        if cert.factor(lam - delta) is not None:
+            lower = lam - delta
+            break
+        delta *= 10.0
+    n, d = q.mats.n, q.mats.dim
+    result = Certificate(
+        certified=certified,
+        lambda_min=lam,
+        lambda_lower=lower,
+        tolerance=tol,
+        q_norm=q_norm,
+        objective=cert.objective,
+        lower_bound=cert.objective + d * n * min(lower, 0.0),
+        poses=n,
+        seconds=time.perf_counter() - t0,
+    )
+    return LiftedCertificate(result, vec)
 
 
 def certify(
@@ -318,37 +412,6 @@ def certify(
     problem = GraphProblem.from_data(data, objective="sesync")
     d = int(data.dim)
     p = as_array(poses, "poses", (problem.pose_ids.shape[0], 3 if d == 2 else 7))
-    rots = _rotation_blocks(p, d)
-    cert = _Certifier(sesync_matrices(data, problem.pose_ids), rots, linear_solver)
-    q_norm = cert.q_norm()
-    tol = rtol * q_norm
-    fac = cert.factor(-tol)  # the verdict: S + tol·I ≻ 0
-    certified, sigma = fac is not None, -tol
-    if fac is None:
-        sigma = -cert.lam_norm - tol  # below λ_min(S) since Q ⪰ 0: K(σ) ≻ 0
-        fac = cert.factor(sigma)
-        if fac is None:  # rounding at that floor: step further down, still a valid shift
-            sigma = 2.0 * sigma - tol
-            fac = cert.factor(sigma)
-        if fac is None:
-            raise ConvergenceError("certificate: K(σ) does not factor below every eigenvalue of S")
-    lam = cert.smallest(sigma, fac)
-    # A verified lower bound: the first of λ - δ, δ = tol·10^k, whose K factors.
-    lower, delta = sigma, 1e-4 * tol
-    while lam - delta > sigma:
-        if cert.factor(lam - delta) is not None:
-            lower = lam - delta
-            break
-        delta *= 10.0
-    n = problem.pose_ids.shape[0]
-    return Certificate(
-        certified=certified,
-        lambda_min=lam,
-        lambda_lower=lower,
-        tolerance=tol,
-        q_norm=q_norm,
-        objective=cert.objective,
-        lower_bound=cert.objective + d * n * min(lower, 0.0),
-        poses=n,
-        seconds=time.perf_counter() - t0,
-    )
+    q = SchurQ(sesync_matrices(data, problem.pose_ids), linear_solver)
+    cert = certify_blocks(q, rotation_blocks(p, d), rtol=rtol).certificate
+    return dataclasses.replace(cert, seconds=time.perf_counter() - t0)
