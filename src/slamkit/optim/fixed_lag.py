@@ -495,8 +495,9 @@ def smooth_fixed_lag(
     (the origin without one), the others are chained from their edges.
     ``progress(step, steps)`` runs after every step.
 
-    Raises :class:`~slamkit.errors.InputError` for a graph with landmarks, 3D poses or edge
-    kinds other than ``se2`` and ``se2_prior``."""
+    Raises :class:`~slamkit.errors.InputError` for a graph with landmarks, 3D poses, edge
+    kinds other than ``se2`` and ``se2_prior``, fixed poses other than the first, or
+    equivalences."""
     kinds = sorted({es.kind for es in data.edges} - set(UPDATE_KINDS))
     if data.dim != 2 or kinds or data.landmark_ids.shape[0]:
         what = f"dim {data.dim}" if data.dim != 2 else f"edge kinds {', '.join(kinds)}"
@@ -506,8 +507,16 @@ def smooth_fixed_lag(
             f"{data.source or 'the graph'}: the fixed-lag smoother handles 2D pose graphs "
             f"(se2 and se2_prior edges), got {what}"
         )
-    smoother = FixedLagSmoother(config)
     updates = time_ordered_updates(data)
+    first = int(updates[0].pose_ids[0]) if updates else None
+    if data.equivalences.shape[0] or (
+        data.fixed_ids.shape[0] and set(data.fixed_ids.tolist()) != {first}
+    ):
+        raise InputError(
+            f"{data.source or 'the graph'}: the fixed-lag smoother holds only the first pose "
+            "fixed; the graph fixes other poses or has equivalences"
+        )
+    smoother = FixedLagSmoother(config)
     for k, u in enumerate(updates, start=1):
         guess = None if u.initial_poses is None else u.initial_poses[0]
         smoother.update(int(u.pose_ids[0]), u.edges, guess)
