@@ -21,9 +21,8 @@ The window after pose 9 with ``window = 4`` (``━`` edges, ``┄`` loop closure
    previous step's estimate;
 4. if the window holds more than ``window`` poses, the oldest is marginalised
    (:mod:`slamkit.optim.marginal_prior`: the Schur complement of every factor touching it,
-   linearised at the current estimate, or at the prior's first estimates for the poses
-   already in the prior) and its current estimate becomes its **online estimate**, the
-   smoother's output for that pose.
+   the old prior included, linearised at the current estimate) and its current estimate
+   becomes its **online estimate**, the smoother's output for that pose.
 
 The system of a step has ``3 · window`` unknowns and the prior at most as many, whatever the
 length of the run: a step's cost depends on the window and on how many edges its poses have,
@@ -454,16 +453,16 @@ class FixedLagSmoother:
         touch = (self._ea == m) | (self._eb == m)
         others = np.concatenate([self._ea[touch], self._eb[touch]])
         sep = set(others[np.isin(others, self._wid[1:])].tolist())
-        Y = self._X.copy()  # the linearisation point: first estimates for the prior's poses
         if self._prior is not None:
-            Y[self._prior_rows()] = self._prior.linearization_point
             sep |= set(self._prior.pose_ids.tolist())
         sep.discard(m)
         ids = np.array([m, *sorted(sep)], dtype=np.int64)
-        Y_loc = Y[np.searchsorted(self._wid, ids)]
+        # Linearised at the current estimate, the old prior too (its residual and Jacobian
+        # at X: marginal_prior's module docstring says why not at its first estimates).
+        Y_loc = self._X[np.searchsorted(self._wid, ids)]
         H, g, _ = self._system(Y_loc, touch, ids)
         if self._prior is not None:
-            self._add_prior(H, g, ids, self._prior.linearization_point)
+            self._add_prior(H, g, ids, self._X[self._prior_rows()])
         self._prior = schur_prior(H, g, 3, ids[1:], Y_loc[1:]) if ids.shape[0] > 1 else None
         self._out[self._row[m]] = self._X[0].copy()
         self._left[self._row[m]] = self._steps

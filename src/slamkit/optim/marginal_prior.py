@@ -19,10 +19,11 @@ removed factors said nothing about), ``R = Λ^½ Vᵀ``, ``d = Λ^-½ Vᵀ g'``,
 ``Rᵀd = g'``). The prior is then an ordinary whitened factor with residual ``R δ_s + d``.
 
 **Evaluated when the window moves.** ``R`` and ``d`` are fixed at the linearisation point
-``X̄ = Y_s`` (first estimates: they are never recomputed). When the window poses move to
-``X_s``, ``δ_s`` is read as the local coordinates of ``X_s`` around ``X̄``: per pose,
-``e_k = (x, y, θ)`` of ``X̄_k⁻¹ X_k`` (θ wrapped), the chart of g2o's absolute-pose prior
-(:func:`~slamkit.optim.factors.se2_prior_error` with ``Z = X̄_k``), and the residual is
+``X̄ = Y_s`` (first estimates: while the prior stands they are never recomputed). When the
+window poses move to ``X_s``, ``δ_s`` is read as the local coordinates of ``X_s`` around
+``X̄``: per pose, ``e_k = (x, y, θ)`` of ``X̄_k⁻¹ X_k`` (θ wrapped), the chart of g2o's
+absolute-pose prior (:func:`~slamkit.optim.factors.se2_prior_error` with ``Z = X̄_k``), and
+the residual is
 ``r(X_s) = R e(X_s) + d`` with Jacobian ``R · diag(∂e_k/∂δ_k)``,
 ``∂e_k/∂δ_k = [[R(θ_k - θ̄_k), 0], [0, 1]]``. At ``X_s = X̄``, ``e = 0`` and ``∂e/∂δ = I``:
 the factor reproduces ``H'`` and ``g'`` exactly there, and away from ``X̄`` it is a fixed,
@@ -30,9 +31,15 @@ well-defined cost (``‖R e(X) + d‖²``) whose Gauss-Newton steps converge to 
 Reading ``δ`` as ``Log(X̄⁻¹ X)`` instead would differ at second order only (the chart differs
 from the exponential's coordinates by ``O(|δ|²)``, and its Jacobian from ``I`` by ``O(|δ|)``).
 
-A pose that leaves later is marginalised at the same ``Y``: for poses already in the prior
-``Y = X̄`` (their first estimate, so the old prior enters as exactly ``RᵀR``, ``Rᵀd`` and is
-never relinearised), the current estimate for the rest.
+**The next marginalisation** linearises at the current estimate ``Y = X``, the old prior
+included: its residual ``R e(X) + d`` and Jacobian ``R · ∂e/∂δ`` at ``X`` join the Schur
+complement, so its information ``RᵀR`` (fixed when it was made) is carried over, re-expressed
+in the tangent at ``X``, and the new prior's ``X̄`` is the current estimate of its poses.
+Keeping instead every pose's first ``X̄`` as the point of all later marginalisations (strict
+first-estimate Jacobians, as consistent filters do for observability) linearises the edges
+between poses marginalised at different times around estimates from different times, and
+its online estimates were an order of magnitude further from batch (the measurement is in
+``docs/estimators/optim.md``).
 """
 
 from __future__ import annotations
