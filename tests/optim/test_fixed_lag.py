@@ -235,6 +235,14 @@ def test_bad_input_is_refused_with_the_pose_named() -> None:
         s.update(1)
     with pytest.raises(InputError, match="pose 7 is not in the graph"):
         s.update(2, [_se2([7], [2], [[1.0, 0, 0]])])
+    s.update(2, [_se2([1], [2], [[1.0, 0, 0]])])  # window 1: pose 1 leaves
+    with pytest.raises(InputError, match="pose 3: no edge ties it to a pose in the window"):
+        s.update(3, [_se2([1], [3], [[2.0, 0, 0]])])  # only an edge to the marginalised pose
+    with pytest.raises(InputError, match="edge from a pose to itself"):
+        s.update(3, [_se2([2, 3], [3, 3], [[1.0, 0, 0], [0.0, 0, 0]])])
+    info = s.update(3, [_se2([1, 2], [3, 3], [[2.0, 0, 0], [1.0, 0, 0]])])
+    assert info.dropped == 1 and info.left_id == 2  # the refused steps changed nothing
+    assert s.finish().dropped_edges == 1
     with pytest.raises(InputError, match="1 landmarks"):
         smooth_fixed_lag(
             GraphData(
