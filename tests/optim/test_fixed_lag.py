@@ -119,8 +119,8 @@ def test_a_short_window_stays_near_batch_and_counts_what_it_drops(
     batch = optimize(graph, TIGHT)
     es = graph.edges[0]
     # A window of 30 poses holds each loop (24 poses back): nothing is dropped, and the
-    # online estimates stay near batch. Measured: RMSE 0.078 m, max 0.25 m (seeds 1-3:
-    # RMSE 0.061-0.096 m, max 0.19-0.35 m); the arrival guesses are 0.37 m RMSE.
+    # online estimates stay near batch. Measured: RMSE 0.085 m, max 0.24 m (seeds 1-3:
+    # RMSE 0.091-0.117 m, max 0.19-0.33 m); the arrival guesses are 0.37 m RMSE.
     res = smooth_fixed_lag(graph, FixedLagConfig(window=30))
     assert res.dropped_edges == 0 and res.dropped_lines.shape[0] == 0
     assert res.window_ids.shape[0] == 30 and 1 <= res.max_prior_poses <= 30
@@ -268,8 +268,26 @@ def test_manhattan_online_estimates_and_drops(data_root: Path) -> None:
     es = graph.edges[0]
     older, newer = np.minimum(es.i, es.j), np.maximum(es.i, es.j)
     assert res.dropped_edges == int(((older < newer - 50) & (older != 0)).sum()) == 1026
-    # Measured: online estimates 4.14 m RMSE from batch (max 12.4 m); GTSAM's
+    # Measured: online estimates 5.64 m RMSE from batch (max 16.6 m); GTSAM's
     # BatchFixedLagSmoother on the same stream 7.1 m (benchmarks/results/fixed_lag.md).
     err = np.linalg.norm(res.poses[:, :2] - batch.poses[order, :2], axis=1)
-    assert np.sqrt(np.mean(err**2)) < 4.5 and err.max() < 13.5
+    assert np.sqrt(np.mean(err**2)) < 6.0 and err.max() < 18.0
     assert res.converged and res.max_prior_poses <= 50
+
+
+def test_intel_online_estimates_do_not_jump(data_root: Path) -> None:
+    # With the prior's Jacobian taken at its linearisation point (R), Gauss-Newton on the
+    # window is stable; with R · ∂e/∂δ at the current estimate it diverged along the window's
+    # weakest direction here (steps growing sevenfold a step from pose 700 on, online
+    # estimates jumping by 1-3 m between consecutive poses; docs/estimators/optim.md).
+    path = data_root / "posegraph2d" / "intel.g2o"
+    if not path.exists():
+        pytest.skip(f"{path} not found")
+    graph = read_graph(path)
+    res = smooth_fixed_lag(graph, FixedLagConfig(window=50))
+    batch = optimize(graph, TIGHT)
+    ours = np.linalg.norm(np.diff(res.poses[:, :2], axis=0), axis=1)
+    theirs = np.linalg.norm(np.diff(batch.poses[:, :2], axis=0), axis=1)
+    assert np.abs(ours - theirs).max() < 0.2  # measured 0.07 m (1-3 m with the jumps)
+    err = np.linalg.norm(res.poses[:, :2] - batch.poses[:, :2], axis=1)
+    assert np.sqrt(np.mean(err**2)) < 1.1 and err.max() < 2.5  # measured 0.95 m, 2.04 m

@@ -22,24 +22,24 @@ removed factors said nothing about), ``R = Λ^½ Vᵀ``, ``d = Λ^-½ Vᵀ g'``,
 ``X̄ = Y_s`` (first estimates: while the prior stands they are never recomputed). When the
 window poses move to ``X_s``, ``δ_s`` is read as the local coordinates of ``X_s`` around
 ``X̄``: per pose, ``e_k = (x, y, θ)`` of ``X̄_k⁻¹ X_k`` (θ wrapped), the chart of g2o's
-absolute-pose prior (:func:`~slamkit.optim.factors.se2_prior_error` with ``Z = X̄_k``), and
-the residual is
-``r(X_s) = R e(X_s) + d`` with Jacobian ``R · diag(∂e_k/∂δ_k)``,
-``∂e_k/∂δ_k = [[R(θ_k - θ̄_k), 0], [0, 1]]``. At ``X_s = X̄``, ``e = 0`` and ``∂e/∂δ = I``:
-the factor reproduces ``H'`` and ``g'`` exactly there, and away from ``X̄`` it is a fixed,
-well-defined cost (``‖R e(X) + d‖²``) whose Gauss-Newton steps converge to its minimum.
-Reading ``δ`` as ``Log(X̄⁻¹ X)`` instead would differ at second order only (the chart differs
-from the exponential's coordinates by ``O(|δ|²)``, and its Jacobian from ``I`` by ``O(|δ|)``).
+absolute-pose prior (:func:`~slamkit.optim.factors.se2_prior_error` with ``Z = X̄_k``),
+which is zero with identity Jacobian at ``X̄``. The residual is ``r(X_s) = R e(X_s) + d`` and
+its Jacobian is kept at its first estimate, ``R`` (the Jacobian of ``R δ_s + d`` at ``X̄``),
+as a linear factor is: the prior adds ``RᵀR`` to the window's ``H`` and ``Rᵀ r`` to its
+``g`` wherever the window is. At ``X_s = X̄`` this is exact; away from it the step differs
+from the exact derivative ``R · diag(∂e_k/∂δ_k)`` (``∂e_k/∂δ_k = [[R(θ_k - θ̄_k), 0],
+[0, 1]]``) at first order in ``θ - θ̄``. The exact derivative is the worse choice: it makes
+Gauss-Newton see the curvature ``2 (Rᵀ r)ᵀ ∂²e``, which is large where ``d`` is, in the
+prior's weakest directions (``d = Λ^-½ Vᵀ g'``), and there the window's Gauss-Newton
+iteration diverged (the measurement is in ``docs/estimators/optim.md``).
 
 **The next marginalisation** linearises at the current estimate ``Y = X``, the old prior
-included: its residual ``R e(X) + d`` and Jacobian ``R · ∂e/∂δ`` at ``X`` join the Schur
-complement, so its information ``RᵀR`` (fixed when it was made) is carried over, re-expressed
-in the tangent at ``X``, and the new prior's ``X̄`` is the current estimate of its poses.
-Keeping instead every pose's first ``X̄`` as the point of all later marginalisations (strict
-first-estimate Jacobians, as consistent filters do for observability) linearises the edges
-between poses marginalised at different times around estimates from different times, and
-its online estimates were an order of magnitude further from batch (the measurement is in
-``docs/estimators/optim.md``).
+included as the linear factor above (residual ``R e(X) + d``, Jacobian ``R``), so its
+information ``RᵀR`` is carried over and the new prior's ``X̄`` is the current estimate of its
+poses. Keeping instead every pose's first ``X̄`` as the point of all later marginalisations
+(strict first estimates for every factor, as consistent filters do for observability)
+linearises the edges between poses marginalised at different times around estimates from
+different times, and its online estimates were an order of magnitude further from batch.
 """
 
 from __future__ import annotations
@@ -75,13 +75,11 @@ class MarginalPrior:
         return self.R.T @ self.R
 
     def terms(self, X: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Whitened residual ``R e(X) + d`` ``(r,)`` and its Jacobian ``(r, 3k)`` with respect
-        to the right perturbations of ``X`` ``(k, 3)`` (rows follow ``pose_ids``)."""
-        e, Je = factors.se2_prior_error(X, self.linearization_point)
-        k = X.shape[0]
-        Rb = self.R.reshape(-1, k, 3)  # R's columns per pose
-        J = np.einsum("rki,kij->rkj", Rb, Je).reshape(self.R.shape)  # R · diag(∂e_k/∂δ_k)
-        return self.R @ e.ravel() + self.d, J
+        """Whitened residual ``R e(X) + d`` ``(r,)`` and its first-estimate Jacobian ``R``
+        ``(r, 3k)`` with respect to the right perturbations of ``X`` ``(k, 3)`` (rows follow
+        ``pose_ids``; module docstring)."""
+        e, _ = factors.se2_prior_error(X, self.linearization_point)
+        return self.R @ e.ravel() + self.d, self.R
 
 
 def schur_prior(
