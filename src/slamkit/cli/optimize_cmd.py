@@ -1,4 +1,5 @@
-"""``slamkit optimize FILE [--out DIR]``: optimise a pose-graph or landmark-graph file.
+"""``slamkit optimize FILE [--out DIR]``: optimise a pose-graph or landmark-graph file
+(``--window L``: stream a 2D pose graph through the fixed-lag smoother, ``fixed_lag_cmd.py``).
 
 Parses the options, calls :func:`slamkit.app.optimize.optimize_graph_job` and prints a short
 table of its metrics and where the files are. Known errors
@@ -134,6 +135,16 @@ def optimize_command(
             "staircase from it and write its certified global optimum.",
         ),
     ] = False,
+    window: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            help="Stream a 2D pose graph through the fixed-lag smoother keeping the last "
+            "WINDOW poses (poses in id order, older ones marginalised; loop closures to them "
+            "dropped and counted). Writes the online and final-window estimates.",
+            show_default=False,
+        ),
+    ] = None,
     plots: Annotated[bool, typer.Option(help="Write graph.png (before and after).")] = True,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
     data_root: Annotated[
@@ -153,6 +164,19 @@ def optimize_command(
 
     file = find_graph_file(file, data_root)
     stem = Path(file.name.removesuffix(".gz")).stem
+    if window is not None:  # the fixed-lag smoother: its own module renders it
+        from slamkit.cli.fixed_lag_cmd import check_window_options, run_fixed_lag
+
+        check_window_options({
+            "--solver": solver != "lm", "--init": init is not None, "--robust": robust != "none",
+            "--robust-width": robust_width is not None, "--objective": objective != "g2o",
+            "--max-iterations": max_iterations is not None, "--certify": certify,
+            "--staircase": staircase,
+            "--repair-information": repair_information != "none",
+        })  # fmt: skip
+        target = output_folder(out, f"fixed-lag-{stem}")
+        run_fixed_lag(file, target, window, plots, overwrite)
+        return
     target = output_folder(out, f"optimize-{stem}")
     request = OptimizeRequest(
         path=file,

@@ -26,10 +26,18 @@ and 2D landmarks, and over SE(3) poses.
 * :mod:`~slamkit.optim.marginals`: marginal covariances from the factorisation.
 * :mod:`~slamkit.optim.incremental`: poses and edges added in time order, window steps
   between periodic batch steps (iSAM-style), equal to batch at the end.
+* :mod:`~slamkit.optim.fixed_lag`: the fixed-lag (sliding-window) smoother, older poses
+  marginalised into a prior (:mod:`~slamkit.optim.marginal_prior`); every step costs the same.
 """
 
 from slamkit.optim.certificate import Certificate, certify
 from slamkit.optim.data import EdgeKind, EdgeSet, GraphData
+from slamkit.optim.fixed_lag import (
+    FixedLagConfig,
+    FixedLagResult,
+    FixedLagSmoother,
+    smooth_fixed_lag,
+)
 from slamkit.optim.graph import GraphProblem
 from slamkit.optim.incremental import (
     GraphUpdate,
@@ -73,6 +81,9 @@ __all__ = [
     "DoglegConfig",
     "EdgeKind",
     "EdgeSet",
+    "FixedLagConfig",
+    "FixedLagResult",
+    "FixedLagSmoother",
     "GraphData",
     "GraphProblem",
     "GraphUpdate",
@@ -106,6 +117,7 @@ __all__ = [
     "riemannian_staircase",
     "robust_rho_and_weight",
     "sesync_objective",
+    "smooth_fixed_lag",
     "spanning_tree_initialization",
     "time_ordered_updates",
 ]
