@@ -46,9 +46,9 @@ an unscented transform of the augmented state ``[x; z]``, without its ``O(n³)``
 
 **Cost per step**: the prediction ``O(n)`` (one ``3 × 3`` solve and a ``3 × 2L``
 product), an update ``O(n²)`` (the rank-``2m`` covariance update, as EKF-SLAM's; the sigma
-points cost a constant), a new landmark ``O(n)``. ``Σ_ss⁺`` is applied by a Cholesky solve
-(a pseudo-inverse when ``Σ_ss`` is singular, e.g. a start pose known exactly: there the
-cross-covariances it multiplies are zero too).
+points cost a constant), a new landmark ``O(n)``. ``Σ_ss⁺`` is the pseudo-inverse of the small
+block (:func:`regress`): ``Σ_ss`` is singular when part of ``s`` is known exactly (a start
+pose known exactly), and there the cross-covariances it multiplies are zero too.
 """
 
 from __future__ import annotations
@@ -57,7 +57,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 
 from slamkit._validation import FloatArray
 from slamkit.errors import ConvergenceError
@@ -77,19 +76,31 @@ from slamkit.models import LandmarkModel, MotionModel
 from slamkit.models.measurement import InvertibleLandmarkModel
 from slamkit.slam.ekf_slam.update import gain_update_inplace
 
-__all__ = ["UnscentedKernels", "regress"]
+__all__ = ["RANK_TOL", "UnscentedKernels", "regress"]
+
+
+RANK_TOL = 1e-10
+"""Eigenvalues of ``Σ_ss`` below this fraction of the largest count as zero in
+:func:`regress`: a direction known that much better than the best-known one (standard
+deviation ratio 1e-5) is treated as known exactly. Such directions are real — one
+prediction from a start known exactly leaves the pose covariance of rank two (the Euler
+step moves the position along the heading only) — and there the rounding of a zero
+eigenvalue, divided into, would put noise of order one into the cross-covariances."""
 
 
 def regress(P: FloatArray, C: FloatArray, rows: FloatArray) -> FloatArray:
     """``C P⁺ rows``: the covariance of an output with the rest of the state from its
     covariance ``C (a × k)`` with the ``k`` entries it read, their covariance ``P (k × k)``
-    and their rows ``(k × n)`` of the state covariance (module docstring). A Cholesky solve,
-    or the pseudo-inverse when ``P`` is singular."""
-    try:
-        factor = scipy.linalg.cho_factor(P, lower=True, check_finite=False)
-        F = scipy.linalg.cho_solve(factor, C.T, check_finite=False).T  # C P⁻¹ (P symmetric)
-    except (np.linalg.LinAlgError, ValueError):
-        F = C @ scipy.linalg.pinvh(P)
+    and their rows ``(k × n)`` of the state covariance (module docstring). ``P⁺`` is the
+    pseudo-inverse from the eigen-decomposition of the small ``P``, with the cut-off
+    :data:`RANK_TOL`."""
+    w, V = np.linalg.eigh(P)
+    top = float(w[-1])
+    if not top > 0.0:  # nothing of s is uncertain: its cross-covariances are zero
+        return np.zeros((C.shape[0], rows.shape[1]))
+    keep = w > RANK_TOL * top
+    Vk = V[:, keep]
+    F = ((C @ Vk) / w[keep]) @ Vk.T  # C P⁺
     return np.asarray(F @ rows, dtype=np.float64)
 
 
