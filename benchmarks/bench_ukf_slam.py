@@ -24,6 +24,7 @@ wall time over the runner's steps (distinct time stamps).
 from __future__ import annotations
 
 import math
+import os
 import time
 from typing import Any
 
@@ -132,6 +133,7 @@ def real_case(data: str, options: dict[str, Any], config: dict[str, Any], root: 
 
 
 def main() -> str:
+    load_before = os.getloadavg()[0]
     records: list[Record] = []
     lines = [
         f"### Consistency over {SEEDS} seeds (known ids)",
@@ -192,7 +194,11 @@ def main() -> str:
     notes = (
         "UKF-SLAM (slamkit.slam.ukf_slam) against EKF-SLAM with the same defaults, the same "
         "association, provisional list and checks: only the Gaussian approximation differs. "
-        "'peer' is EKF-SLAM, so the ratio below 1 is the UKF's extra cost.\n\n" + "\n".join(lines)
+        "'peer' is EKF-SLAM, so the ratio below 1 is the UKF's extra cost. Load average "
+        f"(1 min) {load_before:.1f} before, {os.getloadavg()[0]:.1f} after, on "
+        f"{os.cpu_count()} CPUs: other jobs share the machine, so compare the two filters "
+        "within one run. MRCLAM as loaded carries no true path (ATE nan); association "
+        "accuracy needs a feature index (Victoria Park's).\n\n" + "\n".join(lines)
     )
     return write_results("ukf_slam", records, notes=notes)
 

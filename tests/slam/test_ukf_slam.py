@@ -5,6 +5,7 @@ answer recovered as the noise shrinks."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -224,3 +225,44 @@ def test_unknown_association_in_the_runner(association: str) -> None:
     assert metrics["landmarks"]["n_matched"] == 5 and metrics["landmarks"]["rmse"] < 0.05
     assert metrics["association"]["accuracy"] > 0.99
     assert result.output.diagnostics["n_landmarks"] == 5
+
+
+@pytest.mark.realdata
+def test_victoria_park_first_300_s_matches_ekf_slam(data_root: Path) -> None:
+    """The first 300 s of Victoria Park, ids withheld, nearest neighbour — the case of
+    EKF-SLAM's real-data test. Measured: GPS RMSE 4.358 m (EKF-SLAM 4.352 m), 154
+    landmarks (155), association accuracy 96.05 % (96.04 %), precision 96.6 %; 7.2 s
+    (EKF-SLAM 5.3 s)."""
+    from slamkit.pipeline import run as run_pipeline
+    from slamkit.pipeline.evaluate import evaluate
+
+    ds = load_dataset("victoria-park", options={"max_duration_s": 300.0}, data_root=data_root)
+    m = evaluate(run_pipeline("ukf-slam", ds, seed=0), ds).metrics
+    assert m["gps"]["used"] > 800 and m["gps"]["rmse"] < 5.2
+    a = m["association"]
+    assert a["readings"] > 8000 and a["accuracy"] > 0.94 and a["precision"] > 0.95
+    assert 140 <= m["diagnostics"]["n_landmarks"] <= 170
+
+
+def test_command_line_lists_and_runs_it(tmp_path: Path) -> None:
+    """``slamkit estimators`` lists ``ukf-slam``; ``slamkit run ukf-slam`` writes the
+    standard files with its settings (a sigma-point table included) and the scores."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from slamkit.cli.main import app
+
+    runner = CliRunner()
+    res = runner.invoke(app, ["estimators"], env={"COLUMNS": "200"})
+    assert res.exit_code == 0 and "ukf-slam" in res.output
+    out = tmp_path / "run"
+    args = ["run", "ukf-slam", "--data", "five-features", "--out", str(out), "--no-plots",
+            "--set", "sigma_points.alpha=0.5"]  # fmt: skip
+    res = runner.invoke(app, args)
+    assert res.exit_code == 0, res.output
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["landmarks"]["n_matched"] == 5 and metrics["landmarks"]["rmse"] < 0.05
+    assert metrics["ate"]["rmse"] < 0.1
+    config = json.loads((out / "config.json").read_text())
+    assert config["estimator"]["sigma_points"]["alpha"] == 0.5
