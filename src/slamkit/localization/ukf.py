@@ -60,10 +60,12 @@ __all__ = [
     "SigmaPointParams",
     "UkfConfig",
     "UkfLocalization",
+    "circular_mean_about",
     "psd_sqrt",
     "sigma_point_weights",
     "ukf_predict",
     "ukf_update",
+    "unscented_motion_unchecked",
 ]
 
 
@@ -123,7 +125,7 @@ def psd_sqrt(P: FloatArray, where: str) -> FloatArray:
         return np.asarray(V * np.sqrt(np.clip(w, 0.0, None)), dtype=np.float64)
 
 
-def _circular_mean_about(angles: FloatArray, weights: FloatArray, ref: float) -> float:
+def circular_mean_about(angles: FloatArray, weights: FloatArray, ref: float) -> float:
     """Weighted circular mean of ``angles`` computed about the reference angle ``ref``: the
     offsets ``angles − ref`` are small, so the weighted sums of sines and cosines keep full
     precision even with a large negative central weight. Wrapped to ``[-π, π)``."""
@@ -131,7 +133,7 @@ def _circular_mean_about(angles: FloatArray, weights: FloatArray, ref: float) ->
     return a if -math.pi <= a < math.pi else float(wrap_angle(a))
 
 
-def _ukf_predict_arrays(
+def unscented_motion_unchecked(
     mean: FloatArray,
     cov: FloatArray,
     u: FloatArray,
@@ -140,8 +142,12 @@ def _ukf_predict_arrays(
     Q: FloatArray,
     params: SigmaPointParams,
     sqrt_Q: FloatArray | None = None,
-) -> tuple[FloatArray, FloatArray]:
-    """:func:`ukf_predict` on validated arrays; ``sqrt_Q`` may carry a precomputed root of Q."""
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The augmented unscented prediction on validated arrays (module docstring):
+    ``(mean', cov', C)`` with ``C = Σ Wcᵢ (Yᵢ − ȳ)(χᵢ − μ)ᵀ (n × n)``, the covariance of the
+    moved state with the state before the move (what a caller needs to carry correlations
+    with quantities that do not move, e.g. a SLAM map: ``Σ_ym = C Σ_xx⁻¹ Σ_xm``).
+    ``sqrt_Q`` may carry a precomputed root of ``Q``."""
     n, k = mean.size, u.size
     N = n + k
     Wm, Wc, c = sigma_point_weights(params, N)
@@ -161,12 +167,29 @@ def _ukf_predict_arrays(
     if not math.isfinite(float(Y[:, :3].sum())):
         raise ConvergenceError("ukf_predict: the motion moved a sigma point to a non-finite pose")
     new_mean = Wm @ Y
-    new_mean[2] = _circular_mean_about(Y[:, 2], Wm, float(Y[0, 2]))
+    new_mean[2] = circular_mean_about(Y[:, 2], Wm, float(Y[0, 2]))
     D = Y - new_mean
     D[:, 2] = wrap_array(D[:, 2])  # heading residuals wrapped before the outer products
     new_cov = (D.T * Wc) @ D
     new_cov = 0.5 * (new_cov + new_cov.T)
     check_covariance(new_cov, "ukf_predict")
+    # Only the rows 1..n and N+1..N+n have a state offset (±√c Lx columns), with Wc = 1/(2c).
+    cross = (D[1 : n + 1] - D[N + 1 : N + n + 1]).T @ Lx.T * (0.5 / s)
+    return new_mean, new_cov, cross
+
+
+def _ukf_predict_arrays(
+    mean: FloatArray,
+    cov: FloatArray,
+    u: FloatArray,
+    dt: float,
+    model: MotionModel,
+    Q: FloatArray,
+    params: SigmaPointParams,
+    sqrt_Q: FloatArray | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`ukf_predict` on validated arrays; ``sqrt_Q`` may carry a precomputed root of Q."""
+    new_mean, new_cov, _ = unscented_motion_unchecked(mean, cov, u, dt, model, Q, params, sqrt_Q)
     return new_mean, new_cov
 
 
@@ -191,7 +214,7 @@ def _ukf_update_arrays(
     Z = predict_measurement_unchecked(model, X[:, :3], landmark)  # (2n+1, m)
     z_hat = Wm @ Z
     for i in angular:
-        z_hat[i] = _circular_mean_about(Z[:, i], Wm, float(Z[0, i]))
+        z_hat[i] = circular_mean_about(Z[:, i], Wm, float(Z[0, i]))
     dZ = Z - z_hat
     for i in angular:
         dZ[:, i] = wrap_array(dZ[:, i])  # bearing residuals wrapped before the outer products

@@ -190,6 +190,16 @@ ESTIMATORS: dict[str, EstimatorEntry] = {
             work="readings",
         ),
         EstimatorEntry(
+            "ukf-slam",
+            "UKF-SLAM: EKF-SLAM's state, association and feature list with unscented "
+            "prediction, updates and landmark initialisation (sigma points over the pose and "
+            "the few entries a step reads)",
+            "slamkit.slam.ukf_slam:UkfSlam",
+            "slamkit.slam.ukf_slam:UkfSlamConfig",
+            requires=("motion", "landmark_sensor"),
+            work="readings",
+        ),
+        EstimatorEntry(
             "fastslam1",
             "FastSLAM 1.0: particles over paths, a 2×2 EKF per landmark and particle, "
             "per-particle maximum-likelihood association",

@@ -2,6 +2,8 @@
 
 * :mod:`slamkit.slam.ekf_slam` — EKF-SLAM over the pose and point landmarks (full
   covariance, 5-column updates, nearest-neighbour or JCBB association, provisional features).
+* :mod:`slamkit.slam.ukf_slam` — UKF-SLAM: EKF-SLAM's state and association with unscented
+  prediction, updates and landmark initialisation.
 * :mod:`slamkit.slam.fastslam` — FastSLAM 1.0 and 2.0: particles over paths, a 2×2 EKF per
   landmark and particle, per-particle association, vectorised over particles.
 * :mod:`slamkit.slam.seif` — SEIF SLAM: information form, bounded active landmarks,
@@ -31,6 +33,7 @@ from slamkit.slam.fastslam import (
     fastslam_resample,
 )
 from slamkit.slam.seif import Seif, SeifConfig
+from slamkit.slam.ukf_slam import UkfSlam, UkfSlamConfig
 
 __all__ = [
     "EkfSlam",
@@ -43,6 +46,8 @@ __all__ = [
     "Seif",
     "SeifConfig",
     "SlamBelief",
+    "UkfSlam",
+    "UkfSlamConfig",
     "dense_slam_predict",
     "dense_slam_update",
     "fastslam1_update",

@@ -64,6 +64,9 @@ The package, by concern:
 * :mod:`~slamkit.slam.ekf_slam.update` — the in-place 5-column Joseph update;
 * :mod:`~slamkit.slam.ekf_slam.association` — distances, nearest neighbour, JCBB;
 * :mod:`~slamkit.slam.ekf_slam.provisional` — the provisional feature list;
+* :mod:`~slamkit.slam.ekf_slam.kernels` — the prediction, update and new landmark as one
+  object the estimator holds (:class:`~slamkit.slam.ekf_slam.kernels.EkfKernels`; UKF-SLAM
+  passes its unscented ones);
 * :mod:`~slamkit.slam.ekf_slam.config` and :mod:`~slamkit.slam.ekf_slam.estimator` — the
   settings and the estimator shell :class:`EkfSlam`.
 """

@@ -43,6 +43,7 @@ from slamkit.slam.common import OWN_ID_BASE, NisRecord, ReadingLog, scan_reading
 from slamkit.slam.ekf_slam.association import JcbbResult, associate_scan
 from slamkit.slam.ekf_slam.belief import SlamBelief
 from slamkit.slam.ekf_slam.config import EkfSlamConfig
+from slamkit.slam.ekf_slam.kernels import EkfKernels, SlamKernels
 from slamkit.slam.ekf_slam.provisional import (
     TRACKED,
     in_view,
@@ -51,8 +52,8 @@ from slamkit.slam.ekf_slam.provisional import (
     remove_missed,
     watched,
 )
-from slamkit.slam.ekf_slam.state import SlamState, diagonal_blocks, predict_inplace
-from slamkit.slam.ekf_slam.update import check_diagonal, update_inplace
+from slamkit.slam.ekf_slam.state import SlamState, diagonal_blocks
+from slamkit.slam.ekf_slam.update import check_diagonal
 
 __all__ = ["COUNTS", "EkfSlam"]
 
@@ -76,7 +77,7 @@ COUNTS = (
 
 
 def _check_dataset(
-    dataset: Dataset,
+    dataset: Dataset, key: str
 ) -> tuple[MotionSpec, LandmarkSensorSpec, InvertibleLandmarkModel]:
     """The data set's motion, landmark sensor and the sensor's (invertible) model; a named
     error if EKF-SLAM cannot run on the data set."""
@@ -89,12 +90,12 @@ def _check_dataset(
             )
             if value is None
         ]
-        raise InputError(f"ekf-slam needs {' and '.join(missing)}; {dataset.name} has none")
+        raise InputError(f"{key} needs {' and '.join(missing)}; {dataset.name} has none")
     sensor = dataset.landmark_sensor
     meas = sensor.model()
     if not isinstance(meas, InvertibleLandmarkModel):
         raise InputError(
-            f"ekf-slam cannot use the {sensor.kind!r} sensor of {dataset.name}: one reading "
+            f"{key} cannot use the {sensor.kind!r} sensor of {dataset.name}: one reading "
             "does not locate a landmark (use range-bearing or position readings)"
         )
     return dataset.motion, sensor, meas
@@ -148,9 +149,11 @@ class EkfSlam(EstimatorShell):
     """
 
     name = "EKF-SLAM"
+    key = "ekf-slam"
+    """The registry name, used in error messages."""
 
     def __init__(self, dataset: Dataset, config: EkfSlamConfig, rng: np.random.Generator) -> None:
-        motion, sensor, meas = _check_dataset(dataset)
+        motion, sensor, meas = _check_dataset(dataset, self.key)
         self._config = config
         self._motion = motion.model
         self._Q = config.motion_cov_scale * motion.noise_cov
@@ -160,6 +163,9 @@ class EkfSlam(EstimatorShell):
         self._m = int(self._R.shape[0])
         self._R_inv = np.asarray(np.linalg.inv(self._R), dtype=np.float64)
         self._angular = angular_indices(self._model)
+        self._kernels = self.make_kernels(
+            config, EkfKernels(self._motion, self._Q, self._model, meas, self._R, self._angular)
+        )
         self._sensor = sensor
         self._use_ids = config.use_ids and sensor.identities
         self._state = SlamState(config.initial_capacity, dataset.initial_pose, dataset.initial_cov)
@@ -199,6 +205,12 @@ class EkfSlam(EstimatorShell):
         """The current belief (all landmarks, provisional ones included) as a value."""
         return SlamBelief(self.mean, self.cov, self.landmark_ids)
 
+    def make_kernels(self, config: EkfSlamConfig, ekf: EkfKernels) -> SlamKernels:
+        """The Gaussian kernels this filter runs (called once, by the constructor): here
+        ``ekf``, the analytic linearisation; a subclass returns its own from the same
+        models and noises (the fields of ``ekf``) and its ``config``."""
+        return ekf
+
     def on_control(self, u: FloatArray, dt: float) -> None:
         self._predict(u, dt)
 
@@ -206,7 +218,7 @@ class EkfSlam(EstimatorShell):
         self._scan(event)
 
     def after_event(self, step: int) -> None:
-        check_state_covariance(self._state.views()[1], "ekf-slam", step, self._config.check_every)
+        check_state_covariance(self._state.views()[1], self.key, step, self._config.check_every)
 
     def estimate(self) -> PoseEstimate:
         return PoseEstimate(self._state.mean_buf[:3].copy(), self._state.cov_buf[:3, :3].copy())
@@ -258,7 +270,7 @@ class EkfSlam(EstimatorShell):
 
     def _predict(self, u: FloatArray, dt: float) -> None:
         mean, cov = self._state.views()
-        predict_inplace(mean, cov, u, dt, self._motion, self._Q)
+        self._kernels.predict(mean, cov, u, dt)
         self._counts["predictions"] += 1
 
     def _scan(self, event: LandmarkReadings) -> None:
@@ -314,7 +326,7 @@ class EkfSlam(EstimatorShell):
 
     def _add(self, z: FloatArray, landmark_id: int) -> None:
         provisional = self._config.provisional_trace is not None
-        j = self._state.add(z, landmark_id, self._meas, self._R, provisional)
+        j = self._state.add(z, landmark_id, self._kernels.add, provisional)
         if provisional:
             self._add_information(j)
         self._next_id = max(self._next_id, landmark_id + 1)
@@ -330,10 +342,7 @@ class EkfSlam(EstimatorShell):
         mean, cov = st.views()
         lid, provisional = int(st.ids[j]), bool(st.provisional[j])
         try:
-            nis, _, _ = update_inplace(
-                mean, cov, 3 + 2 * j, z, self._model, self._R, self._angular, st.scratch,
-                consider=provisional,
-            )  # fmt: skip
+            nis = self._kernels.update(mean, cov, 3 + 2 * j, z, st.scratch, provisional)
         except GeometryError:
             self._counts["degenerate"] += 1
             self._log.add(t, -1, DISCARDED)

@@ -22,6 +22,7 @@ A new landmark (:func:`add_landmark_inplace`) from its first reading by the inve
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,7 +34,13 @@ from slamkit.models.measurement import InvertibleLandmarkModel
 from slamkit.models.motion import motion_kernels
 from slamkit.slam.ekf_slam.update import SCRATCH_BYTES
 
-__all__ = ["SlamState", "add_landmark_inplace", "diagonal_blocks", "predict_inplace"]
+__all__ = [
+    "LandmarkWriter",
+    "SlamState",
+    "add_landmark_inplace",
+    "diagonal_blocks",
+    "predict_inplace",
+]
 
 
 def diagonal_blocks(cov: FloatArray, L: int) -> FloatArray:
@@ -89,6 +96,10 @@ def add_landmark_inplace(
     cov_buf[:n, n : n + 2] = cross.T
     cov_buf[n : n + 2, n : n + 2] = 0.5 * (P + P.T)
 
+
+LandmarkWriter = Callable[[FloatArray, FloatArray, int, FloatArray], None]
+"""``write(mean_buf, cov_buf, n, z)``: put the landmark first read at ``z`` into rows and
+columns ``n, n + 1`` of the buffers, with its cross-covariances with the first ``n`` entries."""
 
 _PER_LANDMARK = ("ids", "provisional", "misses", "info")
 
@@ -156,14 +167,14 @@ class SlamState:
         self,
         z: FloatArray,
         landmark_id: int,
-        model: InvertibleLandmarkModel,
-        R: FloatArray,
+        write: LandmarkWriter,
         provisional: bool,
     ) -> int:
-        """Append the landmark first read at ``z`` (:func:`add_landmark_inplace`); returns
-        its index in the state."""
+        """Append the landmark first read at ``z``, its mean and covariance written by
+        ``write`` (:func:`add_landmark_inplace`'s signature without the model and noise);
+        returns its index in the state."""
         self.ensure_capacity(1)
-        add_landmark_inplace(self.mean_buf, self.cov_buf, self.n, z, model, R)
+        write(self.mean_buf, self.cov_buf, self.n, z)
         j = self.n_landmarks
         self.ids[j] = landmark_id
         self.provisional[j] = provisional

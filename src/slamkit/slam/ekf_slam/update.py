@@ -34,7 +34,13 @@ from slamkit.estimation.gaussian import small_spd_inverse, wrap_components
 from slamkit.models import LandmarkModel
 from slamkit.slam.common import reading_jacobians
 
-__all__ = ["SCRATCH_BYTES", "check_diagonal", "rank_update", "update_inplace"]
+__all__ = [
+    "SCRATCH_BYTES",
+    "check_diagonal",
+    "gain_update_inplace",
+    "rank_update",
+    "update_inplace",
+]
 
 SCRATCH_BYTES = 1 << 20
 """Size of the block of rows the rank-2m covariance product is formed in: small enough to
@@ -83,6 +89,29 @@ def update_inplace(
     HS = Hr @ cov[:3, :] + Hj @ cov[s : s + 2, :]  # H Σ from five rows (m × n)
     S = HS[:, :3] @ Hr.T + HS[:, s : s + 2] @ Hj.T + R
     S = 0.5 * (S + S.T)
+    nis = gain_update_inplace(mean, cov, s, nu, HS, S, scratch, consider=consider)
+    return nis, nu, S
+
+
+def gain_update_inplace(
+    mean: FloatArray,
+    cov: FloatArray,
+    slot: int,
+    nu: FloatArray,
+    HS: FloatArray,
+    S: FloatArray,
+    scratch: FloatArray,
+    *,
+    consider: bool = False,
+) -> float:
+    """The Kalman update of :func:`update_inplace` from its ingredients: the innovation
+    ``ν (m,)`` (angles wrapped), ``H Σ = (Σ Hᵀ)ᵀ (m × n)`` — the covariance of the reading's
+    prediction with the whole state — and ``S (m × m)``; returns the NIS. Any filter whose
+    reading depends on the pose and the landmark in rows ``slot, slot + 1`` only can supply
+    them (the UKF's statistically linearised ``H Σ``, see :mod:`slamkit.slam.ukf_slam`);
+    ``consider`` as in :func:`update_inplace`."""
+    s = slot
+    S = 0.5 * (S + S.T)
     S_inv = small_spd_inverse(S, "ekf-slam update")
     if S_inv is None:  # readings of more than two components
         S_inv = _spd_inverse(S)
@@ -99,7 +128,7 @@ def update_inplace(
         cov[s : s + 2, s : s + 2] = 0.5 * (block + block.T)
         if not math.isfinite(float(block.sum() + mean[s] + mean[s + 1])):
             raise ConvergenceError("ekf-slam update: the covariance became non-finite")
-        return nis, nu, S
+        return nis
     Kt = S_inv @ HS  # Kᵀ = S⁻¹ H Σ (m × n)
     if not math.isfinite(float(Kt.sum() + nis)):
         raise ConvergenceError("ekf-slam update: the gain became non-finite")
@@ -112,7 +141,7 @@ def update_inplace(
     cov[:3, :3] = 0.5 * (cov[:3, :3] + cov[:3, :3].T)
     blk = cov[s : s + 2, s : s + 2]
     cov[s : s + 2, s : s + 2] = 0.5 * (blk + blk.T)
-    return nis, nu, S
+    return nis
 
 
 def _spd_inverse(S: FloatArray) -> FloatArray:
