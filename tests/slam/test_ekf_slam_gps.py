@@ -21,6 +21,7 @@ from slamkit.slam.ekf_slam import EkfSlamConfig
 from slamkit.slam.ekf_slam.gps import (
     antenna_measurement,
     gps_update_inplace,
+    gps_warnings,
     move_state_inplace,
 )
 
@@ -153,6 +154,7 @@ def test_fusion_ends_closer_to_the_truth_and_gates_the_outliers(seed: int) -> No
     assert d["gps_refused"] >= N_OUT
     assert d["gps_refused"] - N_OUT <= 0.03 * d["gps_fused"]
     assert "gps_fused" not in plain.output.diagnostics
+    assert fused.output.warnings == ()
 
     def truth_at(times: np.ndarray) -> np.ndarray:
         k = np.searchsorted(ds.truth.times, times).clip(0, ds.truth.times.size - 1)  # type: ignore[arg-type]
@@ -169,6 +171,18 @@ def test_fusion_ends_closer_to_the_truth_and_gates_the_outliers(seed: int) -> No
     assert err_fused[-1] < err_plain[-1]
 
 
+def test_warnings_name_a_filter_that_refuses_most_fixes() -> None:
+    def counts(fixes: int, aligning: int, fused: int, refused: int) -> dict[str, int]:
+        return dict(gps_fixes=fixes, gps_aligning=aligning, gps_fused=fused,
+                    gps_refused=refused)  # fmt: skip
+
+    assert gps_warnings(counts(0, 0, 0, 0)) == ()
+    assert gps_warnings(counts(100, 20, 60, 20)) == ()
+    assert [w.kind for w in gps_warnings(counts(100, 20, 30, 50))] == ["gps_refused"]
+    assert "50 of 80" in gps_warnings(counts(100, 20, 30, 50))[0].message
+    assert [w.kind for w in gps_warnings(counts(5, 5, 0, 0))] == ["gps_not_used"]
+
+
 def test_settings_are_checked() -> None:
     with pytest.raises(ConfigError, match="gps_lever_arm"):
         EkfSlamConfig(gps_lever_arm=(1.0,))  # type: ignore[arg-type]
@@ -182,7 +196,8 @@ def test_settings_are_checked() -> None:
 def test_victoria_park_fused_scores_on_held_out_fixes(data_root: Path) -> None:
     """The first 200 s of Victoria Park with ``gps_fuse``: 9 of 10 fixes in the stream; EKF-
     SLAM with the graph's lever arm (3.98, 0.41) m scores on the held-out tenth, without
-    alignment, below 1.6 m RMSE (measured 1.30 m), and refuses few fixes (measured 1)."""
+    alignment, below 1.6 m RMSE (measured 1.30 m), and refuses few fixes (measured 1). With
+    the arm left at 0 the gate refuses most (measured 328 of 418) and the run says so."""
     opts = {"gps_fuse": True, "identities": True, "max_duration_s": 200.0}
     ds = load_dataset("victoria-park", options=opts, data_root=data_root)
     t, xy = ds.truth.position_times, ds.truth.positions
@@ -194,6 +209,12 @@ def test_victoria_park_fused_scores_on_held_out_fixes(data_root: Path) -> None:
     assert d["gps_refused"] <= 5
     s = holdout_gps_error(res.times, res.poses, t, xy, held, (3.98, 0.41))
     assert s.direct_rmse < 1.6
+    assert res.output.warnings == ()
+    wrong = run("ekf-slam", ds).output
+    assert wrong.diagnostics["gps_refused"] > 0.5 * (
+        wrong.diagnostics["gps_refused"] + wrong.diagnostics["gps_fused"]
+    )
+    assert [w.kind for w in wrong.warnings] == ["gps_refused"]
     assert (
         "GpsFix"
         not in load_dataset(

@@ -57,7 +57,10 @@ Conversion (:func:`load_victoria_park`):
 * **GPS** is ``truth.position_times``/``truth.positions``: positions only (no heading), in
   the GPS frame, every fix as recorded, outliers included. :func:`slamkit.eval.gps.gps_error`
   rejects fixes that disagree with their neighbours and scores an estimate after an SE(2)
-  alignment at the GPS times. There is no true trajectory and no landmark map.
+  alignment at the GPS times. There is no true trajectory and no landmark map. With
+  ``gps_fuse`` the fixes are also put in the stream as ``GpsFix`` events (every
+  ``gps_holdout_every``-th left out, to score on) with noise ``gps_sigma`` per axis, for
+  estimators that fuse them (EKF-SLAM, ``docs/estimators/gps.md``).
 * **Prior**: the start defines the frame: pose ``(0, 0, 0)`` with zero covariance.
 
 **Conventions checked on the data.** Dead reckoning below integrates the odometry with the
@@ -139,6 +142,7 @@ from slamkit.datasets.assemble import (
 )
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.plaza import cut_intervals
+from slamkit.datasets.provenance import Provenance
 from slamkit.datasets.stream import (
     Dataset,
     GpsFix,
@@ -440,12 +444,7 @@ def load_victoria_park(
     return Dataset(
         name="victoria-park",
         events=events,
-        motion=ackermann_motion(
-            wheelbase=opts.wheelbase,
-            encoder_offset=opts.encoder_offset,
-            sigma_speed=opts.sigma_speed,
-            sigma_steering=opts.sigma_steering,
-        ),
+        motion=_motion(opts),
         landmark_sensor=replace(sensor, detection_range=measured_detection_range(events, sensor)),
         initial_pose=np.zeros(3),
         initial_cov=np.zeros((3, 3)),
@@ -456,9 +455,19 @@ def load_victoria_park(
             reading_ids=truth_ids,
         ),
         description=_DESCRIPTION,
+        provenance=Provenance(options=config_to_dict(opts)),
         metadata=_metadata(
             opts, len(odo), t_odo, n_ctrl, len(det), kept, len(readings), n_gps, cut
         ),
+    )
+
+
+def _motion(opts: VictoriaParkOptions) -> MotionSpec:
+    return ackermann_motion(
+        wheelbase=opts.wheelbase,
+        encoder_offset=opts.encoder_offset,
+        sigma_speed=opts.sigma_speed,
+        sigma_steering=opts.sigma_steering,
     )
 
 

@@ -51,6 +51,7 @@ from slamkit.slam.ekf_slam.gps import (
     add_frame_uncertainty,
     antenna_measurement,
     gps_update_inplace,
+    gps_warnings,
     move_state_inplace,
 )
 from slamkit.slam.ekf_slam.kernels import EkfKernels, SlamKernels
@@ -338,6 +339,7 @@ class EkfSlam(EstimatorShell):
             reading_landmarks=self._log.arrays()[1],
             landmark_numbering=LandmarkIds.DATASET if self._use_ids else LandmarkIds.OWN,
             trajectory=self._gps_trajectory(),
+            warnings=gps_warnings(self._gps_counts),
         )
 
     def _predict(self, u: FloatArray, dt: float) -> None:

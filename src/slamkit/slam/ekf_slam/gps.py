@@ -35,6 +35,7 @@ import math
 import numpy as np
 
 from slamkit._validation import FloatArray
+from slamkit.estimation.contract import RunWarning
 from slamkit.estimation.gaussian import small_spd_inverse
 from slamkit.geometry.alignment import align_points_2d
 from slamkit.slam.ekf_slam.update import gain_update_inplace
@@ -42,10 +43,12 @@ from slamkit.slam.ekf_slam.update import gain_update_inplace
 __all__ = [
     "ALIGN_MIN_FIXES",
     "ALIGN_SPAN",
+    "REFUSED_SHARE",
     "FrameAligner",
     "add_frame_uncertainty",
     "antenna_measurement",
     "gps_update_inplace",
+    "gps_warnings",
     "move_state_inplace",
 ]
 
@@ -55,6 +58,11 @@ span this many metres (the largest distance from the first): with σ = 1 m fixes
 heading is then good to about 0.01 rad."""
 ALIGN_MIN_FIXES = 10
 """And at least this many fixes were collected."""
+REFUSED_SHARE = 0.5
+"""A run whose gate refused more than this share of the fixes it judged gets a warning: the
+filter and the GPS disagree for good (on Victoria Park with the lever arm left at 0, 3,695
+of 3,883; with the graph's arm, 319: ``docs/estimators/gps.md``). A filter cannot re-weigh
+a refused fix later, so once it drifts past the gate it stays there."""
 
 
 def antenna_measurement(pose: FloatArray, lever: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -177,3 +185,30 @@ class FrameAligner:
         var = self.sigma**2
         frame_cov = np.diag([var / keep.sum(), var / keep.sum(), var / max(spread, 1e-9)])
         return sim.angle, np.asarray(sim.translation, dtype=float), centre, frame_cov
+
+
+def gps_warnings(counts: dict[str, int]) -> tuple[RunWarning, ...]:
+    """The run's doubts about its GPS, from the counts ``gps_fixes``, ``gps_aligning``,
+    ``gps_fused``, ``gps_refused``: never moved into the GPS frame, or the gate refused
+    most fixes (:data:`REFUSED_SHARE`)."""
+    if not counts["gps_fixes"]:
+        return ()
+    judged = counts["gps_fused"] + counts["gps_refused"]
+    if not judged:
+        return (
+            RunWarning(
+                "gps_not_used",
+                f"the {counts['gps_fixes']} GPS fixes never spanned {ALIGN_SPAN:g} m of the "
+                "path, so the filter never moved into the GPS frame and fused none",
+            ),
+        )
+    if counts["gps_refused"] > REFUSED_SHARE * judged:
+        return (
+            RunWarning(
+                "gps_refused",
+                f"the χ² gate refused {counts['gps_refused']} of {judged} GPS fixes: the "
+                "filter and the GPS disagree (is gps_lever_arm right?), so the path follows "
+                "the odometry and the landmarks",
+            ),
+        )
+    return ()
