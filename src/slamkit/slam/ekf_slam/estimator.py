@@ -25,11 +25,9 @@ from slamkit.estimation.contract import (
     LandmarkEstimate,
     LandmarkIds,
     PoseEstimate,
-    SmoothedTrajectory,
 )
 from slamkit.estimation.gaussian import angular_indices, check_state_covariance
 from slamkit.estimation.shell import EstimatorShell
-from slamkit.geometry.angles import wrap_angle
 from slamkit.mapping.ekf_mapping import (
     DISCARDED,
     INITIALISED,
@@ -46,14 +44,7 @@ from slamkit.slam.common import OWN_ID_BASE, NisRecord, ReadingLog, scan_reading
 from slamkit.slam.ekf_slam.association import JcbbResult, associate_scan
 from slamkit.slam.ekf_slam.belief import SlamBelief
 from slamkit.slam.ekf_slam.config import EkfSlamConfig
-from slamkit.slam.ekf_slam.gps import (
-    FrameAligner,
-    add_frame_uncertainty,
-    antenna_measurement,
-    gps_update_inplace,
-    gps_warnings,
-    move_state_inplace,
-)
+from slamkit.slam.ekf_slam.gps import GPS_COUNTS, GpsFusion, gps_warnings
 from slamkit.slam.ekf_slam.kernels import EkfKernels, SlamKernels
 from slamkit.slam.ekf_slam.provisional import (
     TRACKED,
@@ -67,10 +58,6 @@ from slamkit.slam.ekf_slam.state import SlamState, diagonal_blocks
 from slamkit.slam.ekf_slam.update import check_diagonal
 
 __all__ = ["COUNTS", "GPS_COUNTS", "EkfSlam"]
-
-GPS_COUNTS = ("gps_fixes", "gps_aligning", "gps_fused", "gps_refused")
-"""The counts of GPS fixes in the diagnostics, when the stream carries them: all, spent on
-moving into the GPS frame, fused, refused by the gate."""
 
 COUNTS = (
     "predictions",
@@ -151,6 +138,12 @@ class EkfSlam(EstimatorShell):
        (``max_misses_confirmed`` for confirmed ones). Removing marginalises the feature out
        of the Gaussian: its rows and columns are dropped.
 
+    :class:`~slamkit.datasets.GpsFix` events (a stream whose loader was asked to fuse GPS)
+    measure the antenna at ``gps_lever_arm``: after the first fixes have moved the filter into
+    the GPS frame, each is fused through a χ² gate (:mod:`slamkit.slam.ekf_slam.gps`), and
+    :meth:`finish` returns the whole path in the GPS frame and the counts of
+    :data:`GPS_COUNTS`.
+
     The prior is the data set's (``initial_pose``, ``initial_cov``); without one the map
     frame is the start pose, known exactly. :meth:`finish` returns the confirmed
     landmarks with their marginal covariances and the diagnostics: counts (see
@@ -190,18 +183,10 @@ class EkfSlam(EstimatorShell):
         self._log = ReadingLog()
         self._nis = NisRecord()
         self._nis_provisional: list[float] = []
-        self._gps_R = None if dataset.gps is None else dataset.gps.noise_cov
-        self._gps_counts = dict.fromkeys(GPS_COUNTS, 0)
-        self._lever = np.asarray(config.gps_lever_arm, dtype=np.float64)
-        self._gps_gate = chi2_gate(2, config.gps_gate_probability)
-        sigma = 0.0 if self._gps_R is None else float(np.sqrt(np.trace(self._gps_R) / 2.0))
-        self._aligner: FrameAligner | None = FrameAligner(sigma)
-        # With GPS the path before the move into the GPS frame is moved too, at the end:
-        # the pose at every time stamp is kept (finish's trajectory); _moved holds the
-        # move's angle, shift and how many of the kept poses it applies to.
-        self._path_t: list[float] = [dataset.start_time]
-        self._path: list[FloatArray] = [self._state.mean_buf[:3].copy()]
-        self._moved: tuple[float, FloatArray, int] | None = None
+        self._gps = None if dataset.gps is None else GpsFusion(
+            dataset.gps.noise_cov, config.gps_lever_arm, config.gps_gate_probability,
+            dataset.start_time, self._state.mean_buf[:3],
+        )  # fmt: skip
 
     @property
     def mean(self) -> FloatArray:
@@ -245,50 +230,14 @@ class EkfSlam(EstimatorShell):
         self._scan(event)
 
     def on_gps(self, event: GpsFix) -> None:
-        """A fix: collected for the move into the GPS frame until that is done, then fused
-        through the χ² gate (:mod:`slamkit.slam.ekf_slam.gps`)."""
-        if self._gps_R is None:  # the Dataset refuses fixes without a GpsSpec
-            return
-        mean, cov = self._state.views()
-        self._gps_counts["gps_fixes"] += 1
-        if self._aligner is not None:
-            self._gps_counts["gps_aligning"] += 1
-            antenna, _ = antenna_measurement(mean[:3], self._lever)
-            if self._aligner.add(antenna, event.position):
-                angle, shift, centre, frame_cov = self._aligner.fit()
-                move_state_inplace(mean, cov, angle, shift)
-                add_frame_uncertainty(cov, mean, centre, frame_cov)
-                self._aligner = None
-                early = len(self._path_t) - int(self._path_t[-1] >= event.t)
-                self._moved = (angle, shift, early)
-            return
-        _, used = gps_update_inplace(mean, cov, event.position, self._lever, self._gps_R,
-                                     self._gps_gate, self._state.scratch)  # fmt: skip
-        self._gps_counts["gps_fused" if used else "gps_refused"] += 1
+        if self._gps is not None:  # the Dataset refuses fixes without a GpsSpec
+            mean, cov = self._state.views()
+            self._gps.fix(mean, cov, float(event.t), event.position, self._state.scratch)
 
     def after_event(self, step: int) -> None:
         check_state_covariance(self._state.views()[1], self.key, step, self._config.check_every)
-        if self._gps_R is not None:
-            t = float(self.clock.time or 0.0)
-            if t > self._path_t[-1]:
-                self._path_t.append(t)
-                self._path.append(self._state.mean_buf[:3].copy())
-            else:  # the same stamp (or the start): its latest pose
-                self._path[-1] = self._state.mean_buf[:3].copy()
-
-    def _gps_trajectory(self) -> SmoothedTrajectory | None:
-        """The path at every time stamp in the GPS frame: the poses before the move, moved
-        as the state was; ``None`` without GPS or before the move (the online path is it)."""
-        if self._moved is None or self._gps_R is None:
-            return None
-        angle, shift, n = self._moved
-        path = np.asarray(self._path)
-        early = path[:n].copy()
-        c, s = np.cos(angle), np.sin(angle)
-        path[:n, 0] = c * early[:, 0] - s * early[:, 1] + shift[0]
-        path[:n, 1] = s * early[:, 0] + c * early[:, 1] + shift[1]
-        path[:n, 2] = wrap_angle(early[:, 2] + angle)
-        return SmoothedTrajectory(np.asarray(self._path_t), path)
+        if self._gps is not None:
+            self._gps.record(float(self.clock.time or 0.0), self._state.mean_buf[:3])
 
     def estimate(self) -> PoseEstimate:
         return PoseEstimate(self._state.mean_buf[:3].copy(), self._state.cov_buf[:3, :3].copy())
@@ -330,16 +279,16 @@ class EkfSlam(EstimatorShell):
             nis_above_95=float(np.mean(nis > q95)) if nis.size else None,
             mean_nis_provisional=float(nis_p.mean()) if nis_p.size else None,
         )
-        if self._gps_R is not None:
-            diagnostics.update(self._gps_counts)
+        if self._gps is not None:
+            diagnostics.update(self._gps.counts)
         return EstimatorOutput(
             landmarks=landmarks,
             diagnostics=diagnostics,
             innovations=self._nis.log(self._m) if self._config.record_innovations else None,
             reading_landmarks=self._log.arrays()[1],
             landmark_numbering=LandmarkIds.DATASET if self._use_ids else LandmarkIds.OWN,
-            trajectory=self._gps_trajectory(),
-            warnings=gps_warnings(self._gps_counts),
+            trajectory=None if self._gps is None else self._gps.trajectory(),
+            warnings=() if self._gps is None else gps_warnings(self._gps.counts),
         )
 
     def _predict(self, u: FloatArray, dt: float) -> None:

@@ -35,22 +35,30 @@ import math
 import numpy as np
 
 from slamkit._validation import FloatArray
-from slamkit.estimation.contract import RunWarning
+from slamkit.estimation.contract import RunWarning, SmoothedTrajectory
 from slamkit.estimation.gaussian import small_spd_inverse
 from slamkit.geometry.alignment import align_points_2d
+from slamkit.geometry.angles import wrap_angle
+from slamkit.prob import chi2_gate
 from slamkit.slam.ekf_slam.update import gain_update_inplace
 
 __all__ = [
     "ALIGN_MIN_FIXES",
     "ALIGN_SPAN",
+    "GPS_COUNTS",
     "REFUSED_SHARE",
     "FrameAligner",
+    "GpsFusion",
     "add_frame_uncertainty",
     "antenna_measurement",
     "gps_update_inplace",
     "gps_warnings",
     "move_state_inplace",
 ]
+
+GPS_COUNTS = ("gps_fixes", "gps_aligning", "gps_fused", "gps_refused")
+"""The counts of GPS fixes in a filter's diagnostics: all, spent on moving into the GPS frame,
+fused, refused by the gate."""
 
 ALIGN_SPAN = 50.0
 """The filter is moved into the GPS frame once its antenna positions at the collected fixes
@@ -212,3 +220,65 @@ def gps_warnings(counts: dict[str, int]) -> tuple[RunWarning, ...]:
             ),
         )
     return ()
+
+
+class GpsFusion:
+    """A filter's GPS fusion, one object the estimator holds when its stream has fixes: the
+    lever arm, the fixes' noise and gate, the move into the GPS frame, the counts, and the
+    path kept to return it in the GPS frame (module docstring)."""
+
+    def __init__(
+        self, noise_cov: FloatArray, lever_arm: tuple[float, float], gate_probability: float,
+        start_time: float, start_pose: FloatArray,
+    ) -> None:  # fmt: skip
+        self.counts = dict.fromkeys(GPS_COUNTS, 0)
+        """How many fixes were seen, spent on the frame, fused, refused (:data:`GPS_COUNTS`)."""
+        self._R = noise_cov
+        self._lever = np.asarray(lever_arm, dtype=np.float64)
+        self._gate = chi2_gate(2, gate_probability)
+        self._aligner: FrameAligner | None = FrameAligner(math.sqrt(np.trace(noise_cov) / 2.0))
+        # The pose at every time stamp; _moved: the move's angle, shift and how many of the
+        # kept poses precede it (they are moved at the end).
+        self._path_t: list[float] = [start_time]
+        self._path: list[FloatArray] = [np.array(start_pose[:3], dtype=float)]
+        self._moved: tuple[float, FloatArray, int] | None = None
+
+    def fix(self, mean: FloatArray, cov: FloatArray, t: float, z: FloatArray,
+            scratch: FloatArray) -> None:  # fmt: skip
+        """The fix ``z`` at ``t`` on the active state: collected for the move into the GPS
+        frame until that is done, then fused through the gate."""
+        self.counts["gps_fixes"] += 1
+        if self._aligner is not None:
+            self.counts["gps_aligning"] += 1
+            antenna, _ = antenna_measurement(mean[:3], self._lever)
+            if self._aligner.add(antenna, z):
+                angle, shift, centre, frame_cov = self._aligner.fit()
+                move_state_inplace(mean, cov, angle, shift)
+                add_frame_uncertainty(cov, mean, centre, frame_cov)
+                self._aligner = None
+                self._moved = (angle, shift, len(self._path_t) - int(self._path_t[-1] >= t))
+            return
+        _, used = gps_update_inplace(mean, cov, z, self._lever, self._R, self._gate, scratch)
+        self.counts["gps_fused" if used else "gps_refused"] += 1
+
+    def record(self, t: float, pose: FloatArray) -> None:
+        """The pose ``(3,)`` after an event at ``t`` (the last one of a stamp is kept)."""
+        if t > self._path_t[-1]:
+            self._path_t.append(t)
+            self._path.append(np.array(pose, dtype=float))
+        else:
+            self._path[-1] = np.array(pose, dtype=float)
+
+    def trajectory(self) -> SmoothedTrajectory | None:
+        """The path at every time stamp in the GPS frame (the poses before the move moved as
+        the state was); ``None`` if the filter never moved (its online path is all)."""
+        if self._moved is None:
+            return None
+        angle, shift, n = self._moved
+        path = np.asarray(self._path)
+        early = path[:n].copy()
+        c, s = math.cos(angle), math.sin(angle)
+        path[:n, 0] = c * early[:, 0] - s * early[:, 1] + shift[0]
+        path[:n, 1] = s * early[:, 0] + c * early[:, 1] + shift[1]
+        path[:n, 2] = wrap_angle(early[:, 2] + angle)
+        return SmoothedTrajectory(np.asarray(self._path_t), path)
