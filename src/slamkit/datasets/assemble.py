@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 from slamkit.datasets.stream import (
     Control,
     Event,
+    GpsFix,
     KnownPose,
     LandmarkReadings,
     LaserScan,
@@ -57,6 +58,7 @@ EVENT_RANK: dict[type, int] = {
     Odometry: 1,
     LandmarkReadings: 2,
     LaserScan: 2,
+    GpsFix: 2,
 }
 """The order of event kinds at one time stamp (lower first)."""
 

@@ -12,6 +12,7 @@ event                    meaning
 :class:`LandmarkReadings`  readings ``z (K, m)`` of point landmarks at ``t``, with
                          identities ``ids (K,)`` or ``-1`` where unknown
 :class:`LaserScan`       ranges ``(B,)`` at ``t``; ``max_range`` means no return
+:class:`GpsFix`          a GPS fix: the antenna's position ``(2,)`` in the GPS frame
 ======================  ==========================================================
 
 Conventions (also in ``docs/architecture.md``): times in seconds, lengths in metres, angles in
@@ -59,6 +60,8 @@ __all__ = [
     "Control",
     "Dataset",
     "Event",
+    "GpsFix",
+    "GpsSpec",
     "GroundTruth",
     "KnownPose",
     "LandmarkReadings",
@@ -119,7 +122,29 @@ class LaserScan:
     ranges: FloatArray
 
 
-Event: TypeAlias = Control | Odometry | KnownPose | LandmarkReadings | LaserScan
+@dataclass(frozen=True, slots=True)
+class GpsFix:
+    """A GPS fix: the antenna's position ``(2,)`` [m] in the GPS frame at ``t``. A loader
+    emits fixes as events only when asked to (the data set's :class:`GpsSpec` says how
+    noisy they are); otherwise a data set's GPS is reference (``truth.positions``), which
+    estimators never read. Where the antenna sits on the robot is the estimator's setting."""
+
+    t: float
+    position: FloatArray
+
+
+Event: TypeAlias = Control | Odometry | KnownPose | LandmarkReadings | LaserScan | GpsFix
+
+
+@dataclass(frozen=True)
+class GpsSpec:
+    """The GPS fixes in a data set's stream: their nominal noise ``noise_cov (2, 2)`` [m²]
+    (east, north). A fix's frame is the GPS's own, not the estimator's map frame."""
+
+    noise_cov: FloatArray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "noise_cov", as_covariance(self.noise_cov, "gps noise_cov", 2))
 
 
 @dataclass(frozen=True)
@@ -358,6 +383,8 @@ class Dataset:
     known_landmarks: LandmarkMap | None = None
     known_grid: OccupancyGrid | None = None
     truth: GroundTruth = field(default_factory=GroundTruth)
+    gps: GpsSpec | None = None
+    """How noisy the stream's :class:`GpsFix` events are (``None``: the stream has none)."""
     description: str = ""
     metadata: dict[str, Any] = field(default_factory=dict)
     reading: ReadingSummary | None = None
@@ -413,6 +440,10 @@ class Dataset:
                         idx[int(np.argmax(negative))],
                         "ranges: expected ranges >= 0 m (max_range marks no return)",
                     )
+            elif kind is GpsFix:
+                if self.gps is None:
+                    self._fail(idx[0], "a GPS fix needs a GpsSpec")
+                self._check_rows(idx, "position", (2,))
             else:
                 self._fail(idx[0], "unknown event type")
 

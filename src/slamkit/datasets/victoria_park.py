@@ -57,7 +57,10 @@ Conversion (:func:`load_victoria_park`):
 * **GPS** is ``truth.position_times``/``truth.positions``: positions only (no heading), in
   the GPS frame, every fix as recorded, outliers included. :func:`slamkit.eval.gps.gps_error`
   rejects fixes that disagree with their neighbours and scores an estimate after an SE(2)
-  alignment at the GPS times. There is no true trajectory and no landmark map.
+  alignment at the GPS times. There is no true trajectory and no landmark map. With
+  ``gps_fuse`` the fixes are also put in the stream as ``GpsFix`` events (every
+  ``gps_holdout_every``-th left out, to score on) with noise ``gps_sigma`` per axis, for
+  estimators that fuse them (EKF-SLAM, ``docs/estimators/gps.md``).
 * **Prior**: the start defines the frame: pose ``(0, 0, 0)`` with zero covariance.
 
 **Conventions checked on the data.** Dead reckoning below integrates the odometry with the
@@ -139,8 +142,11 @@ from slamkit.datasets.assemble import (
 )
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.plaza import cut_intervals
+from slamkit.datasets.provenance import Provenance
 from slamkit.datasets.stream import (
     Dataset,
+    GpsFix,
+    GpsSpec,
     GroundTruth,
     LandmarkSensorSpec,
     MotionSpec,
@@ -229,6 +235,15 @@ class VictoriaParkOptions:
     """Nominal bearing noise [rad]."""
     split_at_readings: bool = True
     """Cut controls at the detection times so each detection sees the pose of its time."""
+    gps_fuse: bool = False
+    """Put the GPS fixes into the stream as ``GpsFix`` events, for estimators that fuse
+    them (EKF-SLAM). Default: the GPS is reference only (``truth.positions``)."""
+    gps_holdout_every: int = 10
+    """With ``gps_fuse``: every this-many-th fix (the 10th, 20th, …) stays out of the stream,
+    to score on (``eval.gps_holdout``); 0: every fix in the stream. The truth keeps all."""
+    gps_sigma: float = 1.0
+    """With ``gps_fuse``: the fixes' nominal standard deviation per axis [m] (the graph's,
+    measured in ``docs/estimators/gps.md``)."""
 
     def __post_init__(self) -> None:
         if self.max_duration_s is not None and not self.max_duration_s > 0:
@@ -236,7 +251,13 @@ class VictoriaParkOptions:
         for name in ("sigma_speed", "sigma_steering"):
             if not getattr(self, name) >= 0:
                 raise ConfigError(f"{name}: expected a number >= 0, got {getattr(self, name)}")
-        for name in ("sigma_range", "sigma_bearing", "wheelbase"):
+        if not (isinstance(self.gps_holdout_every, int) and self.gps_holdout_every >= 0) or (
+            self.gps_holdout_every == 1
+        ):
+            raise ConfigError(
+                f"gps_holdout_every: expected 0 or an integer >= 2, got {self.gps_holdout_every}"
+            )
+        for name in ("sigma_range", "sigma_bearing", "wheelbase", "gps_sigma"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"{name}: expected a number > 0, got {getattr(self, name)}")
         values = (*self.laser_offset, self.encoder_offset, self.steering_offset)
@@ -417,29 +438,53 @@ def load_victoria_park(
     truth_ids = tuple(ev.ids.copy() for ev in reading_events(kept.t, kept.z, kept.tree))
     t_gps = gps.values[:, 0] * _MS
     n_gps, sensor = int(np.searchsorted(t_gps, cut, side="right")), _tree_sensor(opts)
-    events = assemble_events(control_events(ends[:n_ctrl], u[:n_ctrl], dts[:n_ctrl]), readings)
+    fixes, gps_spec = _gps_stream(opts, t_gps[:n_gps], gps.values[:n_gps, 1:3])
+    controls = control_events(ends[:n_ctrl], u[:n_ctrl], dts[:n_ctrl])
+    events = assemble_events(controls, readings, fixes)
     return Dataset(
         name="victoria-park",
         events=events,
-        motion=ackermann_motion(
-            wheelbase=opts.wheelbase,
-            encoder_offset=opts.encoder_offset,
-            sigma_speed=opts.sigma_speed,
-            sigma_steering=opts.sigma_steering,
-        ),
+        motion=_motion(opts),
         landmark_sensor=replace(sensor, detection_range=measured_detection_range(events, sensor)),
         initial_pose=np.zeros(3),
         initial_cov=np.zeros((3, 3)),
+        gps=gps_spec,
         truth=GroundTruth(
             position_times=t_gps[:n_gps],
             positions=gps.values[:n_gps, 1:3].copy(),
             reading_ids=truth_ids,
         ),
         description=_DESCRIPTION,
+        provenance=Provenance(options=config_to_dict(opts)),
         metadata=_metadata(
             opts, len(odo), t_odo, n_ctrl, len(det), kept, len(readings), n_gps, cut
         ),
     )
+
+
+def _motion(opts: VictoriaParkOptions) -> MotionSpec:
+    return ackermann_motion(
+        wheelbase=opts.wheelbase,
+        encoder_offset=opts.encoder_offset,
+        sigma_speed=opts.sigma_speed,
+        sigma_steering=opts.sigma_steering,
+    )
+
+
+def _gps_stream(
+    opts: VictoriaParkOptions, t: FloatArray, xy: FloatArray
+) -> tuple[list[GpsFix], GpsSpec | None]:
+    """The fixes as stream events when ``gps_fuse`` (without every ``gps_holdout_every``-th,
+    the held-out ones), and their noise. Why the loader and not the estimator reads them:
+    an estimator sees only the stream, in time order, as a robot would; ``truth`` is for
+    scoring, and the held-out fixes never reach the estimator."""
+    if not opts.gps_fuse:
+        return [], None
+    k = opts.gps_holdout_every
+    idx = np.arange(t.shape[0])
+    fused = ~(idx % k == k - 1) if k else np.ones(t.shape[0], dtype=bool)
+    fixes = [GpsFix(float(ti), p.copy()) for ti, p in zip(t[fused], xy[fused], strict=True)]
+    return fixes, GpsSpec(np.eye(2) * opts.gps_sigma**2)
 
 
 def _detections(

@@ -258,6 +258,11 @@ class StepClock:
             self._t = t
         return self.step
 
+    @property
+    def time(self) -> float | None:
+        """The time stamp of the event counted last (``None`` before the first)."""
+        return self._t
+
     def stamped(self, exc: ConvergenceError, name: str, t: float) -> ConvergenceError:
         """``exc`` if it already names a step, else a :class:`~slamkit.errors.ConvergenceError`
         ``"{name} at t = {t} s: ..."`` carrying the current step (raise it ``from exc``).

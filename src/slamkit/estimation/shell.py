@@ -26,6 +26,7 @@ from slamkit._validation import FloatArray
 from slamkit.datasets.stream import (
     Control,
     Event,
+    GpsFix,
     KnownPose,
     LandmarkReadings,
     LaserScan,
@@ -132,6 +133,8 @@ class EstimatorShell:
                 self.on_landmarks(event)
             elif isinstance(event, LaserScan):
                 self.on_scan(event)
+            elif isinstance(event, GpsFix):
+                self.on_gps(event)
             self.after_event(step)
         except ConvergenceError as exc:
             stamped = self.clock.stamped(exc, self.name, event.t)
@@ -150,6 +153,10 @@ class EstimatorShell:
 
     def on_scan(self, event: LaserScan) -> None:
         """A laser scan. Default: ignored."""
+
+    def on_gps(self, event: GpsFix) -> None:
+        """A GPS fix (only in a stream whose loader was asked to fuse GPS). Default:
+        ignored."""
 
     def after_event(self, step: int) -> None:
         """After every event (``step``: the runner's step it belongs to), inside the step

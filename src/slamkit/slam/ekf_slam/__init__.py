@@ -67,6 +67,9 @@ The package, by concern:
 * :mod:`~slamkit.slam.ekf_slam.kernels` — the prediction, update and new landmark as one
   object the estimator holds (:class:`~slamkit.slam.ekf_slam.kernels.EkfKernels`; UKF-SLAM
   passes its unscented ones);
+* :mod:`~slamkit.slam.ekf_slam.gps` — GPS fixes (stream events ``GpsFix``): the antenna's
+  position with a lever arm as a measurement of the pose, the χ² gate, the move into the
+  GPS frame;
 * :mod:`~slamkit.slam.ekf_slam.config` and :mod:`~slamkit.slam.ekf_slam.estimator` — the
   settings and the estimator shell :class:`EkfSlam`.
 """

@@ -80,6 +80,14 @@ class EkfSlamConfig:
     and ``landmark-loop-closure`` (``docs/estimators/ekf_slam.md``)."""
     record_innovations: bool = True
     """Keep the NIS of every map update in the output's :class:`InnovationLog`."""
+    gps_lever_arm: tuple[float, float] = (0.0, 0.0)
+    """Where the GPS antenna sits in the robot frame [m] (ahead, left): a fix measures
+    ``t + R(θ) o`` (:mod:`slamkit.slam.ekf_slam.gps`). Used only when the data set's stream
+    carries GPS fixes (its loader asked to fuse them)."""
+    gps_gate_probability: float = 0.99
+    """A fix whose ``d² = νᵀ S⁻¹ ν`` exceeds ``χ²₂(p)`` (9.21) is refused as an outlier
+    (multipath) and counted in ``gps_refused`` — the graph's gate
+    (``docs/estimators/gps.md``)."""
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.motion_cov_scale) and self.motion_cov_scale >= 0):
@@ -102,6 +110,19 @@ class EkfSlamConfig:
                 raise ConfigError(f"{name}: expected an integer >= 1 or None, got {v!r}")
         if not (math.isfinite(self.min_range) and self.min_range >= 0):
             raise ConfigError(f"min_range: expected a number >= 0, got {self.min_range}")
+        try:
+            arm = tuple(float(v) for v in self.gps_lever_arm)
+        except (TypeError, ValueError):
+            arm = ()
+        if len(arm) != 2 or not all(math.isfinite(v) for v in arm):
+            raise ConfigError(
+                f"gps_lever_arm: expected two finite numbers [m], got {self.gps_lever_arm!r}"
+            )
+        object.__setattr__(self, "gps_lever_arm", arm)
+        if not 0.0 < self.gps_gate_probability < 1.0:
+            raise ConfigError(
+                f"gps_gate_probability: expected 0 < p < 1, got {self.gps_gate_probability}"
+            )
         for name in ("jcbb_max_nodes", "initial_capacity"):
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 1):

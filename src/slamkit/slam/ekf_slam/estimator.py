@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 from slamkit._validation import FloatArray, as_covariance
 from slamkit.datasets.stream import (
     Dataset,
+    GpsFix,
     LandmarkReadings,
     LandmarkSensorSpec,
     MotionSpec,
@@ -43,6 +44,7 @@ from slamkit.slam.common import OWN_ID_BASE, NisRecord, ReadingLog, scan_reading
 from slamkit.slam.ekf_slam.association import JcbbResult, associate_scan
 from slamkit.slam.ekf_slam.belief import SlamBelief
 from slamkit.slam.ekf_slam.config import EkfSlamConfig
+from slamkit.slam.ekf_slam.gps import GPS_COUNTS, GpsFusion, gps_warnings
 from slamkit.slam.ekf_slam.kernels import EkfKernels, SlamKernels
 from slamkit.slam.ekf_slam.provisional import (
     TRACKED,
@@ -55,7 +57,7 @@ from slamkit.slam.ekf_slam.provisional import (
 from slamkit.slam.ekf_slam.state import SlamState, diagonal_blocks
 from slamkit.slam.ekf_slam.update import check_diagonal
 
-__all__ = ["COUNTS", "EkfSlam"]
+__all__ = ["COUNTS", "GPS_COUNTS", "EkfSlam"]
 
 COUNTS = (
     "predictions",
@@ -136,6 +138,12 @@ class EkfSlam(EstimatorShell):
        (``max_misses_confirmed`` for confirmed ones). Removing marginalises the feature out
        of the Gaussian: its rows and columns are dropped.
 
+    :class:`~slamkit.datasets.GpsFix` events (a stream whose loader was asked to fuse GPS)
+    measure the antenna at ``gps_lever_arm``: after the first fixes have moved the filter into
+    the GPS frame, each is fused through a χ² gate (:mod:`slamkit.slam.ekf_slam.gps`), and
+    :meth:`finish` returns the whole path in the GPS frame and the counts of
+    :data:`GPS_COUNTS`.
+
     The prior is the data set's (``initial_pose``, ``initial_cov``); without one the map
     frame is the start pose, known exactly. :meth:`finish` returns the confirmed
     landmarks with their marginal covariances and the diagnostics: counts (see
@@ -175,6 +183,10 @@ class EkfSlam(EstimatorShell):
         self._log = ReadingLog()
         self._nis = NisRecord()
         self._nis_provisional: list[float] = []
+        self._gps = None if dataset.gps is None else GpsFusion(
+            dataset.gps.noise_cov, config.gps_lever_arm, config.gps_gate_probability,
+            dataset.start_time, self._state.mean_buf[:3],
+        )  # fmt: skip
 
     @property
     def mean(self) -> FloatArray:
@@ -217,8 +229,15 @@ class EkfSlam(EstimatorShell):
     def on_landmarks(self, event: LandmarkReadings) -> None:
         self._scan(event)
 
+    def on_gps(self, event: GpsFix) -> None:
+        if self._gps is not None:  # the Dataset refuses fixes without a GpsSpec
+            mean, cov = self._state.views()
+            self._gps.fix(mean, cov, float(event.t), event.position, self._state.scratch)
+
     def after_event(self, step: int) -> None:
         check_state_covariance(self._state.views()[1], self.key, step, self._config.check_every)
+        if self._gps is not None:
+            self._gps.record(float(self.clock.time or 0.0), self._state.mean_buf[:3])
 
     def estimate(self) -> PoseEstimate:
         return PoseEstimate(self._state.mean_buf[:3].copy(), self._state.cov_buf[:3, :3].copy())
@@ -260,12 +279,16 @@ class EkfSlam(EstimatorShell):
             nis_above_95=float(np.mean(nis > q95)) if nis.size else None,
             mean_nis_provisional=float(nis_p.mean()) if nis_p.size else None,
         )
+        if self._gps is not None:
+            diagnostics.update(self._gps.counts)
         return EstimatorOutput(
             landmarks=landmarks,
             diagnostics=diagnostics,
             innovations=self._nis.log(self._m) if self._config.record_innovations else None,
             reading_landmarks=self._log.arrays()[1],
             landmark_numbering=LandmarkIds.DATASET if self._use_ids else LandmarkIds.OWN,
+            trajectory=None if self._gps is None else self._gps.trajectory(),
+            warnings=() if self._gps is None else gps_warnings(self._gps.counts),
         )
 
     def _predict(self, u: FloatArray, dt: float) -> None:
