@@ -125,6 +125,7 @@ class LandmarkFixedLagResult:
     initial_poses: FloatArray
     landmark_ids: IntArray  # sorted file ids
     landmarks: FloatArray  # the latest variable of each: online estimate or final window
+    initial_landmarks: FloatArray  # the guess from each landmark's first observation
     converged: bool
     window: int
     steps: int
@@ -210,6 +211,7 @@ class LandmarkFixedLagSmoother:
         self._out: list[FloatArray] = []
         self._guess: list[FloatArray] = []
         self._lm_out: dict[int, FloatArray] = {}
+        self._lm_first: dict[int, FloatArray] = {}
         self._seconds: list[float] = []
         self._iterations: list[int] = []
         self._max_unknowns = 0
@@ -295,6 +297,7 @@ class LandmarkFixedLagSmoother:
             initial_poses=np.array(self._guess).reshape(-1, 3),
             landmark_ids=lm_ids,
             landmarks=np.array([self._lm_out[int(i)] for i in lm_ids]).reshape(-1, 2),
+            initial_landmarks=np.array([self._lm_first[int(i)] for i in lm_ids]).reshape(-1, 2),
             converged=step <= FINISH_STEP_TOLERANCE,
             window=self.config.window,
             steps=len(self._ids),
@@ -380,7 +383,9 @@ class LandmarkFixedLagSmoother:
                     self._key_of[lid] = key
                     self._file_of[key] = lid
                     self._lkey = np.append(self._lkey, key)
-                    self._P = np.vstack([self._P, _point_from(kind, x, z)[None, :]])
+                    p = _point_from(kind, x, z)
+                    self._lm_first.setdefault(lid, p)
+                    self._P = np.vstack([self._P, p[None, :]])
                 keys[k] = key
             o.kind = np.concatenate([o.kind, np.full(len(es), kind, dtype=np.int64)])
             o.pose = np.concatenate([o.pose, es.i])
