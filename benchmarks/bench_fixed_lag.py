@@ -4,8 +4,8 @@ edges fed in the same order, in one run: time per step and the error of each pos
 estimate against slamkit's batch optimum.
 
 Victoria Park, a pose-landmark graph, is in ``bench_fixed_lag_victoria.py`` (the landmark
-smoother against the same two GTSAM solvers, and GPS RMSE beside EKF-SLAM); ``main`` runs it
-after these files and writes its own results (``results/fixed_lag_victoria.md``).
+smoother against the same two GTSAM solvers, and GPS RMSE beside EKF-SLAM), with its own
+results (``results/fixed_lag_victoria.md``).
 
 The stream: one step per pose in id order with the edges whose later end is that pose
 (``slamkit.optim.updates.time_ordered_updates``). The first pose is the anchor (slamkit holds
@@ -285,10 +285,7 @@ def main() -> str:
             *[f"* {c}" for c in flat],
         ]
     )
-    text = write_results("fixed_lag", records, notes=notes)
-    from bench_fixed_lag_victoria import victoria_main
-
-    return text + "\n\n" + victoria_main()
+    return write_results("fixed_lag", records, notes=notes)
 
 
 if __name__ == "__main__":

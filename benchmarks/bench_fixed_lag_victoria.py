@@ -1,8 +1,9 @@
 """Fixed-lag smoothing of Victoria Park's pose-landmark graph: slamkit's
 ``LandmarkFixedLagSmoother`` against GTSAM's ``BatchFixedLagSmoother`` and iSAM2 fed the same
-stream, and the smoothed path's GPS RMSE beside EKF-SLAM's. Run by ``bench_fixed_lag.py``
-(its ``main`` calls :func:`victoria_main`) or alone:
-``python benchmarks/bench_fixed_lag_victoria.py``.
+stream, and the smoothed path's GPS RMSE beside EKF-SLAM's (the Victoria Park part of
+``bench_fixed_lag.py``, in its own file and results):
+``python benchmarks/bench_fixed_lag_victoria.py`` or ``python benchmarks/run.py
+fixed_lag_victoria``.
 
 **The stream** is the landmark graph of the Victoria Park data set with its feature index as
 the association (``slamkit.slam.landmark_graph.build_landmark_graph`` without GPS: a node at
@@ -250,5 +251,9 @@ def _isam_file_rows(root: Any) -> list[str]:
     return rows
 
 
+def main() -> str:
+    return victoria_main()
+
+
 if __name__ == "__main__":
-    print(victoria_main() if len(sys.argv) < 2 else "usage: bench_fixed_lag_victoria.py")
+    print(main() if len(sys.argv) < 2 else "usage: bench_fixed_lag_victoria.py")
