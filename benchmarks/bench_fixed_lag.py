@@ -3,8 +3,9 @@
 edges fed in the same order, in one run: time per step and the error of each pose's online
 estimate against slamkit's batch optimum.
 
-Victoria Park (``isam/victoriaPark.txt``) is a pose-landmark graph; the smoother handles pose
-graphs only, so Manhattan (M3500, ``posegraph2d/manhattan.g2o``) takes its place.
+Victoria Park, a pose-landmark graph, is in ``bench_fixed_lag_victoria.py`` (the landmark
+smoother against the same two GTSAM solvers, and GPS RMSE beside EKF-SLAM), with its own
+results (``results/fixed_lag_victoria.md``).
 
 The stream: one step per pose in id order with the edges whose later end is that pose
 (``slamkit.optim.updates.time_ordered_updates``). The first pose is the anchor (slamkit holds

@@ -1,6 +1,7 @@
 """``fixed_lag_job``: a 2D pose-graph file streamed through the fixed-lag smoother
 (``slamkit optimize FILE --window L``), its outputs in one folder written completely or not
-at all.
+at all. A graph with landmarks goes to :mod:`slamkit.app.fixed_lag_landmarks` (its files
+are listed there).
 
 Files written (``OUT`` the output folder):
 
@@ -33,11 +34,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from slamkit.app.fixed_lag_landmarks import has_landmarks, landmark_fixed_lag_outputs
 from slamkit.config import config_to_dict
 from slamkit.io import atomic_folder, write_json
 from slamkit.io.posegraph import read_graph, write_graph
 from slamkit.optim import GraphData, g2o_chi2
 from slamkit.optim.fixed_lag import FixedLagConfig, FixedLagResult, smooth_fixed_lag
+from slamkit.optim.fixed_lag_landmarks import LandmarkFixedLagResult
 
 if TYPE_CHECKING:
     from slamkit.viz.plots import Figure  # app never imports matplotlib itself
@@ -66,7 +69,7 @@ class FixedLagReport:
     files: tuple[str, ...]
     metrics: dict[str, Any]
     config: dict[str, Any]
-    result: FixedLagResult
+    result: FixedLagResult | LandmarkFixedLagResult
 
 
 def _in_file_order(data: GraphData, result: FixedLagResult) -> tuple[np.ndarray, np.ndarray]:
@@ -165,7 +168,7 @@ def fixed_lag_job(
     step.
 
     A malformed file raises :class:`~slamkit.errors.DatasetFormatError` naming the file and
-    line; a graph the smoother cannot take (landmarks, 3D, fixed vertices beyond the first)
+    line; a graph the smoother cannot take (3D, fixed vertices beyond the first)
     an :class:`~slamkit.errors.InputError`; an existing non-empty output folder without
     ``overwrite`` an :class:`~slamkit.errors.InputError`. Nothing is written then.
     """
@@ -173,6 +176,12 @@ def fixed_lag_job(
     t0 = time.perf_counter()
     data = read_graph(path)
     t1 = time.perf_counter()
+    if has_landmarks(data):  # a pose-landmark graph: its own smoother and files
+        files, m, resolved, res = landmark_fixed_lag_outputs(
+            data, path, request.out_dir, request.config, plots=request.plots,
+            overwrite=request.overwrite, read_seconds=t1 - t0, progress=progress,
+        )  # fmt: skip
+        return FixedLagReport(Path(request.out_dir), files, m, resolved, res)
     with atomic_folder(request.out_dir, overwrite=request.overwrite) as tmp:
         result = smooth_fixed_lag(data, request.config, progress)
         t2 = time.perf_counter()

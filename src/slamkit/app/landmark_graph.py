@@ -77,6 +77,9 @@ class LandmarkGraphRequest:
     """Use only the first this many seconds of the data (all: None)."""
     seed: int = 0
     """Seed of a simulated data set."""
+    window: int | None = None
+    """Smooth the graph (its GPS left out, scoring only) over this many nodes instead of
+    solving it in batch and fusing the fixes (:mod:`slamkit.app.landmark_smoother`)."""
     plots: bool = True
     overwrite: bool = False
     data_root: Path | None = None
@@ -145,6 +148,10 @@ def landmark_graph_job(request: LandmarkGraphRequest) -> LandmarkGraphReport:
     ds = load_dataset(
         request.data, seed=request.seed, options=_options(request), data_root=request.data_root
     )
+    if request.window is not None:  # the fixed-lag back end: its own job and files
+        from slamkit.app.landmark_smoother import smoothed_landmark_graph_job
+
+        return smoothed_landmark_graph_job(request, ds)
     track_t, track_xy = ds.truth.position_times, ds.truth.positions
     gps: GpsFixes | None = None
     if request.gps:

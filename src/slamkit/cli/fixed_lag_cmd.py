@@ -44,7 +44,12 @@ def _table(m: dict[str, Any]) -> Table:
     add("steps, total [s]", f"{m['steps']}, {t['total']:.2f}")
     add("Gauss-Newton iterations a step (mean / max)",
         f"{m['iterations']['mean']:.2f} / {m['iterations']['max']}")  # fmt: skip
-    add("largest marginal prior [poses]", str(m["max_prior_poses"]))
+    if "landmarks" in m:  # a pose-landmark graph
+        add("landmarks / re-entries", f"{m['landmarks']} / {m['reentries']}")
+        add("largest step system / prior [unknowns]",
+            f"{m['max_unknowns']} / {m['max_prior_size']}")  # fmt: skip
+    else:
+        add("largest marginal prior [poses]", str(m["max_prior_poses"]))
     add("χ² arrival guesses", f"{m['chi2_initial']:.6g}")
     add("χ² smoother estimate", f"{m['chi2_final']:.6g}")
     add("last window converged", "yes" if m["converged"] else "no")

@@ -1,5 +1,6 @@
-"""``slamkit landmark-graph --data NAME [--gps/--no-gps]``: a landmark data set solved as a
-factor graph, its GPS fused or not.
+"""``slamkit landmark-graph --data NAME [--gps/--no-gps] [--window L]``: a landmark data set
+solved as a factor graph, its GPS fused or not; with ``--window`` smoothed over a sliding
+window instead (:mod:`slamkit.app.landmark_smoother`).
 
 Parses the options, calls :func:`slamkit.app.landmark_graph.landmark_graph_job` and prints a
 short table (landmarks, lever arm, fixes down-weighted, the held-out GPS error of the graph
@@ -49,6 +50,30 @@ def _table(m: dict[str, Any]) -> Table:
     return table
 
 
+def _window_table(m: dict[str, Any]) -> Table:
+    table = Table(show_header=True, header_style="bold")
+    table.add_column("quantity")
+    table.add_column(f"fixed-lag, window {m['window']}", justify="right")
+    table.add_column("batch", justify="right")
+    sm, ba = m["smoothed"], m["batch"]
+    t = sm["step_seconds"]
+
+    def add(name: str, a: str, b: str = "—") -> None:
+        table.add_row(escape(name), escape(a), escape(b))
+
+    add("poses / landmarks", f"{sm['poses']} / {sm['landmarks']}",
+        f"{ba['poses']} / {ba['landmarks']}")  # fmt: skip
+    add("step median / p95 [ms]", f"{1e3 * t['median']:.2f} / {1e3 * t['p95']:.2f}")
+    add("total [s]", f"{t['total']:.2f}", f"{ba['solve_seconds']:.2f}")
+    add("landmark re-entries", str(sm["reentries"]))
+    if sm["gps"] is not None:
+        add("GPS RMSE, aligned [m]", f"{sm['gps']['rmse']:.2f}", f"{ba['gps']['rmse']:.2f}")
+        add("GPS median, aligned [m]", f"{sm['gps']['median']:.2f}", f"{ba['gps']['median']:.2f}")
+    add("against batch RMSE / max [m]",
+        f"{m['against_batch']['rmse']:.2f} / {m['against_batch']['max']:.2f}")  # fmt: skip
+    return table
+
+
 @known_errors
 def landmark_graph_command(
     data: Annotated[
@@ -82,12 +107,22 @@ def landmark_graph_command(
             help="Output folder (default: a fresh results/landmark-graph-DATA).", show_default=False
         ),
     ] = None,
+    window: Annotated[
+        int | None,
+        typer.Option(
+            help="Smooth the graph over this many nodes (fixed-lag) beside batch; the GPS "
+            "only scores.",
+            show_default=False,
+        ),
+    ] = None,
     plots: Annotated[bool, typer.Option(help="Write graph.png.")] = True,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
     data_root: DataRootOption = None,
 ) -> None:
     """Solve a landmark data set as a factor graph (odometry + the readings' ids), with its
-    GPS fused (lever arm estimated, fixes re-weighted) or not; score on held-out fixes."""
+    GPS fused (lever arm estimated, fixes re-weighted) or not; score on held-out fixes.
+    With --window L: smooth the graph without its GPS over L nodes (a smoothed EKF-SLAM)
+    beside batch, both scored on every fix."""
     from slamkit.app.landmark_graph import LandmarkGraphRequest, landmark_graph_job
 
     target = output_folder(out, f"landmark-graph-{data}")
@@ -100,13 +135,14 @@ def landmark_graph_command(
         gps_sigma=gps_sigma,
         holdout_every=holdout,
         max_duration_s=max_duration,
+        window=window,
         plots=plots,
         overwrite=overwrite,
         data_root=data_root,
     )
     with console.status(f"solving the landmark graph of {escape(data)}"):
         report = landmark_graph_job(request)
-    console.print(_table(report.metrics))
+    console.print(_table(report.metrics) if window is None else _window_table(report.metrics))
     console.print(
         f"wrote {', '.join(report.files)} to [bold]{escape(str(report.out_dir))}[/]",
         soft_wrap=True,

@@ -53,7 +53,7 @@ from slamkit.errors import GeometryError
 from slamkit.optim import factors
 from slamkit.optim.data import FloatArray, IntArray
 
-__all__ = ["EIGEN_RTOL", "MarginalPrior", "schur_prior"]
+__all__ = ["EIGEN_RTOL", "MarginalPrior", "schur_prior", "schur_square_root"]
 
 EIGEN_RTOL = 1e-12
 """Eigenvalues of the marginal information below this fraction of the largest are dropped
@@ -95,13 +95,29 @@ def schur_prior(
 
     Raises :class:`~slamkit.errors.GeometryError` when ``H_mm`` is not positive definite
     (the removed poses are not determined by their factors)."""
+    R, d = schur_square_root(H, g, n_marginalized)
+    return MarginalPrior(
+        np.asarray(pose_ids, dtype=np.int64).copy(),
+        np.asarray(linearization_point, dtype=np.float64).copy(),
+        R,
+        d,
+    )
+
+
+def schur_square_root(
+    H: FloatArray, g: FloatArray, n_marginalized: int
+) -> tuple[FloatArray, FloatArray]:
+    """``(R, d)`` with ``RᵀR = H'`` and ``Rᵀd = g'``, the Schur complement of the first
+    ``n_marginalized`` unknowns of ``(H, g)`` in square-root form (module docstring), for any
+    unknowns (poses, landmarks). Raises :class:`~slamkit.errors.GeometryError` when ``H_mm``
+    is not positive definite."""
     n = n_marginalized
     Hmm, Hms, Hss = H[:n, :n], H[:n, n:], H[n:, n:]
     try:
         c = scipy.linalg.cho_factor(Hmm, lower=True, check_finite=False)
     except np.linalg.LinAlgError:
         raise GeometryError(
-            "marginalisation: the poses leaving the window are not determined by their edges"
+            "marginalisation: the variables leaving the window are not determined by their factors"
         ) from None
     Hs = Hss - Hms.T @ scipy.linalg.cho_solve(c, Hms, check_finite=False)  # H_ss - H_sm H_mm⁻¹ H_ms
     gs = g[n:] - Hms.T @ scipy.linalg.cho_solve(c, g[:n], check_finite=False)
@@ -111,9 +127,4 @@ def schur_prior(
     root = np.sqrt(lam[keep])
     R = root[:, None] * V[:, keep].T  # R = Λ^½ Vᵀ, so RᵀR = H'
     d = (V[:, keep].T @ gs) / root  # d = Λ^-½ Vᵀ g', so Rᵀd = g'
-    return MarginalPrior(
-        np.asarray(pose_ids, dtype=np.int64).copy(),
-        np.asarray(linearization_point, dtype=np.float64).copy(),
-        R,
-        d,
-    )
+    return R, d

@@ -2,6 +2,8 @@
 
 * :mod:`~slamkit.slam.landmark_graph.build`: the graph of a data set (odometry integrated
   between nodes, associated range-bearing readings, GPS fixes at nodes of their own times).
+* :mod:`~slamkit.slam.landmark_graph.smooth`: the graph without its fixes streamed through
+  the fixed-lag smoother (a smoothed alternative to EKF-SLAM).
 * :mod:`~slamkit.slam.landmark_graph.solve`: solving it without and with the fixes, the fixes
   re-weighted against outliers (:mod:`slamkit.optim.gps`).
 
@@ -14,6 +16,7 @@ from slamkit.slam.landmark_graph.build import (
     build_landmark_graph,
     odometry_segments,
 )
+from slamkit.slam.landmark_graph.smooth import smooth_graph
 from slamkit.slam.landmark_graph.solve import (
     FusionResult,
     GraphSolution,
@@ -37,6 +40,7 @@ __all__ = [
     "fuse_gps",
     "fused_start",
     "odometry_segments",
+    "smooth_graph",
     "solve_fused",
     "solve_unfused",
     "without_gps",
