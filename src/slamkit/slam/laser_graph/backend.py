@@ -246,10 +246,11 @@ class PoseGraph:
             fixed_ids=np.zeros(1 if n else 0, dtype=np.int64),
         )
 
-    def optimize(self) -> OptimizationRecord:
+    def optimize(self, keep: bool = True) -> OptimizationRecord:
         """Optimise every keyframe pose from the current estimate (the first held fixed);
-        the estimate becomes the optimum. Raises :class:`ConvergenceError` when the solver
-        returns non-finite poses."""
+        the estimate becomes the optimum, and the solve is kept in :attr:`solves` unless
+        ``keep`` is False (a trial solve, as the whole-graph check's). Raises
+        :class:`ConvergenceError` when the solver returns non-finite poses."""
         tic = time.perf_counter()
         data = self.graph_data()
         # objectives=False: the record keeps the cost; g2o's χ² and SE-Sync's F go unread.
@@ -269,7 +270,8 @@ class PoseGraph:
             converged=result.converged,
             start=result.initialization,
         )
-        self.solves.append(record)
+        if keep:
+            self.solves.append(record)
         return record
 
 
@@ -468,7 +470,7 @@ def _group_scores(graph: PoseGraph, groups: list[list[int]], off: list[int]) -> 
     for g, group in enumerate(groups):
         graph.set_poses(start)
         graph.disable_edges(off + group)
-        graph.optimize()
+        graph.optimize(keep=False)
         rest = kept.copy()
         rest[group] = False
         without = float(graph.chi2()[rest].sum())
