@@ -37,6 +37,7 @@ from slamkit.datasets.assemble import assemble_events, reading_events
 from slamkit.datasets.stream import (
     Control,
     Dataset,
+    LandmarkReadings,
     LandmarkSensorSpec,
     LaserScan,
     measured_detection_range,
@@ -50,9 +51,12 @@ from slamkit.errors import ConfigError, InputError
 from slamkit.features import TreeDetections, TreeExtractorConfig, extract_trees
 
 __all__ = [
+    "CLOCK_OFFSET_S",
+    "DetectionMatch",
     "ScanTrees",
     "VictoriaParkTreesOptions",
     "load_victoria_park_trees",
+    "match_published",
     "scan_trees",
 ]
 
@@ -95,6 +99,71 @@ def scan_trees(laser: Dataset, config: TreeExtractorConfig | None = None) -> lis
         for ev in laser.events
         if isinstance(ev, LaserScan)
     ]
+
+
+CLOCK_OFFSET_S = 20.967
+"""``victoria-park``'s clock minus the raw laser's [s]
+(:mod:`slamkit.datasets.victoria_park_laser`)."""
+
+
+@dataclass(frozen=True)
+class DetectionMatch:
+    """Our trunks against the published detections at the scans both have: ``scans``
+    compared, ``published`` detections there, ``reproduced`` of them with one of ours
+    within ``radius``, ``ours`` detections there and ``extra`` of ours with no published
+    one within ``radius`` [m]; ``not_compared``: published stamps where we found no trunk."""
+
+    scans: int
+    published: int
+    reproduced: int
+    ours: int
+    extra: int
+    radius: float
+    not_compared: int = 0
+
+    def as_dict(self) -> dict[str, float | int]:
+        return {
+            "scans": self.scans,
+            "published": self.published,
+            "reproduced": self.reproduced,
+            "ours": self.ours,
+            "extra": self.extra,
+            "radius_m": self.radius,
+            "not_compared": self.not_compared,
+        }
+
+
+def _xy(z: FloatArray) -> FloatArray:
+    return np.column_stack([z[:, 0] * np.cos(z[:, 1]), z[:, 0] * np.sin(z[:, 1])])
+
+
+def match_published(
+    ours: Dataset, published: Dataset, *, radius: float = 0.5, tolerance_s: float = 0.005
+) -> DetectionMatch:
+    """Compare the readings of ``victoria-park-trees`` (``ours``) with those of
+    ``victoria-park`` (``published``) scan by scan, in the vehicle frame: a published
+    stamp minus :data:`CLOCK_OFFSET_S` within ``tolerance_s`` of a readings event of ours
+    is compared; a published stamp with none of ours there (we found no trunk in that scan)
+    is counted in ``not_compared``."""
+    mine = {round(ev.t, 3): ev.z for ev in ours.events if isinstance(ev, LandmarkReadings)}
+    t_mine = np.array(sorted(mine))
+    scans = published_n = reproduced = ours_n = extra = not_compared = 0
+    for ev in published.events:
+        if not isinstance(ev, LandmarkReadings) or t_mine.size == 0:
+            continue
+        t = ev.t - CLOCK_OFFSET_S
+        k = int(np.argmin(np.abs(t_mine - t)))
+        if abs(t_mine[k] - t) > tolerance_s:
+            not_compared += 1
+            continue
+        p, q = _xy(ev.z), _xy(mine[float(t_mine[k])])
+        dist = np.linalg.norm(p[:, None, :] - q[None, :, :], axis=2)
+        scans += 1
+        published_n += p.shape[0]
+        ours_n += q.shape[0]
+        reproduced += int(np.count_nonzero(dist.min(axis=1) < radius))
+        extra += int(np.count_nonzero(dist.min(axis=0) >= radius))
+    return DetectionMatch(scans, published_n, reproduced, ours_n, extra, radius, not_compared)
 
 
 def _readings(found: list[ScanTrees]) -> tuple[FloatArray, FloatArray, FloatArray]:
