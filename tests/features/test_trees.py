@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slamkit.errors import InputError, ShapeError
+from slamkit.errors import ConfigError, InputError, ShapeError
 from slamkit.features import TreeExtractorConfig, extract_trees
 from slamkit.sim import trunk_scan
 
@@ -108,8 +108,10 @@ def test_bad_input_is_refused():
         extract_trees(np.ones(5), ANGLES)
     with pytest.raises(InputError, match="evenly spaced"):
         extract_trees(np.ones(3), [0.0, 0.1, 0.3])
-    with pytest.raises(InputError, match="max_diameter"):
+    with pytest.raises(ConfigError, match="max_diameter"):
         TreeExtractorConfig(min_diameter=0.5, max_diameter=0.4)
+    with pytest.raises(ConfigError, match="fit_beams"):
+        TreeExtractorConfig(fit_beams=2)
 
 
 def test_trunk_scan_ray_casts_exactly():

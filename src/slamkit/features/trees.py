@@ -17,9 +17,9 @@ range jumps and keeps a run of beams as a trunk when
 * its number of beams is what a trunk of diameter ``min_diameter`` to ``max_diameter`` at
   that range gives: with ``n`` beams at increment ``δ`` the trunk spans between
   ``(n - 1) δ`` and ``(n + 1) δ``, so ``n`` must lie within one beam of
-  ``Δφ(d, r) / δ`` for some ``d`` in the bounds. Near the laser a small diameter needs many
-  beams; far away a wall of a few beams is refused because it is too narrow for its range
-  only when it is also too deep, by the next check;
+  ``Δφ(d, r) / δ`` for some ``d`` in the bounds. Near the laser even a thin trunk covers
+  many beams; far away one or two suffice, and a wall seen over a few beams is refused by
+  its depth (the next check);
 * its depth (the spread of its ranges) is at most the radius plus the range noise, and it
   is convex toward the laser: no inner beam is farther than the chord between its two end
   points by more than the noise (a trunk bulges toward the sensor, a corner away from it).
@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray
-from slamkit.errors import InputError, ShapeError
+from slamkit.errors import ConfigError, InputError, ShapeError
 
 __all__ = ["TreeDetections", "TreeExtractorConfig", "extract_trees"]
 
@@ -66,14 +66,14 @@ class TreeExtractorConfig:
     def __post_init__(self) -> None:
         for name in ("max_range", "jump", "min_diameter", "range_sigma"):
             if not getattr(self, name) > 0:
-                raise InputError(f"{name}: expected a number > 0, got {getattr(self, name)}")
+                raise ConfigError(f"{name}: expected a number > 0, got {getattr(self, name)}")
         if not self.max_diameter > self.min_diameter:
-            raise InputError(
+            raise ConfigError(
                 f"max_diameter: expected more than min_diameter = {self.min_diameter}, "
                 f"got {self.max_diameter}"
             )
         if self.fit_beams < 3:
-            raise InputError(f"fit_beams: expected at least 3, got {self.fit_beams}")
+            raise ConfigError(f"fit_beams: expected at least 3, got {self.fit_beams}")
 
 
 @dataclass(frozen=True)
