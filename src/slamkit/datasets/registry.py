@@ -269,6 +269,20 @@ DATASETS: dict[str, DatasetEntry] = {
             ),
         ),
         DatasetEntry(
+            "victoria-park-trees",
+            "real",
+            "Victoria Park truck: tree trunks slamkit extracts from the 7230 raw laser scans "
+            "as range-bearing readings (ids unknown), 40 Hz Ackermann speed/steering, GPS",
+            "slamkit.datasets.victoria_park_trees:load_victoria_park_trees",
+            options="slamkit.datasets.victoria_park_trees:VictoriaParkTreesOptions",
+            files=(
+                "landmarks/victoria_park/raw_laser/laser.txt.gz",
+                "landmarks/victoria_park/raw_laser/drs.txt.gz",
+                "landmarks/victoria_park/raw_laser/gps.txt.gz",
+                "landmarks/victoria_park/raw_laser/sensors_manager.txt.gz",
+            ),
+        ),
+        DatasetEntry(
             "intel",
             "real",
             "Intel Research Lab, corrected CARMEN log: 910 scans × 180 beams, corrected poses "

@@ -24,6 +24,7 @@ from slamkit.sim.scenarios import (
 )
 from slamkit.sim.sensors import observe_landmarks, observe_landmarks_labelled, simulate_scan
 from slamkit.sim.trajectory import Drive, follow_waypoints, simulate_motion, waypoint_controls
+from slamkit.sim.trunks import trunk_scan
 from slamkit.sim.worlds import (
     five_feature_world,
     random_landmarks,
@@ -62,5 +63,6 @@ __all__ = [
     "simulate_motion",
     "simulate_scan",
     "simulated_scan_pair",
+    "trunk_scan",
     "waypoint_controls",
 ]
