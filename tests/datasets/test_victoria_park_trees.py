@@ -3,12 +3,18 @@ published detections (skipped when the data folder is absent)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from slamkit.datasets import Control, LandmarkReadings, load_dataset
 from slamkit.datasets.registry import dataset_available, get_dataset_entry
-from slamkit.datasets.victoria_park_trees import match_published, scan_trees
+from slamkit.datasets.victoria_park_trees import (
+    load_victoria_park_trees,
+    match_published,
+    scan_trees,
+)
 from slamkit.errors import ConfigError
 from slamkit.pipeline import run
 from slamkit.pipeline.evaluate import evaluate
@@ -64,5 +70,6 @@ def test_ekf_slam_end_to_end_first_minute(trees):
 
 
 def test_bad_option_is_refused():
+    """Refused before any file is read (the loader itself, so the data need not be here)."""
     with pytest.raises(ConfigError, match="sigma_range"):
-        load_dataset("victoria-park-trees", options={"sigma_range": 0.0})
+        load_victoria_park_trees({"sigma_range": 0.0}, data_root=Path("/nonexistent"))
