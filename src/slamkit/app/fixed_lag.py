@@ -34,7 +34,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from slamkit.app.fixed_lag_landmarks import has_landmarks, landmark_fixed_lag_outputs
+from slamkit.app.fixed_lag_landmarks import (
+    has_landmarks,
+    landmark_fixed_lag_outputs,
+    step_statistics,
+)
 from slamkit.config import config_to_dict
 from slamkit.io import atomic_folder, write_json
 from slamkit.io.posegraph import read_graph, write_graph
@@ -104,13 +108,7 @@ def _metrics(
         "edges_by_kind": {e.kind: len(e) for e in data.edges},
         "window": result.window,
         "steps": result.steps,
-        "step_seconds": {
-            "median": float(np.median(t)),
-            "p95": float(np.percentile(t, 95)),
-            "max": float(t.max()),
-            "total": float(t.sum()),
-        },
-        "iterations": {"mean": float(its.mean()), "max": int(its.max())},
+        **step_statistics(t, its),
         "dropped_edges": {
             "count": result.dropped_edges,
             "why": "loop closures to poses already marginalised out of the window",

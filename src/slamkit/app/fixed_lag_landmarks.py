@@ -36,13 +36,27 @@ from slamkit.maps import LandmarkMap
 from slamkit.optim import GraphData, g2o_chi2
 from slamkit.optim.fixed_lag_landmarks import LandmarkFixedLagResult, smooth_landmark_fixed_lag
 
-__all__ = ["has_landmarks", "landmark_fixed_lag_outputs"]
+__all__ = ["has_landmarks", "landmark_fixed_lag_outputs", "step_statistics"]
 
 
 def has_landmarks(data: GraphData) -> bool:
     """Whether ``data`` holds landmark variables or observation edges."""
     kinds = {e.kind for e in data.edges}
     return bool(data.landmark_ids.shape[0]) or bool(kinds & {"se2_xy", "range_bearing"})
+
+
+def step_statistics(seconds: np.ndarray, iterations: np.ndarray) -> dict[str, Any]:
+    """``step_seconds`` (median, p95, max, total) and ``iterations`` (mean, max) of a
+    smoother's steps, as ``metrics.json`` holds them."""
+    return {
+        "step_seconds": {
+            "median": float(np.median(seconds)),
+            "p95": float(np.percentile(seconds, 95)),
+            "max": float(seconds.max()),
+            "total": float(seconds.sum()),
+        },
+        "iterations": {"mean": float(iterations.mean()), "max": int(iterations.max())},
+    }
 
 
 def _metrics(
@@ -57,13 +71,7 @@ def _metrics(
         "edges_by_kind": {e.kind: len(e) for e in data.edges},
         "window": res.window,
         "steps": res.steps,
-        "step_seconds": {
-            "median": float(np.median(t)),
-            "p95": float(np.percentile(t, 95)),
-            "max": float(t.max()),
-            "total": float(t.sum()),
-        },
-        "iterations": {"mean": float(its.mean()), "max": int(its.max())},
+        **step_statistics(t, its),
         "dropped_edges": {
             "count": res.dropped_edges,
             "why": "relative-pose edges to poses already marginalised out of the window",
