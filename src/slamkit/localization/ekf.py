@@ -42,6 +42,7 @@ from slamkit.estimation.gaussian import (
 from slamkit.estimation.shell import AssociationRecorder, EstimatorShell, InnovationRecorder
 from slamkit.localization.association import associate_arrays_unchecked
 from slamkit.localization.belief import GaussianBelief, predict
+from slamkit.localization.closed_form import EkfClosedForm, FilterSteps, closed_form_supports
 from slamkit.localization.kalman import UpdateInfo
 from slamkit.models import LandmarkModel, MotionModel
 from slamkit.models.motion import motion_kernels
@@ -52,7 +53,9 @@ __all__ = [
     "EkfLocalization",
     "GaussianFilterConfig",
     "GaussianLocalization",
+    "GeneralEkfSteps",
     "check_reading",
+    "choose_ekf_steps",
     "ekf_predict",
     "ekf_predict_unchecked",
     "ekf_update",
@@ -162,6 +165,42 @@ def ekf_update(
     idx = angular_indices(model)
     mean, cov, nu, S, nis = _ekf_update_arrays(belief.mean, belief.cov, za, la, model, Ra, idx)
     return GaussianBelief(mean, cov), UpdateInfo(nu, S, nis)
+
+
+class GeneralEkfSteps:
+    """The EKF's steps for any models (:func:`ekf_predict_unchecked` and the update of
+    :func:`ekf_update` on validated arrays): a :class:`FilterSteps`."""
+
+    def __init__(
+        self, motion: MotionModel, measurement: LandmarkModel, Q: FloatArray, R: FloatArray
+    ) -> None:
+        self._motion, self._meas, self._Q, self._R = motion, measurement, Q, R
+        self._angular = angular_indices(measurement)
+
+    def predict(
+        self, mean: FloatArray, cov: FloatArray, u: FloatArray, dt: float
+    ) -> tuple[FloatArray, FloatArray]:
+        return ekf_predict_unchecked(mean, cov, u, dt, self._motion, self._Q)
+
+    def update(
+        self, mean: FloatArray, cov: FloatArray, z: FloatArray, landmark: FloatArray
+    ) -> tuple[FloatArray, FloatArray, float]:
+        new_mean, new_cov, _, _, nis = _ekf_update_arrays(
+            mean, cov, z, landmark, self._meas, self._R, self._angular
+        )
+        return new_mean, new_cov, nis
+
+
+def choose_ekf_steps(
+    motion: MotionModel, measurement: LandmarkModel, Q: FloatArray, R: FloatArray
+) -> FilterSteps:
+    """The EKF steps for a pose-only filter with these models, chosen once: the closed form
+    of :class:`~slamkit.localization.closed_form.EkfClosedForm` when it covers them (a
+    slamkit motion model and a range-bearing sensor), else :class:`GeneralEkfSteps`. Both
+    give the same numbers to rounding."""
+    if closed_form_supports(motion, measurement)[0]:
+        return EkfClosedForm(motion_kernels(motion), Q, R)
+    return GeneralEkfSteps(motion, measurement, Q, R)
 
 
 # --------------------------------------------------------------------------------------------
@@ -510,18 +549,16 @@ class EkfLocalization(GaussianLocalization):
 
     def __init__(self, dataset: Dataset, config: EkfConfig, rng: np.random.Generator) -> None:
         super().__init__(dataset, config, rng)
+        # The closed form or the general steps, decided here once (the state is the pose).
+        self._steps = choose_ekf_steps(self._motion, self._meas, self._Q, self._R)
 
     def _predict(self, u: FloatArray, dt: float) -> None:
         assert self._mean is not None and self._cov is not None
-        self._mean, self._cov = ekf_predict_unchecked(
-            self._mean, self._cov, u, dt, self._motion, self._Q
-        )
+        self._mean, self._cov = self._steps.predict(self._mean, self._cov, u, dt)
 
     def _update(self, z: FloatArray, landmark: FloatArray, gate: float) -> tuple[float, bool]:
         assert self._mean is not None and self._cov is not None
-        mean, cov, _, _, nis = _ekf_update_arrays(
-            self._mean, self._cov, z, landmark, self._meas, self._R, self._angular
-        )
+        mean, cov, nis = self._steps.update(self._mean, self._cov, z, landmark)
         if nis > gate:
             return nis, False
         self._mean, self._cov = mean, cov

@@ -52,14 +52,17 @@ from slamkit.estimation.gaussian import (
 )
 from slamkit.geometry import circular_mean, wrap_angle
 from slamkit.localization.belief import GaussianBelief
+from slamkit.localization.closed_form import FilterSteps, UkfClosedForm, closed_form_supports
 from slamkit.localization.ekf import GaussianFilterConfig, GaussianLocalization, check_reading
 from slamkit.localization.kalman import UpdateInfo
 from slamkit.models import LandmarkModel, MotionModel
 
 __all__ = [
+    "GeneralUkfSteps",
     "SigmaPointParams",
     "UkfConfig",
     "UkfLocalization",
+    "choose_ukf_steps",
     "circular_mean_about",
     "psd_sqrt",
     "sigma_point_weights",
@@ -284,6 +287,66 @@ def ukf_update(
     return GaussianBelief(mean, cov), UpdateInfo(nu, S, nis)
 
 
+class GeneralUkfSteps:
+    """The UKF's steps for any models (:func:`ukf_predict` and :func:`ukf_update` on
+    validated arrays): a :class:`~slamkit.localization.closed_form.FilterSteps`. ``sqrt_Q``
+    is a root of ``Q`` (``L Lᵀ = Q``)."""
+
+    def __init__(
+        self,
+        motion: MotionModel,
+        measurement: LandmarkModel,
+        Q: FloatArray,
+        sqrt_Q: FloatArray,
+        R: FloatArray,
+        params: SigmaPointParams,
+    ) -> None:
+        self._motion, self._meas, self._params = motion, measurement, params
+        self._Q, self._sqrt_Q, self._R = Q, sqrt_Q, R
+        self._angular = angular_indices(measurement)
+
+    def predict(
+        self, mean: FloatArray, cov: FloatArray, u: FloatArray, dt: float
+    ) -> tuple[FloatArray, FloatArray]:
+        return _ukf_predict_arrays(
+            mean, cov, u, dt, self._motion, self._Q, self._params, self._sqrt_Q
+        )
+
+    def update(
+        self, mean: FloatArray, cov: FloatArray, z: FloatArray, landmark: FloatArray
+    ) -> tuple[FloatArray, FloatArray, float]:
+        new_mean, new_cov, _, _, nis = _ukf_update_arrays(
+            mean, cov, z, landmark, self._meas, self._R, self._params, self._angular
+        )
+        return new_mean, new_cov, nis
+
+
+def _weights(params: SigmaPointParams, n: int) -> tuple[float, float, float, float]:
+    """``(Wm₀, Wc₀, Wᵢ, √c)`` of the sigma points of dimension ``n``."""
+    Wm, Wc, c = sigma_point_weights(params, n)
+    return float(Wm[0]), float(Wc[0]), float(Wm[1]), math.sqrt(c)
+
+
+def choose_ukf_steps(
+    motion: MotionModel,
+    measurement: LandmarkModel,
+    Q: FloatArray,
+    sqrt_Q: FloatArray,
+    R: FloatArray,
+    params: SigmaPointParams,
+) -> FilterSteps:
+    """The UKF steps for a pose-only filter with these models, chosen once: the closed form
+    of :class:`~slamkit.localization.closed_form.UkfClosedForm` for a range-bearing sensor
+    (its prediction for the ``UnicycleEuler`` motion, the general one for the others), else
+    :class:`GeneralUkfSteps`. Both give the same numbers to rounding."""
+    general = GeneralUkfSteps(motion, measurement, Q, sqrt_Q, R, params)
+    if not closed_form_supports(motion, measurement)[1]:
+        return general
+    euler = closed_form_supports(motion, measurement)[2]
+    k = Q.shape[0]
+    return UkfClosedForm(general, euler, _weights(params, 3), _weights(params, 3 + k), sqrt_Q, R)
+
+
 # --------------------------------------------------------------------------------------------
 # estimator
 # --------------------------------------------------------------------------------------------
@@ -311,18 +374,18 @@ class UkfLocalization(GaussianLocalization):
         # Fail at construction, not at the first step, if the sigma points are degenerate.
         sigma_point_weights(self._params, 3)
         sigma_point_weights(self._params, 3 + self._Q.shape[0])
+        # The closed form or the general steps, decided here once (the state is the pose).
+        self._steps = choose_ukf_steps(
+            self._motion, self._meas, self._Q, self._sqrt_Q, self._R, self._params
+        )
 
     def _predict(self, u: FloatArray, dt: float) -> None:
         assert self._mean is not None and self._cov is not None
-        self._mean, self._cov = _ukf_predict_arrays(
-            self._mean, self._cov, u, dt, self._motion, self._Q, self._params, self._sqrt_Q
-        )
+        self._mean, self._cov = self._steps.predict(self._mean, self._cov, u, dt)
 
     def _update(self, z: FloatArray, landmark: FloatArray, gate: float) -> tuple[float, bool]:
         assert self._mean is not None and self._cov is not None
-        mean, cov, _, _, nis = _ukf_update_arrays(
-            self._mean, self._cov, z, landmark, self._meas, self._R, self._params, self._angular
-        )
+        mean, cov, nis = self._steps.update(self._mean, self._cov, z, landmark)
         if nis > gate:
             return nis, False
         self._mean, self._cov = mean, cov
