@@ -37,6 +37,7 @@ Run: ``python benchmarks/bench_filters.py`` or ``python benchmarks/run.py filter
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 
@@ -361,7 +362,7 @@ def main(steps: int = 300, repeats: int = 5, seed: int = 0) -> str:
         "fp_ekf_models": lambda: filterpy_ekf_models(ds),
         "ukf": lambda: slamkit_estimator(ds, "ukf"),
         "fp_ukf": lambda: filterpy_ukf(ds),
-        **{name: (lambda obj=obj: run_steps(ds, obj)) for name, obj in objs.items()},
+        **{name: functools.partial(run_steps, ds, obj) for name, obj in objs.items()},
     }
     best = dict.fromkeys(cases, float("inf"))
     for _ in range(repeats):
