@@ -15,7 +15,10 @@ previous one left (*Probabilistic Robotics*, table 7.2).
 
 :class:`EkfLocalization` is the estimator around these functions (see
 :mod:`slamkit.estimation.contract`); it shares its event handling with
-:class:`~slamkit.localization.ukf.UkfLocalization`.
+:class:`~slamkit.localization.ukf.UkfLocalization`. It runs the steps :func:`choose_ekf_steps`
+picks once from its models: the same equations on floats
+(:mod:`slamkit.localization.closed_form`) for a range-bearing sensor, else
+:class:`GeneralEkfSteps`.
 """
 
 from __future__ import annotations

@@ -26,6 +26,10 @@ residuals are the sigma offsets ``±√c Lᵢ`` themselves (no angles are subtra
 
 A covariance that stops being positive semi-definite (possible with a negative ``Wc₀`` and a
 strongly non-linear model) raises :class:`~slamkit.errors.ConvergenceError`.
+
+:class:`UkfLocalization` runs the steps :func:`choose_ukf_steps` picks once from its models:
+the same equations on floats (:mod:`slamkit.localization.closed_form`) for a range-bearing
+sensor, else :class:`GeneralUkfSteps`.
 """
 
 from __future__ import annotations
