@@ -1,5 +1,6 @@
 """Where one EKF / UKF localization step's time goes: the general steps, their parts, and
-the closed-form steps, in µs per call (best of 7 × 5,000 calls), on the data of
+the closed-form steps, in µs of CPU time per call (``time.process_time``, best of 7 × 5,000
+calls: a loaded machine inflates it far less than wall time), on the data of
 ``bench_filters.py``; then whole estimator steps (best of 7 runs of 300 steps)::
 
     PYTHONPATH=src python benchmarks/profile_filters.py
@@ -9,7 +10,9 @@ The profile in ``docs/estimators/localization.md`` ("Speed") came from it.
 
 from __future__ import annotations
 
+import functools
 import os
+import time
 import timeit
 from typing import Any
 
@@ -68,11 +71,14 @@ def main() -> None:
     ]  # fmt: skip
     print(f"load average {os.getloadavg()[0]:.1f}")
     for name, stmt in rows:
-        best = min(timeit.repeat(stmt, globals=names, number=5000, repeat=7)) / 5000
+        timer = timeit.Timer(stmt, timer=time.process_time, globals=names)
+        best = min(timer.repeat(number=5000, repeat=7)) / 5000
         print(f"{name:48s} {best * 1e6:7.1f} µs")
     ds = bench.make_dataset(300)
     for which in ("ekf", "ukf"):
-        runs = timeit.repeat(lambda w=which: bench.slamkit_estimator(ds, w), number=1, repeat=7)
+        step = functools.partial(bench.slamkit_estimator, ds, which)
+        timer = timeit.Timer(step, timer=time.process_time)
+        runs = timer.repeat(number=1, repeat=7)
         print(f"{which.upper()} estimator step (predict + 3 updates + events)"
               f" {min(runs) / 300 * 1e6:7.1f} µs")  # fmt: skip
     print(f"load average {os.getloadavg()[0]:.1f}")
