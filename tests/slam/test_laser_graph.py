@@ -363,6 +363,42 @@ def test_the_whole_graph_check_retracts_an_early_wrong_pair_outvoted_later() -> 
     assert np.abs(graph.poses - right.poses).max() < 1e-3
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_refused_closures_are_offered_again_and_only_the_true_ones_come_back(seed: int) -> None:
+    """The circle closed by one true closure (39 → 9); refused during the run: a wrong pair
+    (31 → 1, 32 → 2, 1 m off) and a true pair (36 → 6, 37 → 7, as noisy as stated). Offered
+    to the final graph, the true pair comes back (its Δ/n is χ²₃ below the bound), the
+    wrong one does not (far beyond it), and the whole-graph check keeps what came back."""
+    from slamkit.slam.laser_graph.backend import (
+        RefusedClosure,
+        restore_consistent,
+        retract_inconsistent,
+    )
+
+    rng = np.random.default_rng(seed)
+    sd = np.array([0.01, 0.01, np.deg2rad(0.5)])
+    info = np.diag(1.0 / sd**2)
+    graph, truth = _circle_graph(rng)
+    graph.add_edge(39, 9, between(truth[39], truth[9]) + sd * rng.standard_normal(3), info, "loop")
+    graph.optimize()
+    wrong = [
+        RefusedClosure(
+            k, k - 30, between(truth[k], truth[k - 30]) + np.array([1.0, 0.0, 0.0]), info
+        )
+        for k in (31, 32)
+    ]
+    true = [
+        RefusedClosure(
+            k, k - 30, between(truth[k], truth[k - 30]) + sd * rng.standard_normal(3), info
+        )
+        for k in (36, 37)
+    ]
+    assert restore_consistent(graph, wrong + true, 2) == true
+    assert retract_inconsistent(graph, 2) == []
+    assert sorted(graph.loop_pairs()) == [(36, 6), (37, 7), (39, 9)]
+    assert restore_consistent(graph, [], 2) == []
+
+
 @pytest.mark.parametrize("seed", range(5))
 def test_the_whole_graph_check_keeps_true_closures_with_noise_as_stated(seed: int) -> None:
     """The circle with ten true closures, each as noisy as its information says: nothing

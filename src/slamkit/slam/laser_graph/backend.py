@@ -37,6 +37,7 @@ __all__ = [
     "edge_chi2",
     "optimize_consistent",
     "rejudge",
+    "restore_consistent",
     "retract_inconsistent",
 ]
 
@@ -405,12 +406,61 @@ def closure_groups(graph: PoseGraph, window: int) -> list[list[int]]:
     other's (and groups are closed under that relation). Edge indices, each group sorted."""
     i, j, _, _ = graph.edges()
     loops = np.flatnonzero(np.array([kind == "loop" for kind in graph.edge_kinds()], bool))
-    if loops.size == 0:
+    return [loops[g].tolist() for g in _groups(i[loops], j[loops], window)]
+
+
+def _groups(a: np.ndarray, b: np.ndarray, window: int) -> list[np.ndarray]:
+    """Closures ``a[n] → b[n]`` grouped as :func:`closure_groups` does (positions into
+    ``a``, ``b``, each group sorted)."""
+    if a.size == 0:
         return []
-    a, b = i[loops], j[loops]
     near = (np.abs(a[:, None] - a[None, :]) <= window) & (np.abs(b[:, None] - b[None, :]) <= window)
     n, label = scipy.sparse.csgraph.connected_components(scipy.sparse.csr_matrix(near))
-    return [loops[label == c].tolist() for c in range(n)]
+    return [np.flatnonzero(label == c) for c in range(n)]
+
+
+def restore_consistent(
+    graph: PoseGraph, pool: list[RefusedClosure], window: int, bound: float = RETRACT_CHI2
+) -> list[RefusedClosure]:
+    """Offer closures refused during the run (``pool``) to the final graph once more, by
+    the statistic that takes closures out (:func:`retract_inconsistent`), so that a
+    refusal is as revisable as an acceptance.
+
+    The pool's closures are grouped as :func:`closure_groups` groups those of a graph. A
+    group ``G`` of ``n`` is scored by how much the optimum's cost rises when it is added,
+    ``Δ = min Σ_{all ∪ G} eᵀ Ω e − min Σ_all eᵀ Ω e``, divided by the graph's a-posteriori
+    variance factor when that exceeds 1, and by ``n``: the same ``Δ / n`` the whole-graph
+    check bounds, read from the other side. Groups within ``bound`` are added; the caller
+    then judges every closure together (:func:`retract_inconsistent`), which takes out any
+    that only fit alone. A closure refused on arrival was judged against the chain of its
+    moment, often bent by a wrong closure since retracted or loose before later loops
+    fixed it. Solves start from the current optimum. Returns the closures added (in the
+    pool's order); the graph's estimate is left at its optimum without them."""
+    if not pool:
+        return []
+    graph.optimize(keep=False)
+    start = graph.poses
+    base = float(graph.chi2().sum())
+    redundancy = 3 * (graph.edges()[0].size - len(graph) + 1)
+    factor = max(1.0, base / redundancy) if redundancy > 0 else 1.0
+    ends = np.array([(c.i, c.j) for c in pool], dtype=np.int64)
+    added: list[int] = []
+    for group in _groups(ends[:, 0], ends[:, 1], window):
+        graph.set_poses(start)
+        new = [
+            graph.add_edge(pool[n].i, pool[n].j, pool[n].measurement, pool[n].information, "loop")
+            for n in group.tolist()
+        ]
+        graph.optimize(keep=False)
+        delta = float(graph.chi2().sum()) - base
+        graph.remove_edges(new)
+        if delta / factor / group.size <= bound:
+            added += group.tolist()
+    graph.set_poses(start)
+    restored = [pool[n] for n in sorted(added)]
+    for c in restored:
+        graph.add_edge(c.i, c.j, c.measurement, c.information, "loop")
+    return restored
 
 
 def retract_inconsistent(

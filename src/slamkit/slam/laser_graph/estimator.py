@@ -54,6 +54,7 @@ from slamkit.slam.laser_graph.backend import (
     default_optimizer,
     optimize_consistent,
     rejudge,
+    restore_consistent,
     retract_inconsistent,
 )
 from slamkit.slam.laser_graph.config import LaserGraphConfig
@@ -158,6 +159,7 @@ class LaserGraphSlam(EstimatorShell):
         self._confirmed: list[tuple[int, int, LoopMatch]] = []  # recent ones in the graph
         self._doubted = np.zeros(0, dtype=bool)  # per keyframe: its chain edge doubted
         self._refused: list[RefusedClosure] = []  # by the Δχ² check, recently
+        self._dropped: dict[tuple[int, int], RefusedClosure] = {}  # by it, ever
         self._last_solve = 0  # the keyframe count at the last optimisation
         # (stamp, keyframe index or -1 for the start pose, offset) of every time stamp.
         self._stamps: list[float] = [float(dataset.start_time)]
@@ -219,9 +221,18 @@ class LaserGraphSlam(EstimatorShell):
             raise MatchError(laser_unusable(self._counts, self._tracker.counts), "laser_unusable")
         if len(self._graph) > 1:
             self._optimize()
-            # Every closure judged once more with all the others in view (backend).
+            # Every closure judged once more with all the others in view, and the refused
+            # ones offered again by the same statistic (backend).
             retracted = retract_inconsistent(self._graph, PAIR_KEYFRAMES)
-            self._counts["loops_retracted"] += len(retracted)
+            judged = {*self._graph.loop_pairs(), *retracted}
+            pool = [c for ends, c in self._dropped.items() if ends not in judged]
+            restored = restore_consistent(self._graph, pool, PAIR_KEYFRAMES)
+            if restored:
+                retracted += retract_inconsistent(self._graph, PAIR_KEYFRAMES)
+            kept = set(self._graph.loop_pairs())
+            back = sum((c.i, c.j) in kept for c in restored)
+            self._counts["loops_retracted"] += len(retracted) - (len(restored) - back)
+            self._counts["loops_restored"] += back
         poses = self._graph.poses
         anchors = np.asarray(self._anchors)
         offsets = np.asarray(self._offsets, dtype=np.float64).reshape(-1, 3)
@@ -487,6 +498,7 @@ class LaserGraphSlam(EstimatorShell):
                 self._graph, self._refused, window, MAX_CHI2, MAX_EDGE_CHI2
             )
             self._counts["loops_readmitted"] += readmitted
+            self._dropped.update(((c.i, c.j), c) for c in self._refused)
             self._counts["loops_reversed"] += reversed_
 
     def _diagnostics(self) -> dict[str, object]:
@@ -524,6 +536,7 @@ class LaserGraphSlam(EstimatorShell):
             "loops_readmitted": c["loops_readmitted"],
             "loops_reversed": c["loops_reversed"],
             "loops_retracted": c["loops_retracted"],
+            "loops_restored": c["loops_restored"],
             "loops_rejected": {
                 k[len("loop_rejected:") :]: v
                 for k, v in c.items()
