@@ -166,8 +166,10 @@ def test_submaps_close_to_flat_and_truth_outliers_rejected(seed: int) -> None:
     ds, gps, out = _drive(seed)
     res = fuse_gps(ds, gps)
     built = res.built
-    hier = solve_hierarchical(built, 50)
+    calls: list[tuple[int, int]] = []
+    hier = solve_hierarchical(built, 50, progress=lambda k, n: calls.append((k, n)))
     h = hier.solution
+    assert calls == [(k, 24) for k in range(1, 25)]
     assert hier.submaps == 24 and hier.top_variables == 3 * 25 + 2
     assert hier.largest_local < hier.flat_variables / 10
     assert h.converged and h.lever_arm is not None and h.weights is not None

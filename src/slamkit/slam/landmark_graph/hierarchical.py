@@ -41,6 +41,7 @@ Measured on Victoria Park: ``docs/estimators/gps.md``.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -49,7 +50,7 @@ from numpy.typing import NDArray
 from scipy.sparse.linalg import spsolve
 
 from slamkit._validation import FloatArray
-from slamkit.errors import ConfigError
+from slamkit.errors import ConfigError, InputError
 from slamkit.geometry import pose2
 from slamkit.optim import OptimizerConfig, g2o_chi2, optimize
 from slamkit.optim.data import EdgeSet, GraphData, IntArray
@@ -277,18 +278,20 @@ def _solve_top(
 
 
 def solve_hierarchical(
-    built: LandmarkGraph, submap_poses: int, config: LandmarkGraphConfig | None = None
+    built: LandmarkGraph,
+    submap_poses: int,
+    config: LandmarkGraphConfig | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> HierarchicalResult:
     """Fuse ``built``'s fixes hierarchically (module docstring): local maps of
     ``submap_poses`` odometry steps each, joined at a top level of their base frames
-    anchored by the fixes. Needs at least two fixes in the graph."""
+    anchored by the fixes. Needs at least two fixes in the graph. ``progress(k, K)`` is
+    called after each local solve."""
     cfg = config or LandmarkGraphConfig()
     if submap_poses < 1:
         raise ConfigError(f"hierarchical submap_poses: expected >= 1, got {submap_poses}")
     gps = _edges(built, "gps")
     if gps is None or len(gps) < 2:
-        from slamkit.errors import InputError
-
         raise InputError(
             f"{built.graph.source or 'the graph'}: fewer than two GPS fixes in the graph "
             "(the hierarchy's top level is anchored by them)"
@@ -311,6 +314,8 @@ def solve_hierarchical(
             local_rb = None if readings is None else _take(readings, owner[readings.i] == k)
             fixes = gps.i[fix_sub == k]
             locals_.append(_solve_local(built, nodes, local_odo, local_rb, fixes, opt))
+            if progress is not None:
+                progress(k + 1, K)
     local_seconds = time.perf_counter() - t0
 
     t1 = time.perf_counter()
