@@ -102,3 +102,40 @@ def test_landmark_graph_window_on_the_simulated_loop(tmp_path: Path) -> None:
     _, batch = read_tum(out / "trajectory_batch.tum")
     d = np.hypot(*(smoothed[:, :2] - batch[:, :2]).T)
     assert float(np.sqrt(np.mean(d**2))) == pytest.approx(m["against_batch"]["rmse"], rel=1e-6)
+
+
+@pytest.mark.realdata
+def test_landmark_graph_hierarchical_on_victoria_park(tmp_path: Path, data_root: Path) -> None:
+    """``--hierarchical 100`` on the first 200 s of Victoria Park: local maps of 100 poses
+    joined by their base frames; the held-out fixes are missed by a direct RMSE under 1.6 m
+    (measured 0.87 m; the flat graph 1.23 m), the lever arm is on the cab (measured
+    (3.63, 0.72) m), the hierarchy's sizes are reported, and the unfused solution is written
+    beside it."""
+    out = tmp_path / "vp-h"
+    res = runner.invoke(
+        app,
+        ["landmark-graph", "--data", "victoria-park", "--max-duration", "200",
+         "--hierarchical", "100", "--no-plots", "--out", str(out), "--data-root",
+         str(data_root)],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "submaps / largest system" in res.output
+    m = json.loads((out / "metrics.json").read_text())
+    h, fused = m["hierarchy"], m["fused"]
+    assert h["submap_poses"] == 100 and h["submaps"] == -(-(fused["poses"] - 1) // 100)
+    assert h["top_variables"] == 3 * (h["submaps"] + 1) + 2
+    assert fused["converged"] and fused["landmarks"] == m["unfused"]["landmarks"]
+    assert fused["holdout"]["direct_rmse"] < 1.6
+    assert 3.0 < fused["lever_arm"][0] < 5.5 and abs(fused["lever_arm"][1]) < 1.0
+    for name in ("trajectory.tum", "trajectory_unfused.tum", "landmarks.csv"):
+        assert (out / name).stat().st_size > 0
+
+
+def test_landmark_graph_hierarchical_needs_batch_gps(tmp_path: Path) -> None:
+    out = tmp_path / "h"
+    res = runner.invoke(
+        app, ["landmark-graph", "--data", "landmark-loop", "--no-gps", "--hierarchical", "50",
+              "--out", str(out)],
+    )  # fmt: skip
+    assert res.exit_code == 1 and "hierarchical: fuses the GPS in batch" in res.output
+    assert not out.exists()

@@ -10,12 +10,14 @@ given (:mod:`slamkit.slam.landmark_graph`). The GPS is the data set's position t
 
 Files written (``OUT`` the output folder):
 
-* ``trajectory.tum`` — the poses at the graph's nodes (fused when ``gps``);
+* ``trajectory.tum`` — the poses at the graph's nodes (fused when ``gps``; with
+  ``hierarchical``, the hierarchy's placed local maps);
   ``trajectory_unfused.tum`` — the graph solved without the fixes (with ``gps``);
 * ``landmarks.csv`` — the landmark map (``id,x,y``) of the same solution;
 * ``graph.png`` — the path(s), the map and the fixes (fused and held out);
 * ``metrics.json`` — counts, times, the lever arm, the fixes' weights (how many were
-  down-weighted), and the held-out scores of both solutions (aligned and direct);
+  down-weighted), and the held-out scores of both solutions (aligned and direct); with
+  ``hierarchical``, the hierarchy's sizes and times under ``hierarchy``;
 * ``config.json`` — the request, to re-run it.
 """
 
@@ -42,6 +44,7 @@ from slamkit.slam.landmark_graph import (
     build_landmark_graph,
     fused_start,
     solve_fused,
+    solve_hierarchical,
     solve_unfused,
 )
 
@@ -83,6 +86,10 @@ class LandmarkGraphRequest:
     plots: bool = True
     overwrite: bool = False
     data_root: Path | None = None
+    hierarchical: int | None = None
+    """Fuse the fixes hierarchically, local maps of this many poses joined at a top level of
+    their base frames (:mod:`slamkit.slam.landmark_graph.hierarchical`), instead of in one
+    flat graph."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,6 +155,8 @@ def landmark_graph_job(request: LandmarkGraphRequest) -> LandmarkGraphReport:
     ds = load_dataset(
         request.data, seed=request.seed, options=_options(request), data_root=request.data_root
     )
+    if request.hierarchical is not None and (request.window is not None or not request.gps):
+        raise ConfigError("hierarchical: fuses the GPS in batch (needs gps, not window)")
     if request.window is not None:  # the fixed-lag back end: its own job and files
         from slamkit.app.landmark_smoother import smoothed_landmark_graph_job
 
@@ -170,7 +179,20 @@ def landmark_graph_job(request: LandmarkGraphRequest) -> LandmarkGraphReport:
     }
     final = unfused
     if gps is not None:
-        final = solve_fused(built, *fused_start(built, unfused), cfg)
+        if request.hierarchical is None:
+            final = solve_fused(built, *fused_start(built, unfused), cfg)
+        else:
+            hier = solve_hierarchical(built, request.hierarchical, cfg)
+            final = hier.solution
+            metrics["hierarchy"] = {
+                "submap_poses": request.hierarchical,
+                "submaps": hier.submaps,
+                "largest_local_variables": hier.largest_local,
+                "top_variables": hier.top_variables,
+                "flat_variables": hier.flat_variables,
+                "local_seconds": hier.local_seconds,
+                "top_seconds": hier.top_seconds,
+            }
         metrics["fused"] = _solution_metrics(final)
         metrics["weighting"] = {"name": weighting.name, "width": weighting.width}
         metrics["fixes"] = int(gps.times.shape[0])

@@ -1,6 +1,7 @@
-"""``slamkit landmark-graph --data NAME [--gps/--no-gps] [--window L]``: a landmark data set
-solved as a factor graph, its GPS fused or not; with ``--window`` smoothed over a sliding
-window instead (:mod:`slamkit.app.landmark_smoother`).
+"""``slamkit landmark-graph --data NAME [--gps/--no-gps] [--window L] [--hierarchical P]``: a
+landmark data set solved as a factor graph, its GPS fused or not; with ``--window`` smoothed
+over a sliding window instead (:mod:`slamkit.app.landmark_smoother`); with ``--hierarchical``
+the GPS fused over local maps of ``P`` poses (:mod:`slamkit.slam.landmark_graph.hierarchical`).
 
 Parses the options, calls :func:`slamkit.app.landmark_graph.landmark_graph_job` and prints a
 short table (landmarks, lever arm, fixes down-weighted, the held-out GPS error of the graph
@@ -41,6 +42,9 @@ def _table(m: dict[str, Any]) -> Table:
         add("lever arm [m]", "—", f"({lever[0]:.2f}, {lever[1]:.2f})")
         add("fixes fused / down-weighted", "—",
             f"{fu['fixes_fused']} / {fu['fixes_down_weighted']}")  # fmt: skip
+    if "hierarchy" in m:
+        h = m["hierarchy"]
+        add("submaps / largest system", "—", f"{h['submaps']} / {h['largest_local_variables']}")
     if "holdout" in un:
         hu, hf = un["holdout"], fu["holdout"]
         add("held-out GPS RMSE, aligned [m]", f"{hu['rmse']:.2f}", f"{hf['rmse']:.2f}")
@@ -118,6 +122,15 @@ def landmark_graph_command(
     plots: Annotated[bool, typer.Option(help="Write graph.png.")] = True,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing output folder.")] = False,
     data_root: DataRootOption = None,
+    hierarchical: Annotated[
+        int | None,
+        typer.Option(
+            metavar="SUBMAP_POSES",
+            help="Fuse the GPS hierarchically: local maps of this many poses, joined at a top "
+            "level of their base frames anchored by the fixes.",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """Solve a landmark data set as a factor graph (odometry + the readings' ids), with its
     GPS fused (lever arm estimated, fixes re-weighted) or not; score on held-out fixes.
@@ -139,6 +152,7 @@ def landmark_graph_command(
         plots=plots,
         overwrite=overwrite,
         data_root=data_root,
+        hierarchical=hierarchical,
     )
     with console.status(f"solving the landmark graph of {escape(data)}"):
         report = landmark_graph_job(request)

@@ -51,6 +51,7 @@ from slamkit.optim.robust import RobustKernel, robust_rho_and_weight
 __all__ = [
     "GpsWeighting",
     "WeightingName",
+    "anchored_gps_error",
     "gps_error",
     "gps_weights",
     "reweight",
@@ -88,6 +89,38 @@ def gps_error(
     Jo[1, 0] = s
     Jo[1, 1] = c
     return e.T, Ji.transpose(2, 0, 1), Jo.transpose(2, 0, 1)
+
+
+def anchored_gps_error(
+    base: FloatArray, local: FloatArray, lever: FloatArray, z: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """A fix seen through a submap (the hierarchical graph's top level): the pose of the fix
+    is ``B ∘ Y`` with ``B`` the submap's base frame (a variable) and ``Y`` the pose of the
+    fix's time in the submap's frame (a constant, from the local solve), so with
+    ``p = t_Y + R_Y o`` (the antenna in the base frame)::
+
+        e = t_B + R_B p - z                                     (2,)
+
+    which is :func:`gps_error` of pose ``B`` with lever arm ``p``. Moving ``B`` by the right
+    update, ``t_B ← t_B + R_B δt``, ``R_B ← R_B (I + δθ S)``, gives
+    ``∂e/∂δ_B = [R_B, R_B S p]``; ``∂e/∂o = R_B R_Y``. Returns ``e (E, 2)``,
+    ``∂e/∂δ_B (E, 2, 3)`` and ``∂e/∂o (E, 2, 2)`` for ``base``, ``local`` ``(E, 3)``,
+    ``lever`` ``(E, 2)`` and ``z`` ``(E, 2)``."""
+    c, s = np.cos(local[:, 2]), np.sin(local[:, 2])
+    p = np.stack(
+        [
+            local[:, 0] + c * lever[:, 0] - s * lever[:, 1],
+            local[:, 1] + s * lever[:, 0] + c * lever[:, 1],
+        ],
+        axis=1,
+    )
+    e, Jb, Rb = gps_error(base, p, z)
+    Ry = np.empty((base.shape[0], 2, 2))
+    Ry[:, 0, 0] = c
+    Ry[:, 0, 1] = -s
+    Ry[:, 1, 0] = s
+    Ry[:, 1, 1] = c
+    return e, Jb, Rb @ Ry
 
 
 def whitened_squares(

@@ -6,6 +6,8 @@
   the fixed-lag smoother (a smoothed alternative to EKF-SLAM).
 * :mod:`~slamkit.slam.landmark_graph.solve`: solving it without and with the fixes, the fixes
   re-weighted against outliers (:mod:`slamkit.optim.gps`).
+* :mod:`~slamkit.slam.landmark_graph.hierarchical`: the fixes fused hierarchically, local
+  maps without GPS joined at a top level of their base frames anchored by the fixes.
 
 Derivations and measurements on Victoria Park: ``docs/estimators/gps.md``.
 """
@@ -16,12 +18,14 @@ from slamkit.slam.landmark_graph.build import (
     build_landmark_graph,
     odometry_segments,
 )
+from slamkit.slam.landmark_graph.hierarchical import HierarchicalResult, solve_hierarchical
 from slamkit.slam.landmark_graph.smooth import smooth_graph
 from slamkit.slam.landmark_graph.solve import (
     FusionResult,
     GraphSolution,
     LandmarkGraphConfig,
     antenna_positions,
+    fit_to_fixes,
     fuse_gps,
     fused_start,
     solve_fused,
@@ -33,15 +37,18 @@ __all__ = [
     "FusionResult",
     "GpsFixes",
     "GraphSolution",
+    "HierarchicalResult",
     "LandmarkGraph",
     "LandmarkGraphConfig",
     "antenna_positions",
     "build_landmark_graph",
+    "fit_to_fixes",
     "fuse_gps",
     "fused_start",
     "odometry_segments",
     "smooth_graph",
     "solve_fused",
+    "solve_hierarchical",
     "solve_unfused",
     "without_gps",
 ]

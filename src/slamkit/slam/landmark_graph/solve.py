@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset
 from slamkit.errors import InputError
-from slamkit.geometry.alignment import align_points_2d
+from slamkit.geometry.alignment import Similarity, align_points_2d
 from slamkit.optim import OptimizerConfig, OptimizeResult, optimize
 from slamkit.optim.data import GraphData
 from slamkit.optim.gps import GpsWeighting, gps_weights, reweight, whitened_squares
@@ -35,6 +35,7 @@ __all__ = [
     "GraphSolution",
     "LandmarkGraphConfig",
     "antenna_positions",
+    "fit_to_fixes",
     "fuse_gps",
     "fused_start",
     "solve_fused",
@@ -162,15 +163,19 @@ def solve_unfused(built: LandmarkGraph, config: LandmarkGraphConfig | None = Non
 def _gps_frame_start(built: LandmarkGraph, poses: FloatArray) -> FloatArray:
     """``poses`` moved into the GPS frame (module docstring, step 2)."""
     gps = built.graph.edges[_gps_edges(built)]
-    src = poses[gps.i, :2]
-    dst = gps.measurement
-    w = np.ones(src.shape[0])
-    sim = align_points_2d(src, dst, w)
+    return fit_to_fixes(poses[gps.i, :2], gps.measurement).apply_to_poses(poses)
+
+
+def fit_to_fixes(points: FloatArray, fixes: FloatArray) -> Similarity:
+    """The SE(2) transform that best maps ``points (M, 2)`` onto ``fixes (M, 2)``,
+    Huber-weighted (3 m) so that jumps of the fixes do not tilt it (five re-weightings)."""
+    w = np.ones(points.shape[0])
+    sim = align_points_2d(points, fixes, w)
     for _ in range(5):
-        r = np.linalg.norm(sim.apply_to_points(src) - dst, axis=1)
+        r = np.linalg.norm(sim.apply_to_points(points) - fixes, axis=1)
         w = np.minimum(1.0, _ALIGN_HUBER / np.maximum(r, 1e-12))
-        sim = align_points_2d(src, dst, w)
-    return sim.apply_to_poses(poses)
+        sim = align_points_2d(points, fixes, w)
+    return sim
 
 
 def solve_fused(
