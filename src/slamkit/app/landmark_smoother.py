@@ -21,10 +21,11 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from slamkit.app.landmark_graph_types import LandmarkGraphReport, LandmarkGraphRequest
 from slamkit.datasets.stream import Dataset
 from slamkit.errors import ConfigError
 from slamkit.eval.gps import gps_error
@@ -40,9 +41,6 @@ from slamkit.slam.landmark_graph import (
     smooth_graph,
     solve_unfused,
 )
-
-if TYPE_CHECKING:
-    from slamkit.app.landmark_graph import LandmarkGraphReport, LandmarkGraphRequest
 
 __all__ = ["smoothed_landmark_graph_job"]
 
@@ -62,8 +60,6 @@ def smoothed_landmark_graph_job(
 ) -> LandmarkGraphReport:
     """Build ``ds``'s graph without GPS, smooth it with ``request.window``, solve it in batch,
     score both and write the files of the module docstring."""
-    from slamkit.app.landmark_graph import LandmarkGraphReport
-
     if request.window is None or request.window < 1:
         raise ConfigError(f"window: expected an integer >= 1, got {request.window!r}")
     t0 = time.perf_counter()

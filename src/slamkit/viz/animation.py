@@ -31,7 +31,7 @@ from slamkit.viz.plots import (
     plot_landmark_estimates,
     plot_particles,
 )
-from slamkit.viz.report import map_under, plot_reference, reference_extent
+from slamkit.viz.reference import map_under, plot_reference, reference_extent
 
 if TYPE_CHECKING:
     from collections.abc import Callable

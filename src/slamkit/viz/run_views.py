@@ -28,7 +28,7 @@ from slamkit.viz.plots import (
     plot_trajectory,
     plot_truth,
 )
-from slamkit.viz.report import plot_estimate_over_truth, reference_extent
+from slamkit.viz.reference import plot_estimate_over_truth, reference_extent
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
