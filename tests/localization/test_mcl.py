@@ -18,12 +18,6 @@ from slamkit.errors import ConfigError, ConvergenceError, InputError
 from slamkit.geometry import angle_diff
 from slamkit.localization import GaussianBelief
 from slamkit.localization.ekf import ekf_update
-from slamkit.localization.likelihood_field import (
-    LikelihoodField,
-    beam_log_likelihood,
-    log_likelihood,
-    usable_beams,
-)
 from slamkit.localization.mcl import (
     Augmentation,
     AugmentedConfig,
@@ -44,6 +38,12 @@ from slamkit.localization.mcl import (
 )
 from slamkit.localization.particles import ParticleSet, effective_sample_size
 from slamkit.maps import LandmarkMap, OccupancyGrid
+from slamkit.maps.likelihood_field import (
+    LikelihoodField,
+    beam_log_likelihood,
+    log_likelihood,
+    usable_beams,
+)
 from slamkit.models import RangeBearing, UnicycleEuler
 from slamkit.pipeline.registry import EstimatorEntry
 from slamkit.pipeline.runner import run

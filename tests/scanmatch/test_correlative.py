@@ -11,8 +11,8 @@ import pytest
 
 from slamkit.errors import ConfigError, InputError, MatchError
 from slamkit.geometry.pose2 import between, inverse_transform_points
-from slamkit.localization.likelihood_field import LikelihoodField
 from slamkit.maps import SegmentMap
+from slamkit.maps.likelihood_field import LikelihoodField
 from slamkit.models.laser import LaserScanner
 from slamkit.scanmatch import (
     CorrelativeConfig,

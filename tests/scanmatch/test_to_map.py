@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from slamkit.errors import ConfigError, InputError, MatchError
-from slamkit.localization.likelihood_field import LikelihoodField, interpolate_distance
 from slamkit.maps import SegmentMap
+from slamkit.maps.likelihood_field import LikelihoodField, interpolate_distance
 from slamkit.models.laser import LaserScanner
 from slamkit.scanmatch import (
     CorrelativeReference,

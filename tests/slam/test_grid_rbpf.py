@@ -13,10 +13,10 @@ from scipy.stats import multivariate_normal
 from slamkit.datasets import LaserScan, load_dataset
 from slamkit.datasets.stream import Control, group_by_time
 from slamkit.errors import ConfigError, ConvergenceError, InputError
-from slamkit.localization.likelihood_field import LikelihoodField
 from slamkit.mapping.grid import LogOddsGrid
 from slamkit.mapping.inverse_model import FREE, InverseSensorModel
 from slamkit.maps import OccupancyGrid
+from slamkit.maps.likelihood_field import LikelihoodField
 from slamkit.pipeline import run
 from slamkit.pipeline.evaluate import evaluate
 from slamkit.slam.grid_rbpf import (

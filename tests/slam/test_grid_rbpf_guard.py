@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from slamkit.geometry.pose2 import between
-from slamkit.localization.likelihood_field import LikelihoodField
 from slamkit.maps import OccupancyGrid
+from slamkit.maps.likelihood_field import LikelihoodField
 from slamkit.scanmatch.relocate import REFUTED_FIT
 from slamkit.scanmatch.to_map import MapMatchConfig
 from slamkit.slam.grid_rbpf import map_fit, relocate_on_map

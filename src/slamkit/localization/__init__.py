@@ -11,7 +11,6 @@ from slamkit.localization.dead_reckoning import DeadReckoning, DeadReckoningConf
 from slamkit.localization.ekf import EkfConfig, EkfLocalization, ekf_predict, ekf_update
 from slamkit.localization.kalman import Gaussian, KalmanFilter, UpdateInfo, kf_predict, kf_update
 from slamkit.localization.least_squares import LeastSquaresConfig, LeastSquaresLocalization
-from slamkit.localization.likelihood_field import LikelihoodField
 from slamkit.localization.mcl import MclConfig, MonteCarloLocalization
 from slamkit.localization.particles import (
     ParticleSet,
@@ -40,6 +39,7 @@ from slamkit.localization.ukf import (
     ukf_predict,
     ukf_update,
 )
+from slamkit.maps.likelihood_field import LikelihoodField
 
 __all__ = [
     "Association",

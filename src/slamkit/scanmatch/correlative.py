@@ -67,8 +67,8 @@ from numpy.typing import ArrayLike, NDArray
 from slamkit._validation import FloatArray, as_array
 from slamkit.errors import ConfigError, InputError, MatchError
 from slamkit.geometry.angles import wrap_angle_float
-from slamkit.localization.likelihood_field import LikelihoodField
 from slamkit.maps import FREE_THRESHOLD, OCCUPIED_THRESHOLD, OccupancyGrid
+from slamkit.maps.likelihood_field import LikelihoodField
 from slamkit.scanmatch import compiled
 from slamkit.scanmatch.lookup import (
     QUANTUM,

@@ -4,7 +4,7 @@ The map enters as a :class:`~slamkit.localization.LikelihoodField` (built from a
 :meth:`LikelihoodField.from_grid` when a grid is given), so scan-to-map matching and MCL score
 a scan with the same beam model. With ``d_p(ξ)`` the field's distance at the world point
 ``R(θ) q_p + t`` of beam end point ``q_p`` under pose ``ξ = (x, y, θ)``, bilinearly
-interpolated between cell centres (:func:`~slamkit.localization.likelihood_field.
+interpolated between cell centres (:func:`~slamkit.maps.likelihood_field.
 interpolate_distance`), the pose maximises the scan's log-likelihood
 
     log p(z | ξ, m) = sum_p log( z_hit N(d_p; 0, σ²) + z_rand / r_max ).
@@ -45,8 +45,8 @@ from numpy.typing import ArrayLike
 from slamkit._validation import FloatArray, as_array
 from slamkit.errors import ConfigError, InputError, MatchError
 from slamkit.geometry.angles import wrap_angle_float
-from slamkit.localization.likelihood_field import LikelihoodField, interpolate_distance
 from slamkit.maps import OccupancyGrid
+from slamkit.maps.likelihood_field import LikelihoodField, interpolate_distance
 from slamkit.scanmatch.correlative import CorrelativeReference, correlative_match
 from slamkit.scanmatch.result import MatchResult, require_points
 

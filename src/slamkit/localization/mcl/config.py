@@ -140,7 +140,7 @@ class KldConfig(Section):
 
 @dataclass(frozen=True)
 class LaserConfig(Section):
-    """The likelihood-field laser model (:mod:`slamkit.localization.likelihood_field`)."""
+    """The likelihood-field laser model (:mod:`slamkit.maps.likelihood_field`)."""
 
     SECTION: ClassVar[str] = "laser"
 

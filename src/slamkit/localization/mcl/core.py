@@ -15,13 +15,13 @@ from numpy.typing import ArrayLike
 
 from slamkit._validation import FloatArray, as_array, as_positive
 from slamkit.errors import ConvergenceError, InputError
-from slamkit.localization.likelihood_field import LikelihoodField, log_likelihood, usable_beams
 from slamkit.localization.mcl.sampling import PoseSampler, sample_poses
 from slamkit.localization.particles import (
     ParticleSet,
     low_variance_resample,
     normalize_log_weights,
 )
+from slamkit.maps.likelihood_field import LikelihoodField, log_likelihood, usable_beams
 from slamkit.models import MotionModel
 from slamkit.models.motion import motion_kernels
 
@@ -125,7 +125,7 @@ def mcl_update_laser(
     exponent: float = 1.0,
 ) -> MeasurementUpdate:
     """Weight the particles by a laser scan through the likelihood field (see
-    :func:`slamkit.localization.likelihood_field.log_likelihood`), tempered:
+    :func:`slamkit.maps.likelihood_field.log_likelihood`), tempered:
     ``w_i ← w_i p(z | x_i)^exponent``.
 
     The field scores the beams as independent, but neighbouring beams' errors are not (they

@@ -25,7 +25,6 @@ from slamkit.estimation.contract import (
     SnapshotSchedule,
 )
 from slamkit.estimation.shell import EstimatorShell, InnovationRecorder
-from slamkit.localization.likelihood_field import LikelihoodField, usable_beams
 from slamkit.localization.mcl.augmented import Augmentation, advance_augmentation
 from slamkit.localization.mcl.config import MclConfig
 from slamkit.localization.mcl.core import (
@@ -55,6 +54,7 @@ from slamkit.localization.particles import (
     particle_estimate_unchecked,
 )
 from slamkit.maps import LandmarkMap
+from slamkit.maps.likelihood_field import LikelihoodField, usable_beams
 from slamkit.models import LandmarkModel, MotionModel
 
 __all__ = ["MonteCarloLocalization"]

@@ -64,7 +64,6 @@ from slamkit.estimation.health import UnmatchedStretch, override_rows, tracking_
 from slamkit.estimation.shell import EstimatorShell
 from slamkit.geometry.angles import wrap_angle_float
 from slamkit.geometry.pose2 import between, compose, transform_points
-from slamkit.localization.likelihood_field import LikelihoodField
 from slamkit.localization.particles import (
     low_variance_resample_unchecked,
     normalize_log_weights,
@@ -73,6 +72,7 @@ from slamkit.mapping.grid import lattice_cells
 from slamkit.mapping.inverse_model import InverseSensorModel
 from slamkit.mapping.logodds import expit
 from slamkit.maps import OccupancyGrid
+from slamkit.maps.likelihood_field import LikelihoodField
 from slamkit.scanmatch.correlative import CorrelativeConfig, CorrelativeReference
 from slamkit.scanmatch.relocate import TRUSTED_FIT, WINDOW_XY, judge
 from slamkit.scanmatch.result import MatchResult, scan_points

@@ -36,7 +36,7 @@ import numpy as np
 from slamkit._validation import FloatArray
 from slamkit.errors import MatchError
 from slamkit.geometry.pose2 import transform_points
-from slamkit.localization.likelihood_field import LikelihoodField, interpolate_distance
+from slamkit.maps.likelihood_field import LikelihoodField, interpolate_distance
 from slamkit.scanmatch.correlative import (
     CorrelativeConfig,
     CorrelativeReference,

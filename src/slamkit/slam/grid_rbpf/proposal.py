@@ -35,7 +35,7 @@ import numpy as np
 from slamkit._validation import FloatArray
 from slamkit.geometry.angles import wrap_angle
 from slamkit.geometry.pose2 import compose
-from slamkit.localization.likelihood_field import LikelihoodField, log_likelihood
+from slamkit.maps.likelihood_field import LikelihoodField, log_likelihood
 from slamkit.slam.grid_rbpf.config import GridRbpfConfig
 
 __all__ = [
