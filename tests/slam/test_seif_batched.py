@@ -10,6 +10,7 @@ from slamkit.datasets import Dataset, load_dataset
 from slamkit.models import Ackermann, UnicycleEuler
 from slamkit.slam.seif import Seif, SeifConfig, seif_motion_update
 from slamkit.slam.seif.kernels import PendingMotion, apply_motion, landmark_indices, motion_step
+from slamkit.slam.seif.recovery import relax, relaxation_order
 
 Q_U = np.diag([0.1**2, np.deg2rad(5.0) ** 2])
 
@@ -111,3 +112,36 @@ def test_the_batched_filter_is_the_step_by_step_filter() -> None:
         assert d_b["sparsifications"] > 50 and d_b["predictions"] == d_s["predictions"]
         for key in ("updates", "new_landmarks", "rejected", "sparsifications", "max_block"):
             assert d_b[key] == d_s[key], key
+
+
+def test_relaxation_with_cached_links_follows_new_links() -> None:
+    """The relaxation keeps each landmark's link indices between calls; after a link is
+    added (a new ``Ω`` entry) a relaxation with the kept cache gives exactly the mean of
+    one with a fresh cache, and both differ from one that ignores the new link."""
+    L, active = 6, [1, 4, 5]
+    omega, xi, mu = linked_state(L, np.array(active), 5)
+    # the landmark-landmark links of ``omega`` (dense: all pairs), minus 0-2, re-added below
+    links = [set(range(L)) - {a} for a in range(L)]
+    i0, i2 = landmark_indices([0]), landmark_indices([2])
+    saved = omega[np.ix_(i0, i2)].copy()
+    omega[np.ix_(i0, i2)] = omega[np.ix_(i2, i0)] = 0.0
+    omega += np.eye(omega.shape[0]) * (0.05 - min(0.0, np.linalg.eigvalsh(omega).min()))
+    links[0].discard(2)
+    links[2].discard(0)
+    blocks, _ = relaxation_order(active, 2, L, L, 0)
+    cache: dict[int, tuple[int, np.ndarray]] = {}
+    m_cached = mu.copy()
+    relax(omega, xi, m_cached, blocks, active, links, list(range(L)), cache)
+    assert set(cache) == set(range(L))
+    omega[np.ix_(i0, i2)] = saved  # a new link 0-2
+    omega[np.ix_(i2, i0)] = saved.T
+    omega += np.eye(omega.shape[0]) * (0.05 - min(0.0, np.linalg.eigvalsh(omega).min()))
+    stale = [set(s) for s in links]
+    links[0].add(2)
+    links[2].add(0)
+    m_fresh, m_stale = m_cached.copy(), m_cached.copy()
+    relax(omega, xi, m_cached, blocks, active, links, list(range(L)), cache)
+    relax(omega, xi, m_fresh, blocks, active, links, list(range(L)), {})
+    relax(omega, xi, m_stale, blocks, active, stale, list(range(L)), {})
+    np.testing.assert_array_equal(m_cached, m_fresh)
+    assert np.abs(m_fresh - m_stale).max() > 1e-6
