@@ -108,6 +108,15 @@ def test_the_batched_filter_is_the_step_by_step_filter() -> None:
         np.testing.assert_allclose(
             out_b.landmarks.covariances, out_s.landmarks.covariances, rtol=1e-8
         )
+        # every nonzero landmark-landmark block of Ω is a recorded link (the relaxation and
+        # the association's blankets read only those)
+        omega, _ = batched.information
+        L = batched.landmark_ids.size
+        blocks = omega[3:, 3:].reshape(L, 2, L, 2)
+        nonzero = np.any(blocks != 0.0, axis=(1, 3))
+        np.fill_diagonal(nonzero, False)
+        for row in range(L):
+            assert set(np.flatnonzero(nonzero[row]).tolist()) <= batched.links(row)
         d_b, d_s = out_b.diagnostics, out_s.diagnostics
         assert d_b["sparsifications"] > 50 and d_b["predictions"] == d_s["predictions"]
         for key in ("updates", "new_landmarks", "rejected", "sparsifications", "max_block"):

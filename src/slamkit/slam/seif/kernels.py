@@ -201,8 +201,8 @@ def link_group(Om: FloatArray, group: NDArray[np.int64], links: list[set[int]]) 
     gi = landmark_indices(group)
     linked = np.any(Om[np.ix_(gi, gi)].reshape(g, 2, g, 2) != 0.0, axis=(1, 3))
     np.fill_diagonal(linked, False)
-    for a, b in zip(*np.nonzero(linked), strict=True):
-        links[int(group[a])].add(int(group[b]))
+    for a in np.flatnonzero(linked.any(axis=1)).tolist():
+        links[int(group[a])].update(group[linked[a]].tolist())
 
 
 def _check_info(
