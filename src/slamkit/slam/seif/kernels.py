@@ -158,10 +158,16 @@ def measurement_block(
     h, Hr, Hj = reading_jacobians(model, x, mu[slot : slot + 2])
     nu = wrap_components(z - h, angular)
     H = np.hstack((Hr, Hj))  # (m, 5)
-    idx = np.array([0, 1, 2, slot, slot + 1])
     HtRi = H.T @ R_inv
-    Om[np.ix_(idx, idx)] += HtRi @ H  # Ω += Hᵀ R⁻¹ H
-    xi[idx] += HtRi @ (nu + H @ mu[idx])  # ξ += Hᵀ R⁻¹ (ν + H μ)
+    J = HtRi @ H  # Ω += Hᵀ R⁻¹ H, on the robot and landmark blocks (slices, no gather)
+    b = HtRi @ (nu + H @ np.concatenate((mu[:3], mu[slot : slot + 2])))  # ξ += Hᵀ R⁻¹ (ν + H μ)
+    end = slot + 2
+    Om[:3, :3] += J[:3, :3]
+    Om[:3, slot:end] += J[:3, 3:]
+    Om[slot:end, :3] += J[3:, :3]
+    Om[slot:end, slot:end] += J[3:, 3:]
+    xi[:3] += b[:3]
+    xi[slot:end] += b[3:]
     return nu, H
 
 
