@@ -27,6 +27,10 @@ The mean moves by ``δ = g(μ_x, u) − μ_x`` and the information vector keeps
 
     μ' = μ + F_xᵀ δ,    ξ' = ξ + (Ω' − Ω) μ + Ω' F_xᵀ δ
 
+The steps between two scans compose into one of the same form (``G = G₂ G₁``,
+``R_x = G₂ R₁ G₂ᵀ + R₂``; :class:`~slamkit.slam.seif.kernels.PendingMotion`): the mean moves
+at every control, the information once per scan.
+
 Measurement (:func:`seif_measurement_update`)
 ---------------------------------------------
 With ``H`` the 5-column Jacobian at ``μ`` and ``ν = z ⊖ h(μ)``, the linearised reading is

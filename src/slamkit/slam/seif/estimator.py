@@ -41,9 +41,11 @@ from slamkit.slam.seif.association import (
 )
 from slamkit.slam.seif.config import SeifConfig
 from slamkit.slam.seif.kernels import (
+    PendingMotion,
+    apply_motion,
     landmark_indices,
     measurement_block,
-    motion_block,
+    motion_step,
     pose_indices,
     sparsify_state,
 )
@@ -76,7 +78,9 @@ def _check_dataset(
 class Seif(EstimatorShell):
     """SEIF SLAM as an estimator of the pipeline.
 
-    Per time step: the motion update (pose and active landmarks); per scan, data
+    Per time step: the motion update of the mean, its information composed with the
+    other steps since the last scan (:class:`~slamkit.slam.seif.kernels.PendingMotion`)
+    and applied to the pose and active landmarks once, before the scan; per scan, data
     association at the state before the scan (readings with ids and ``use_ids`` go to
     their landmark, the others by maximum likelihood over the candidates near the robot
     with the blanket covariance, :mod:`slamkit.slam.seif`), one information update per reading
@@ -122,6 +126,7 @@ class Seif(EstimatorShell):
         pose = np.zeros(3) if dataset.initial_pose is None else dataset.initial_pose.copy()
         cov = np.zeros((3, 3)) if dataset.initial_cov is None else dataset.initial_cov
         self._st = SeifState(config.initial_capacity, pose, cov, config.prior_information)
+        self._pending = PendingMotion(self._st.mu[:3])
         self._next_id = OWN_ID_BASE
         self._cursor = 0
         self._max_block = 0  # the largest index block a motion update or sparsification used
@@ -135,6 +140,7 @@ class Seif(EstimatorShell):
         self._predict(u, dt)
 
     def on_landmarks(self, event: LandmarkReadings) -> None:
+        self.apply_motion()
         self._readings(event)
         touched = sparsify_state(self._st, self._config.max_active)
         if touched:
@@ -158,7 +164,8 @@ class Seif(EstimatorShell):
 
     @property
     def information(self) -> tuple[FloatArray, FloatArray]:
-        """Copies of ``(Ω, ξ)`` over the current state."""
+        """Copies of ``(Ω, ξ)`` over the current state (after :meth:`apply_motion`)."""
+        self.apply_motion()
         n = self._st.n
         return self._st.Om[:n, :n].copy(), self._st.xi[:n].copy()
 
@@ -192,6 +199,7 @@ class Seif(EstimatorShell):
         (:mod:`slamkit.slam.seif`, *Data association*), ``hops`` and ``max_blanket``
         defaulting to the configuration's."""
         cfg = self._config
+        self.apply_motion()
         return blanket_covariance(
             self._st.Om, rows, self._st.active, self._st.links,
             cfg.blanket_hops if hops is None else hops,
@@ -209,6 +217,7 @@ class Seif(EstimatorShell):
         return LandmarkEstimate(LandmarkMap(mean, np.asarray(self._st.ids, dtype=np.int64)))
 
     def finish(self) -> EstimatorOutput:
+        self.apply_motion()
         L = self._st.n_landmarks
         lm, mu = exact_estimate(self._st)
         links = [len(s) for s in self._st.links]
@@ -232,14 +241,24 @@ class Seif(EstimatorShell):
             landmark_numbering=LandmarkIds.DATASET if self._use_ids else LandmarkIds.OWN,
         )
 
-    def _predict(self, u: FloatArray, dt: float) -> None:
+    def apply_motion(self) -> None:
+        """Apply the information of the motion steps since the last scan to ``Ω``, ``ξ``
+        (the mean moves at every step; :class:`~slamkit.slam.seif.kernels.PendingMotion`):
+        done before each scan and whenever ``Ω`` is read, so at most once per scan."""
+        if not self._pending.steps:
+            return
         idx = np.concatenate([pose_indices(), landmark_indices(self._st.active)])
         try:
-            motion_block(self._st.Om, self._st.xi, self._st.mu, idx, u, dt, self._motion, self._Q)
+            apply_motion(self._st.Om, self._st.xi, self._st.mu, idx, self._pending)
         except np.linalg.LinAlgError:
             raise ConvergenceError("the motion update met a singular matrix") from None
-        self._counts["predictions"] += 1
         self._max_block = max(self._max_block, idx.size)
+
+    def _predict(self, u: FloatArray, dt: float) -> None:
+        if not self._pending.steps:  # the relaxation may have moved the mean since
+            self._pending.restart(self._st.mu[:3])
+        self._pending.add(*motion_step(self._st.mu, u, dt, self._motion, self._Q))
+        self._counts["predictions"] += 1
 
     def _readings(self, event: LandmarkReadings) -> None:
         z, ids = scan_readings(event, self._m, self._use_ids)

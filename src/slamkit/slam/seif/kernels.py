@@ -19,10 +19,13 @@ from slamkit.slam.common import reading_jacobians
 from slamkit.slam.seif.state import SeifState, link_active
 
 __all__ = [
+    "PendingMotion",
+    "apply_motion",
     "landmark_indices",
     "link_group",
     "measurement_block",
     "motion_block",
+    "motion_step",
     "pose_indices",
     "seif_measurement_update",
     "seif_motion_update",
@@ -43,6 +46,84 @@ def landmark_indices(landmarks: ArrayLike) -> NDArray[np.int64]:
     return (3 + 2 * j[:, None] + np.arange(2)).reshape(-1)
 
 
+def motion_step(
+    mu: FloatArray, u: FloatArray, dt: float, model: MotionModel, Q: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """One motion step of the mean: ``μ_x += δ`` in place (``δ = g(μ_x, u) − μ_x``, the
+    heading kept unwrapped); returns ``(G, R_x = V Q Vᵀ)``, the linearisation at ``μ_x``."""
+    x = mu[:3].copy()
+    x[2] = wrap_angle_float(float(x[2]))  # models want a wrapped heading
+    moved, G, V = motion_kernels(model).step_single(x, u, dt)  # the fused one-pose kernel
+    delta = moved - x
+    delta[2] = wrap_angle_float(float(delta[2]))  # the heading inside stays unwrapped
+    mu[:3] += delta
+    return G, V @ Q @ V.T
+
+
+class PendingMotion:
+    """Motion steps whose mean is applied (:func:`motion_step`) but whose information is
+    not yet: composed into one linear step ``y' = A y + c + F_xᵀ w``, ``A = diag(G, I)``,
+    ``w ~ N(0, R_x)``, with the pose the mean had before the first of them.
+
+    Two steps compose exactly: ``Σ'' = A₂ (A₁ Σ A₁ᵀ + F_xᵀ R₁ F_x) A₂ᵀ + F_xᵀ R₂ F_x``,
+    and ``A₂ F_xᵀ R₁ F_x A₂ᵀ = F_xᵀ G₂ R₁ G₂ᵀ F_x``, so ``G = G₂ G₁`` and
+    ``R_x = G₂ R₁ G₂ᵀ + R₂`` (each ``G_k`` at the mean the step started from, as when
+    applied one by one). The information vector keeps ``ξ − Ω μ`` through every step, so
+    over all of them ``ξ' = ξ + Ω' μ' − Ω μ⁰`` with ``μ⁰`` the mean before the first.
+    Between two scans the active set does not change, so the steps since the last scan can
+    be applied to ``Ω``, ``ξ`` at once (:func:`apply_motion`): one block update per scan
+    instead of one per control, the same numbers up to rounding."""
+
+    def __init__(self, pose: FloatArray) -> None:
+        self.start = pose.copy()
+        """The pose mean before the first pending step ``(3,)``, heading unwrapped."""
+        self.G = np.eye(3)
+        """The composed pose Jacobian ``G_k ⋯ G_1``."""
+        self.R = np.zeros((3, 3))
+        """The composed motion noise in pose space."""
+        self.steps = 0
+        """Steps pending."""
+
+    def add(self, G: FloatArray, R: FloatArray) -> None:
+        """Compose one more step (its Jacobian ``G`` and noise ``R``, from
+        :func:`motion_step`)."""
+        self.G = G @ self.G
+        self.R = G @ self.R @ G.T + R  # R_x = G₂ R₁ G₂ᵀ + R₂
+        self.steps += 1
+
+    def restart(self, pose: FloatArray) -> None:
+        """No steps pending, from the pose mean ``pose``."""
+        self.start[:] = pose
+        self.G = np.eye(3)
+        self.R = np.zeros((3, 3))
+        self.steps = 0
+
+
+def apply_motion(
+    Om: FloatArray, xi: FloatArray, mu: FloatArray, idx: NDArray[np.int64], pending: PendingMotion
+) -> None:
+    """The information of the ``pending`` motion steps on the block ``idx`` = pose then
+    active landmarks (module docstring, with ``G``, ``R_x`` the composed ones); ``Ω``,
+    ``ξ`` change in place (``μ`` already moved)."""
+    ix = np.ix_(idx, idx)
+    O = Om[ix]
+    Gi = np.linalg.inv(pending.G)
+    Rx = pending.R
+    Phi = O.copy()
+    Phi[:3, :] = Gi.T @ O[:3, :]  # Φ = A⁻ᵀ Ω A⁻¹: pose rows and columns only
+    Phi[:, :3] = Phi[:, :3] @ Gi
+    PhiX = Phi[:, :3]  # Φ F_xᵀ (k × 3)
+    kappa = PhiX @ Rx @ np.linalg.solve(np.eye(3) + Phi[:3, :3] @ Rx, PhiX.T)
+    O_new = Phi - kappa
+    O_new = 0.5 * (O_new + O_new.T)
+    mu_b = mu[idx]
+    mu_0 = mu_b.copy()
+    mu_0[:3] = pending.start
+    xi[idx] += O_new @ mu_b - O @ mu_0  # ξ' − Ω' μ' = ξ − Ω μ⁰
+    Om[ix] = O_new
+    pending.restart(mu[:3])
+
+
 def motion_block(
     Om: FloatArray,
     xi: FloatArray,
@@ -53,28 +134,11 @@ def motion_block(
     model: MotionModel,
     Q: FloatArray,
 ) -> None:
-    """The motion update on the block ``idx`` = pose then active landmarks (module
+    """One motion update on the block ``idx`` = pose then active landmarks (module
     docstring); ``Ω``, ``ξ``, ``μ`` are changed in place."""
-    x = mu[:3].copy()
-    x[2] = wrap_angle_float(float(x[2]))  # models want a wrapped heading
-    moved, G, V = motion_kernels(model).step_single(x, u, dt)  # the fused one-pose kernel
-    delta = moved - x
-    delta[2] = wrap_angle_float(float(delta[2]))  # the heading inside stays unwrapped
-    Rx = V @ Q @ V.T
-    ix = np.ix_(idx, idx)
-    O = Om[ix]
-    mu_b = mu[idx]
-    Gi = np.linalg.inv(G)
-    Phi = O.copy()
-    Phi[:3, :] = Gi.T @ O[:3, :]  # Φ = A⁻ᵀ Ω A⁻¹: pose rows and columns only
-    Phi[:, :3] = Phi[:, :3] @ Gi
-    PhiX = Phi[:, :3]  # Φ F_xᵀ (k × 3)
-    kappa = PhiX @ Rx @ np.linalg.solve(np.eye(3) + Phi[:3, :3] @ Rx, PhiX.T)
-    O_new = Phi - kappa
-    O_new = 0.5 * (O_new + O_new.T)
-    xi[idx] += (O_new - O) @ mu_b + O_new[:, :3] @ delta
-    Om[ix] = O_new
-    mu[:3] += delta
+    pending = PendingMotion(mu[:3])
+    pending.add(*motion_step(mu, u, dt, model, Q))
+    apply_motion(Om, xi, mu, idx, pending)
 
 
 def measurement_block(
@@ -94,10 +158,16 @@ def measurement_block(
     h, Hr, Hj = reading_jacobians(model, x, mu[slot : slot + 2])
     nu = wrap_components(z - h, angular)
     H = np.hstack((Hr, Hj))  # (m, 5)
-    idx = np.array([0, 1, 2, slot, slot + 1])
     HtRi = H.T @ R_inv
-    Om[np.ix_(idx, idx)] += HtRi @ H  # Ω += Hᵀ R⁻¹ H
-    xi[idx] += HtRi @ (nu + H @ mu[idx])  # ξ += Hᵀ R⁻¹ (ν + H μ)
+    J = HtRi @ H  # Ω += Hᵀ R⁻¹ H, on the robot and landmark blocks (slices, no gather)
+    b = HtRi @ (nu + H @ np.concatenate((mu[:3], mu[slot : slot + 2])))  # ξ += Hᵀ R⁻¹ (ν + H μ)
+    end = slot + 2
+    Om[:3, :3] += J[:3, :3]
+    Om[:3, slot:end] += J[:3, 3:]
+    Om[slot:end, :3] += J[3:, :3]
+    Om[slot:end, slot:end] += J[3:, 3:]
+    xi[:3] += b[:3]
+    xi[slot:end] += b[3:]
     return nu, H
 
 
@@ -137,8 +207,8 @@ def link_group(Om: FloatArray, group: NDArray[np.int64], links: list[set[int]]) 
     gi = landmark_indices(group)
     linked = np.any(Om[np.ix_(gi, gi)].reshape(g, 2, g, 2) != 0.0, axis=(1, 3))
     np.fill_diagonal(linked, False)
-    for a, b in zip(*np.nonzero(linked), strict=True):
-        links[int(group[a])].add(int(group[b]))
+    for a in np.flatnonzero(linked.any(axis=1)).tolist():
+        links[int(group[a])].update(group[linked[a]].tolist())
 
 
 def _check_info(

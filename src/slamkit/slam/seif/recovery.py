@@ -52,13 +52,20 @@ def relax(
     active: list[int],
     links: list[set[int]],
     ids: list[int],
+    cache: dict[int, tuple[int, NDArray[np.int64]]] | None = None,
 ) -> None:
     """Block Gauss–Seidel on ``mu`` (in place) over ``blocks`` in order (``-1``: the pose,
     linked to the ``active`` landmarks only; a map row: a landmark, linked to ``links``
     of it and to the pose if active); ``ids`` name a landmark whose block is not positive
-    definite in the :class:`~slamkit.errors.ConvergenceError`."""
+    definite in the :class:`~slamkit.errors.ConvergenceError`. ``cache`` keeps the state
+    indices of each landmark's links from call to call (per map row: the number of links
+    and their indices; links are only ever added, so an unchanged count is an unchanged
+    set)."""
+    if cache is None:
+        cache = {}
     act = set(active)
     act_idx = landmark_indices(active)
+    pose = pose_indices()
     neighbours: dict[int, NDArray[np.int64]] = {}
     for b in blocks:
         if b < 0:  # the pose, linked to the active landmarks only
@@ -70,9 +77,12 @@ def relax(
             continue
         nb = neighbours.get(b)
         if nb is None:
-            nb = landmark_indices(sorted(links[b]))
-            if b in act:
-                nb = np.concatenate([pose_indices(), nb])
+            linked = links[b]
+            known = cache.get(b)
+            if known is None or known[0] != len(linked):
+                known = (len(linked), landmark_indices(sorted(linked)))
+                cache[b] = known
+            nb = np.concatenate([pose, known[1]]) if b in act else known[1]
             neighbours[b] = nb
         s = 3 + 2 * b
         r0, r1 = (xi[s : s + 2] - Om[s : s + 2, nb] @ mu[nb]).tolist()
@@ -132,7 +142,10 @@ def relax_step(state: SeifState, sweeps: int, per_step: int, cursor: int) -> int
     :func:`relaxation_order`; returns the new round-robin cursor."""
     link_active(state.links, state.active)  # motion updates link the active landmarks
     blocks, cursor = relaxation_order(state.active, sweeps, per_step, state.n_landmarks, cursor)
-    relax(state.Om, state.xi, state.mu, blocks, state.active, state.links, state.ids)
+    relax(
+        state.Om, state.xi, state.mu, blocks, state.active, state.links, state.ids,
+        state.neighbour_cache,
+    )  # fmt: skip
     return cursor
 
 

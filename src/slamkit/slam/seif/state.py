@@ -6,6 +6,7 @@ what is kept per landmark (ids, links).
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
 
@@ -66,6 +67,8 @@ class SeifState:
         self.slot_of: dict[int, int] = {}
         self.links: list[set[int]] = []  # landmark-landmark links (map rows)
         self.active: list[int] = []  # linked to the robot, least recently observed first
+        # per map row: its number of links and their state indices (relaxation)
+        self.neighbour_cache: dict[int, tuple[int, NDArray[np.int64]]] = {}
 
     @property
     def n(self) -> int:
