@@ -11,9 +11,9 @@ import pytest
 
 from slamkit.datasets import load_dataset
 from slamkit.datasets.stream import Dataset, LaserScan
+from slamkit.models.laser import scan_points
 from slamkit.pipeline import run
 from slamkit.pipeline.evaluate import evaluate
-from slamkit.scanmatch.result import scan_points
 from slamkit.sim.odometry_errors import OdometryErrorModel, corrupt_odometry
 from slamkit.slam.grid_rbpf.loops import MIN_OFFSET, OLD_AFTER, LoopWatch, particle_spread
 

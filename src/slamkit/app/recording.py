@@ -33,9 +33,9 @@ from slamkit.datasets.stream import Dataset, LaserScan
 from slamkit.errors import InputError
 from slamkit.geometry.pose2 import compose, interpolate_poses, transform_points
 from slamkit.maps import OCCUPIED_THRESHOLD
+from slamkit.models.laser import scan_points
 from slamkit.optim.data import loop_closures
 from slamkit.pipeline import Result
-from slamkit.scanmatch.result import scan_points
 
 __all__ = ["MAX_ELLIPSES", "MAX_SCANS", "record_run", "require_rerun"]
 

@@ -67,13 +67,14 @@ from slamkit.geometry.pose2 import between, compose, transform_points
 from slamkit.mapping.inverse_model import InverseSensorModel
 from slamkit.mapping.occupancy.config import OccupancyMappingConfig
 from slamkit.mapping.occupancy.mapper import OccupancyMapper
+from slamkit.models.laser import scan_points
 from slamkit.scanmatch.correlative import CorrelativeReference
 from slamkit.scanmatch.icp import MIN_REFERENCE_POINTS, PreparedScan, prepare_scan
 from slamkit.scanmatch.normal_icp import NormalCloud, NormalIcpConfig, normal_icp, surface_fit
 from slamkit.scanmatch.plicp import PlIcpConfig, plicp
 from slamkit.scanmatch.point_map import PointMap
 from slamkit.scanmatch.relocate import RELOCATE_SEARCH, TRUSTED_FIT, judge, relocate
-from slamkit.scanmatch.result import MatchResult, require_points, scan_points
+from slamkit.scanmatch.result import MatchResult, require_points
 
 __all__ = [
     "NORMAL_ICP",

@@ -24,7 +24,7 @@ from slamkit._validation import FloatArray, as_array, as_positive
 from slamkit.errors import InputError, ShapeError
 from slamkit.maps.types import OCCUPIED_THRESHOLD, OccupancyGrid, SegmentMap
 
-__all__ = ["LaserScanner", "cast_rays_grid", "cast_rays_segments"]
+__all__ = ["LaserScanner", "cast_rays_grid", "cast_rays_segments", "scan_points"]
 
 # Largest number of (ray, segment) pairs held in memory at once by cast_rays_segments; each
 # pair costs a handful of float64 temporaries, so this bounds the working set to ~100 MB.
@@ -272,3 +272,23 @@ class LaserScanner:
         noise = rng.standard_normal(true.shape) * self.range_sigma
         noisy = np.clip(true + noise, 0.0, self.max_range)
         return np.where(true >= self.max_range, self.max_range, noisy)
+
+
+def scan_points(
+    ranges: FloatArray,
+    beam_angles: FloatArray,
+    max_range: float,
+    *,
+    min_range: float = 0.0,
+) -> FloatArray:
+    """The end points ``(M, 2)`` of the beams that returned, in the sensor frame.
+
+    A beam returned when ``min_range < r < max_range`` and ``r`` is finite (``r >=
+    max_range`` is the "no return" convention of :class:`~slamkit.datasets.LaserScan`).
+    """
+    r = as_array(ranges, "ranges", (None,), finite=False)
+    a = as_array(beam_angles, "beam_angles", (r.size,))
+    keep = np.isfinite(r) & (r > min_range) & (r < max_range)
+    rk = r[keep]
+    ak = a[keep]
+    return np.column_stack([rk * np.cos(ak), rk * np.sin(ak)])

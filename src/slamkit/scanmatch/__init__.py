@@ -6,10 +6,11 @@ convention of :mod:`slamkit.scanmatch.result`, and raises :class:`~slamkit.error
 when it cannot match.
 """
 
+from slamkit.models.laser import scan_points
 from slamkit.scanmatch.correlative import CorrelativeConfig, CorrelativeReference, correlative_match
 from slamkit.scanmatch.icp import IcpConfig, PreparedScan, icp, prepare_scan
 from slamkit.scanmatch.plicp import PlIcpConfig, plicp
-from slamkit.scanmatch.result import MatchError, MatchResult, require_points, scan_points
+from slamkit.scanmatch.result import MatchError, MatchResult, require_points
 from slamkit.scanmatch.to_map import MapMatchConfig, match_to_map
 
 __all__ = [

@@ -17,12 +17,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from slamkit._validation import FloatArray, as_array
 from slamkit.errors import MatchError
 
-__all__ = ["MatchError", "MatchResult", "require_points", "scan_points"]
+__all__ = ["MatchError", "MatchResult", "require_points"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -49,26 +47,6 @@ class MatchResult:
     def __post_init__(self) -> None:
         object.__setattr__(self, "pose", as_array(self.pose, "match pose", (3,)))
         object.__setattr__(self, "cov", as_array(self.cov, "match covariance", (3, 3)))
-
-
-def scan_points(
-    ranges: FloatArray,
-    beam_angles: FloatArray,
-    max_range: float,
-    *,
-    min_range: float = 0.0,
-) -> FloatArray:
-    """The end points ``(M, 2)`` of the beams that returned, in the sensor frame.
-
-    A beam returned when ``min_range < r < max_range`` and ``r`` is finite (``r >=
-    max_range`` is the "no return" convention of :class:`~slamkit.datasets.LaserScan`).
-    """
-    r = as_array(ranges, "ranges", (None,), finite=False)
-    a = as_array(beam_angles, "beam_angles", (r.size,))
-    keep = np.isfinite(r) & (r > min_range) & (r < max_range)
-    rk = r[keep]
-    ak = a[keep]
-    return np.column_stack([rk * np.cos(ak), rk * np.sin(ak)])
 
 
 def require_points(points: FloatArray, minimum: int, which: str) -> FloatArray:

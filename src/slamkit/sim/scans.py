@@ -17,8 +17,7 @@ from slamkit._validation import FloatArray, as_array, as_positive
 from slamkit.errors import InputError
 from slamkit.geometry.pose2 import between, compose
 from slamkit.maps import SegmentMap
-from slamkit.models.laser import LaserScanner
-from slamkit.scanmatch.result import scan_points
+from slamkit.models.laser import LaserScanner, scan_points
 
 __all__ = [
     "ROOMS_FREE_POSES",

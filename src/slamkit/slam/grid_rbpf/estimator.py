@@ -73,9 +73,10 @@ from slamkit.mapping.inverse_model import InverseSensorModel
 from slamkit.mapping.logodds import expit
 from slamkit.maps import OccupancyGrid
 from slamkit.maps.likelihood_field import LikelihoodField
+from slamkit.models.laser import scan_points
 from slamkit.scanmatch.correlative import CorrelativeConfig, CorrelativeReference
 from slamkit.scanmatch.relocate import TRUSTED_FIT, WINDOW_XY, judge
-from slamkit.scanmatch.result import MatchResult, scan_points
+from slamkit.scanmatch.result import MatchResult
 from slamkit.scanmatch.to_map import MapMatchConfig, match_to_map
 from slamkit.slam.grid_rbpf.config import GridRbpfConfig
 from slamkit.slam.grid_rbpf.guard import (

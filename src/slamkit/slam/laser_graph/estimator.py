@@ -41,10 +41,10 @@ from slamkit.geometry.pose2 import between, compose, transform_points
 from slamkit.mapping.inverse_model import InverseSensorModel
 from slamkit.mapping.occupancy.config import OccupancyMappingConfig
 from slamkit.mapping.occupancy.mapper import OccupancyMapper
+from slamkit.models.laser import scan_points
 from slamkit.scanmatch.icp import prepare_scan
 from slamkit.scanmatch.normal_icp import NormalCloud
 from slamkit.scanmatch.point_map import ScanNormals, scan_normals
-from slamkit.scanmatch.result import scan_points
 from slamkit.scanmatch.transient import ScanView
 from slamkit.slam.laser_graph.backend import (
     MAX_CHI2,
