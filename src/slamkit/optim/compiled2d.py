@@ -1,0 +1,282 @@
+"""The inner loop of a 2D pose graph compiled with numba: one pass over the relative-pose
+edges gives χ², ``H`` (in the pattern's slots) and ``g``; one pass retracts every pose.
+
+At the size of intel (1728 poses, 2512 edges) the NumPy path of
+:meth:`~slamkit.optim.graph.GraphProblem.linearize` spends its time in the fixed cost of some
+sixty array operations per linearisation (kernels, whitening ``einsum``, the block products,
+``bincount``), each on arrays of a few thousand numbers; the compiled pass does the same
+arithmetic in one loop per stage (the measurements are in ``docs/estimators/optim.md``).
+
+**Where it applies** (decided once, when the problem is built: :func:`compiled_se2` returns a
+:class:`CompiledSe2` or ``None``, and the problem keeps it): a 2D graph of relative-pose
+edges only (one ``se2`` edge set, no priors, no landmarks, no ``EQUIV`` aliases) with g2o's
+objective, and numba installed (``pip install slamkit[fast]``). Robust kernels, SE-Sync's
+objective and every other graph take the NumPy path.
+
+**The same numbers.** Per edge the formulas of
+:func:`~slamkit.optim.factors.se2_between_error` (with ``d = R_iᵀ (t_j - t_i)``,
+``e_t = R_zᵀ (d - t_z)``, ``e_θ = wrap(θ_j - θ_i - θ_z)`` and its Jacobians), whitened as
+``r = U e``, ``A = U ∂e/∂δ_i``, ``B = U ∂e/∂δ_j``; each entry of ``H`` sums its block-product
+terms in the order ``np.bincount`` does on the NumPy path (every edge's ``AᵀA``, then
+``AᵀB``, then ``BᵀB``, entry by entry, edges in order), and the retraction is
+:func:`~slamkit.optim.factors.retract_poses` (``X · Exp(δ)``, θ wrapped). Results agree with
+the NumPy path to rounding (``libm``'s sine against NumPy's): the tests hold ``H``, ``g``
+and χ² to 1e-12 relative and whole solves to 1e-9.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, TypeVar, cast
+
+import numpy as np
+
+from slamkit.optim.data import FloatArray, IntArray
+from slamkit.optim.linearization import Linearization
+
+if TYPE_CHECKING:
+    from slamkit.optim.graph import GraphProblem
+
+__all__ = ["AVAILABLE", "CompiledSe2", "compiled_se2"]
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def _import_numba() -> Any:
+    try:  # numba is optional: without it the NumPy path runs
+        return importlib.import_module("numba")
+    except ImportError:  # pragma: no cover - depends on the environment
+        return None
+
+
+_NUMBA = _import_numba()
+AVAILABLE: bool = _NUMBA is not None
+"""numba could be imported: plain 2D pose graphs use the compiled pass."""
+
+
+def _jit(fn: F) -> F:
+    if _NUMBA is None:  # pragma: no cover - depends on the environment
+        return fn
+    return cast(F, _NUMBA.njit(cache=True)(fn))
+
+
+_TWO_PI = 2.0 * math.pi
+_SMALL_ANGLE = 1e-3  # below it the SE(2) exponential takes its Taylor series (as geometry)
+
+
+@_jit
+def _wrap(a: float) -> float:
+    """``a`` wrapped to ``[-π, π)``, unchanged when already there (as ``wrap_angle``)."""
+    if -math.pi <= a < math.pi:
+        return a
+    if not math.isfinite(a):
+        return math.nan
+    w = a - _TWO_PI * math.floor((a + math.pi) / _TWO_PI)
+    if w < -math.pi:
+        w += _TWO_PI
+    if w >= math.pi:
+        w -= _TWO_PI
+    return w
+
+
+@_jit
+def _edge_terms(
+    poses: FloatArray,
+    a: IntArray,
+    b: IntArray,
+    z: FloatArray,
+    U: FloatArray,
+    jacobians: bool,
+    r: FloatArray,
+    A: FloatArray,
+    B: FloatArray,
+) -> float:
+    """Fill ``r (E, 3)``, ``A``, ``B (E, 3, 3)`` (whitened residual and Jacobians; ``U`` is
+    edge-last ``(3, 3, E)``) and return ``χ² = Σ ‖r‖²``; ``jacobians=False``: ``r`` only."""
+    chi2 = 0.0
+    e = np.empty(3)
+    Ji = np.zeros((3, 3))
+    Jj = np.zeros((3, 3))
+    Ji[2, 2] = -1.0
+    Jj[2, 2] = 1.0
+    for k in range(a.shape[0]):
+        i, j = a[k], b[k]
+        ci, si = math.cos(poses[i, 2]), math.sin(poses[i, 2])
+        cz, sz = math.cos(z[k, 2]), math.sin(z[k, 2])
+        dx0, dy0 = poses[j, 0] - poses[i, 0], poses[j, 1] - poses[i, 1]
+        dx = ci * dx0 + si * dy0  # d = R_iᵀ (t_j - t_i)
+        dy = -si * dx0 + ci * dy0
+        ux, uy = dx - z[k, 0], dy - z[k, 1]
+        phi = poses[j, 2] - poses[i, 2] - z[k, 2]
+        e[0] = cz * ux + sz * uy  # R_zᵀ (d - t_z)
+        e[1] = -sz * ux + cz * uy
+        e[2] = _wrap(phi)
+        s = 0.0
+        for p in range(3):
+            rp = U[p, 0, k] * e[0] + U[p, 1, k] * e[1] + U[p, 2, k] * e[2]
+            r[k, p] = rp
+            s += rp * rp
+        chi2 += s
+        if not jacobians:
+            continue
+        Ji[0, 0] = -cz
+        Ji[0, 1] = -sz
+        Ji[1, 0] = sz
+        Ji[1, 1] = -cz
+        Ji[0, 2] = cz * dy - sz * dx  # -R_zᵀ S d with S d = (-d_y, d_x)
+        Ji[1, 2] = -sz * dy - cz * dx
+        cp, sp = math.cos(phi), math.sin(phi)
+        Jj[0, 0] = cp
+        Jj[0, 1] = -sp
+        Jj[1, 0] = sp
+        Jj[1, 1] = cp
+        for p in range(3):
+            for q in range(3):
+                A[k, p, q] = U[p, 0, k] * Ji[0, q] + U[p, 1, k] * Ji[1, q] + U[p, 2, k] * Ji[2, q]
+                B[k, p, q] = U[p, 0, k] * Jj[0, q] + U[p, 1, k] * Jj[1, q] + U[p, 2, k] * Jj[2, q]
+    return chi2
+
+
+@_jit
+def _normal_equations(
+    A: FloatArray,
+    B: FloatArray,
+    r: FloatArray,
+    slots: IntArray,
+    grad_slots: IntArray,
+    H: FloatArray,
+    g: FloatArray,
+) -> None:
+    """Add the block products to ``H`` and ``g`` at the pattern's slots (dropped entries
+    carry ``len(H)`` / ``len(g)``), in ``np.bincount``'s order over the NumPy path's list:
+    ``AᵀA``, ``AᵀB``, ``BᵀB`` as ``(3, 3, E)``, then ``Aᵀr``, ``Bᵀr`` as ``(3, E)``."""
+    E = A.shape[0]
+    nnz, n = H.shape[0], g.shape[0]
+    at = 0
+    for prod in range(3):
+        X = A if prod < 2 else B
+        Y = A if prod == 0 else B
+        for p in range(3):
+            for q in range(3):
+                for k in range(E):
+                    s = slots[at]
+                    at += 1
+                    if s < nnz:
+                        H[s] += (
+                            X[k, 0, p] * Y[k, 0, q]
+                            + X[k, 1, p] * Y[k, 1, q]
+                            + (X[k, 2, p] * Y[k, 2, q])
+                        )
+    at = 0
+    for half in range(2):
+        X = A if half == 0 else B
+        for p in range(3):
+            for k in range(E):
+                s = grad_slots[at]
+                at += 1
+                if s < n:
+                    g[s] += X[k, 0, p] * r[k, 0] + X[k, 1, p] * r[k, 1] + X[k, 2, p] * r[k, 2]
+
+
+@_jit
+def _retract(poses: FloatArray, pose_var: IntArray, delta: FloatArray, out: FloatArray) -> None:
+    """``out = X · Exp(δ)`` per free pose (``pose_var >= 0``; its step at ``3 var``), fixed
+    poses copied; θ wrapped."""
+    for i in range(poses.shape[0]):
+        v = pose_var[i]
+        if v < 0:
+            out[i, 0], out[i, 1], out[i, 2] = poses[i, 0], poses[i, 1], poses[i, 2]
+            continue
+        vx, vy, th = delta[3 * v], delta[3 * v + 1], delta[3 * v + 2]
+        t2 = th * th
+        if abs(th) < _SMALL_ANGLE:  # sin θ/θ and (1 - cos θ)/θ are 0/0 at 0: their series
+            sa = 1.0 - t2 / 6.0 + t2 * t2 / 120.0
+            cb = th / 2.0 - th * t2 / 24.0 + th * t2 * t2 / 720.0
+        else:
+            sa = math.sin(th) / th
+            cb = 2.0 * math.sin(th / 2) ** 2 / th
+        tx, ty = sa * vx - cb * vy, cb * vx + sa * vy  # t = V(θ) v
+        dth = _wrap(math.atan2(math.sin(th), math.cos(th)))
+        c, s = math.cos(poses[i, 2]), math.sin(poses[i, 2])
+        out[i, 0] = poses[i, 0] + c * tx - s * ty
+        out[i, 1] = poses[i, 1] + s * tx + c * ty
+        out[i, 2] = _wrap(poses[i, 2] + dth)
+
+
+class CompiledSe2:
+    """The compiled pass over one problem's relative-pose edges (module docstring); build
+    with :func:`compiled_se2`."""
+
+    def __init__(self, problem: GraphProblem) -> None:
+        blk = problem.blocks[0]
+        assert blk.b is not None and blk.sqrt_info is not None
+        self._a = np.ascontiguousarray(blk.a, dtype=np.int64)
+        self._b = np.ascontiguousarray(blk.b, dtype=np.int64)
+        self._z = np.ascontiguousarray(blk.measurement, dtype=np.float64)
+        self._U = np.ascontiguousarray(blk.sqrt_info, dtype=np.float64)
+        self._pose_var = np.ascontiguousarray(problem.pose_var, dtype=np.int64)
+        self._problem = problem
+        E = self._a.shape[0]
+        self._r = np.empty((E, 3))
+        self._A = np.empty((E, 3, 3))
+        self._B = np.empty((E, 3, 3))
+
+    def chi2(self, poses: FloatArray) -> float:
+        """``Σ ‖U e‖²`` at ``poses`` ``(N, 3)``."""
+        x = np.ascontiguousarray(poses, dtype=np.float64)
+        return float(
+            _edge_terms(x, self._a, self._b, self._z, self._U, False, self._r, self._A, self._B)
+        )
+
+    def system(self, poses: FloatArray) -> tuple[float, FloatArray, FloatArray]:
+        """``(χ², H, g)`` at ``poses``: ``H`` as lower-triangle values in the problem's
+        pattern, ``g = Jᵀ r``."""
+        x = np.ascontiguousarray(poses, dtype=np.float64)
+        chi2 = _edge_terms(x, self._a, self._b, self._z, self._U, True, self._r, self._A, self._B)
+        pattern = self._problem.pattern
+        H = np.zeros(pattern.nnz)
+        g = np.zeros(pattern.n)
+        _normal_equations(self._A, self._B, self._r, pattern.slots, pattern.grad_slots, H, g)
+        return float(chi2), H, g
+
+    def linearize(self, poses: FloatArray, *, jacobians: bool, deferred: bool) -> Linearization:
+        """:meth:`GraphProblem.linearize <slamkit.optim.graph.GraphProblem.linearize>`
+        without a robust kernel (cost = χ²): ``jacobians=False`` the cost only;
+        ``deferred=True`` the cost now and ``H``, ``g`` on first read (from a copy of
+        ``poses``)."""
+        t0 = time.perf_counter()
+        if not jacobians or deferred:
+            c = self.chi2(poses)
+            at = np.array(poses, dtype=np.float64)
+            later = (lambda: self.system(at)[1:]) if jacobians else None
+            return Linearization(c, c, None, None, time.perf_counter() - t0, pending=later)
+        c, H, g = self.system(poses)
+        return Linearization(c, c, H, g, time.perf_counter() - t0)
+
+    def retract(self, poses: FloatArray, delta: FloatArray) -> FloatArray:
+        """``X ⊕ δ`` for every free pose (fixed poses unchanged)."""
+        out = np.empty_like(poses, dtype=np.float64)
+        _retract(
+            np.ascontiguousarray(poses, dtype=np.float64),
+            self._pose_var,
+            np.ascontiguousarray(delta, dtype=np.float64),
+            out,
+        )
+        return out
+
+
+def compiled_se2(problem: GraphProblem) -> CompiledSe2 | None:
+    """The compiled pass for ``problem`` when it applies (module docstring), else ``None``."""
+    if not AVAILABLE or problem.dim != 2 or problem.objective != "g2o":
+        return None
+    if problem.landmark_ids.shape[0] or len(problem.blocks) != 1:
+        return None
+    if (problem.alias != np.arange(problem.pose_ids.shape[0])).any():
+        return None
+    blk = problem.blocks[0]
+    if blk.kind != "se2" or blk.b is None or blk.sqrt_info is None or blk.batch_first:
+        return None
+    return CompiledSe2(problem)
