@@ -40,7 +40,7 @@ from slamkit.optim.linearization import Linearization
 if TYPE_CHECKING:
     from slamkit.optim.graph import GraphProblem
 
-__all__ = ["AVAILABLE", "CompiledSe2", "compiled_se2"]
+__all__ = ["AVAILABLE", "CompiledSe2", "CompiledWindow", "compiled_se2", "compiled_window"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -280,3 +280,126 @@ def compiled_se2(problem: GraphProblem) -> CompiledSe2 | None:
     if blk.kind != "se2" or blk.b is None or blk.sqrt_info is None or blk.batch_first:
         return None
     return CompiledSe2(problem)
+
+
+@_jit
+def _window_delta(
+    X: FloatArray,
+    a: IntArray,
+    b: IntArray,
+    z: FloatArray,
+    U: FloatArray,
+    cols: IntArray,
+    H: FloatArray,
+    g: FloatArray,
+) -> bool:
+    """The Gauss-Newton step ``δ = -H⁻¹ g`` of a window (:mod:`slamkit.optim.window`) over
+    relative-pose edges ``a → b`` (``U`` batch-first ``(E, 3, 3)``, ``cols (E, 6)`` the window
+    columns of both poses, -1 when held fixed) into ``g``; ``H`` ``(n, n)`` is scratch (its
+    lower triangle ends as the Cholesky factor). False when ``H`` is not positive definite."""
+    n = g.shape[0]
+    H[:, :] = 0.0
+    g[:] = 0.0
+    e = np.empty(3)
+    J = np.zeros((3, 6))  # ∂e/∂(δ_a, δ_b)
+    W = np.empty((3, 6))  # U J
+    r = np.empty(3)
+    J[2, 2] = -1.0
+    J[2, 5] = 1.0
+    for k in range(a.shape[0]):
+        i, j = a[k], b[k]
+        ci, si = math.cos(X[i, 2]), math.sin(X[i, 2])
+        cz, sz = math.cos(z[k, 2]), math.sin(z[k, 2])
+        dx0, dy0 = X[j, 0] - X[i, 0], X[j, 1] - X[i, 1]
+        dx = ci * dx0 + si * dy0
+        dy = -si * dx0 + ci * dy0
+        ux, uy = dx - z[k, 0], dy - z[k, 1]
+        phi = X[j, 2] - X[i, 2] - z[k, 2]
+        e[0] = cz * ux + sz * uy
+        e[1] = -sz * ux + cz * uy
+        e[2] = _wrap(phi)
+        J[0, 0] = -cz
+        J[0, 1] = -sz
+        J[1, 0] = sz
+        J[1, 1] = -cz
+        J[0, 2] = cz * dy - sz * dx
+        J[1, 2] = -sz * dy - cz * dx
+        cp, sp = math.cos(phi), math.sin(phi)
+        J[0, 3] = cp
+        J[0, 4] = -sp
+        J[1, 3] = sp
+        J[1, 4] = cp
+        for p in range(3):
+            r[p] = U[k, p, 0] * e[0] + U[k, p, 1] * e[1] + U[k, p, 2] * e[2]
+            for q in range(6):
+                W[p, q] = U[k, p, 0] * J[0, q] + U[k, p, 1] * J[1, q] + U[k, p, 2] * J[2, q]
+        for p in range(6):
+            cp_ = cols[k, p]
+            if cp_ < 0:
+                continue
+            g[cp_] += W[0, p] * r[0] + W[1, p] * r[1] + W[2, p] * r[2]
+            for q in range(6):
+                cq = cols[k, q]
+                if cq >= 0:
+                    H[cp_, cq] += W[0, p] * W[0, q] + W[1, p] * W[1, q] + W[2, p] * W[2, q]
+    # Cholesky H = L Lᵀ in the lower triangle, then L y = -g and Lᵀ δ = y.
+    for c in range(n):
+        d = H[c, c]
+        for q in range(c):
+            d -= H[c, q] * H[c, q]
+        if not d > 0.0:
+            return False
+        d = math.sqrt(d)
+        H[c, c] = d
+        for row in range(c + 1, n):
+            v = H[row, c]
+            for q in range(c):
+                v -= H[row, q] * H[c, q]
+            H[row, c] = v / d
+    for row in range(n):
+        v = -g[row]
+        for q in range(row):
+            v -= H[row, q] * g[q]
+        g[row] = v / H[row, row]
+    for row in range(n - 1, -1, -1):
+        v = g[row]
+        for q in range(row + 1, n):
+            v -= H[q, row] * g[q]
+        g[row] = v / H[row, row]
+    return True
+
+
+class CompiledWindow:
+    """The window step of :class:`~slamkit.optim.incremental.IncrementalOptimizer` over
+    relative-pose edges in one compiled pass: normal equations, dense Cholesky and
+    retraction (build with :func:`compiled_window`)."""
+
+    def step(
+        self,
+        X: FloatArray,
+        rows: IntArray,
+        a: IntArray,
+        b: IntArray,
+        z: FloatArray,
+        U: FloatArray,
+        cols: IntArray,
+    ) -> FloatArray | None:
+        """``δ`` ``(3 |rows|,)`` of the window poses ``rows`` (``None`` when ``H`` is not
+        positive definite); see :func:`~slamkit.optim.window.window_normal_equations` for
+        ``cols``."""
+        n = 3 * rows.shape[0]
+        H = np.empty((n, n))
+        delta = np.empty(n)
+        ok = _window_delta(X, a, b, z, U, cols, H, delta)
+        return delta if ok else None
+
+    def retract(self, X: FloatArray, delta: FloatArray) -> FloatArray:
+        """``X ⊕ δ`` row by row (``δ`` of length ``3 len(X)``)."""
+        out = np.empty_like(X)
+        _retract(X, np.arange(X.shape[0], dtype=np.int64), delta, out)
+        return out
+
+
+def compiled_window() -> CompiledWindow | None:
+    """The compiled window step, or ``None`` without numba."""
+    return CompiledWindow() if AVAILABLE else None

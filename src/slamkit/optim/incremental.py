@@ -83,6 +83,7 @@ from slamkit.errors import (
 )
 from slamkit.geometry import pose2
 from slamkit.optim import factors
+from slamkit.optim.compiled2d import compiled_window
 from slamkit.optim.data import EdgeSet, FloatArray, GraphData, IntArray
 from slamkit.optim.graph import GraphProblem
 from slamkit.optim.loop import Estimate, SolverContext, run_least_squares
@@ -97,7 +98,12 @@ from slamkit.optim.updates import (
     edge_name,
     time_ordered_updates,
 )
-from slamkit.optim.window import solve_window, window_normal_equations, window_terms
+from slamkit.optim.window import (
+    DENSE_MAX,
+    solve_window,
+    window_normal_equations,
+    window_terms,
+)
 
 __all__ = [
     "GraphUpdate",
@@ -196,8 +202,10 @@ class IncrementalOptimizer:
     as a :class:`~slamkit.optim.data.GraphData` for batch tools.
     """
 
-    def __init__(self, config: IncrementalConfig | None = None) -> None:
+    def __init__(self, config: IncrementalConfig | None = None, *, compiled: bool = True) -> None:
         self.config = config if config is not None else IncrementalConfig()
+        # The window step in one compiled pass when numba is installed (compiled=False: NumPy).
+        self._compiled = compiled_window() if compiled else None
         cap = 256
         self._n = 0  # poses
         self._ids = np.zeros(cap, dtype=np.int64)
@@ -586,12 +594,19 @@ class IncrementalOptimizer:
         l6 = np.repeat(np.concatenate([la[:, None], lb[:, None]], axis=1), 3, axis=1)
         cols = np.where(l6 >= 0, 3 * l6 + np.tile(np.arange(3), 2), -1)  # (E, 6)
         first_step = 0.0
+        fast = self._compiled if 3 * w <= DENSE_MAX and not prior.any() else None
         for it in range(self.config.window_iterations):
             X = self._X
-            r, J = window_terms(X, a, b, z, U, prior)
-            flat, vals, g = window_normal_equations(3 * w, cols, r, J)
             try:
-                delta = solve_window(3 * w, flat, vals, g, self.config.linear_solver)
+                if fast is not None:  # the same step in one compiled pass
+                    found = fast.step(X, rows, a, b, z, U, cols)
+                    if found is None:
+                        raise SingularSystem("not positive definite")
+                    delta = found
+                else:
+                    r, J = window_terms(X, a, b, z, U, prior)
+                    flat, vals, g = window_normal_equations(3 * w, cols, r, J)
+                    delta = solve_window(3 * w, flat, vals, g, self.config.linear_solver)
             except SingularSystem:
                 names = ", ".join(str(int(self._ids[q])) for q in rows[:8].tolist())
                 raise GeometryError(
@@ -603,7 +618,10 @@ class IncrementalOptimizer:
             step = float(np.abs(delta).max())
             if it == 0:
                 first_step = step
-            self._X[rows] = factors.retract_poses(X[rows], delta.reshape(w, 3))
+            if fast is not None:
+                self._X[rows] = fast.retract(X[rows], delta)
+            else:
+                self._X[rows] = factors.retract_poses(X[rows], delta.reshape(w, 3))
         return first_step
 
     # ------------------------------------------------------------------ batch step
