@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from slamkit.errors import SlamkitError
 from slamkit.geometry import pose2
 from slamkit.io.posegraph import read_graph
 from slamkit.optim import (
@@ -25,6 +26,7 @@ from slamkit.optim.incremental import (
     IncrementalOptimizer,
     time_ordered_updates,
 )
+from slamkit.optim.updates import check_update_edges
 
 pytestmark = pytest.mark.skipif(not AVAILABLE, reason="numba is not installed (slamkit[fast])")
 
@@ -185,3 +187,30 @@ def test_compiled_window_refuses_a_singular_system() -> None:
     # One edge, one free pose: the step lands pose 1 exactly on the measurement.
     moved = window.retract(X[1:], delta)
     np.testing.assert_allclose(moved[0], [1.0, 0.0, 0.0], atol=1e-2)
+
+
+def test_compiled_whitening_and_chaining_equal_numpy() -> None:
+    window = compiled_window()
+    assert window is not None
+    rng = np.random.default_rng(9)
+    M = rng.normal(size=(20, 3, 3))
+    info = M @ M.transpose(0, 2, 1) + 0.5 * np.eye(3)
+    U = window.whitening(info)
+    assert U is not None
+    np.testing.assert_allclose(U, np.linalg.cholesky(info).transpose(0, 2, 1), rtol=1e-13)
+    np.testing.assert_allclose(U.transpose(0, 2, 1) @ U, info, rtol=1e-12)
+    for broken in (np.diag([1.0, -1.0, 1.0]), np.diag([1.0, np.nan, 1.0]), np.eye(3) + 0.1):
+        bad = info.copy()
+        bad[7] = broken
+        if broken[0, 1] != 0:
+            bad[7, 0, 1] += 0.2  # not symmetric
+        assert window.whitening(bad) is None
+        es = _edges("se2", np.arange(20), np.arange(1, 21), np.zeros((20, 3)), bad)
+        with pytest.raises(SlamkitError, match="edge 7"):
+            check_update_edges(es, window.whitening)  # the NumPy checks name the edge
+    x = np.array([1.0, -2.0, 3.0])
+    for z in (np.array([0.5, 0.2, 0.4]), np.array([-1.0, 3.0, -3.1])):
+        np.testing.assert_allclose(window.chain(x, z, False), pose2.compose(x, z), atol=1e-14)
+        np.testing.assert_allclose(
+            window.chain(x, z, True), pose2.compose(x, pose2.inverse(z)), atol=1e-14
+        )

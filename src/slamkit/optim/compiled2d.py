@@ -369,6 +369,56 @@ def _window_delta(
     return True
 
 
+@_jit
+def _whitening(info: FloatArray, U: FloatArray) -> bool:
+    """``U = Lᵀ`` with ``L Lᵀ = Ω`` (``L`` lower, as ``np.linalg.cholesky``) for each
+    ``(3, 3)`` information matrix; False when one is not finite, not symmetric (``max |Ω - Ωᵀ| >
+    1e-9 max |Ω|``, the NumPy check) or not positive definite."""
+    for k in range(info.shape[0]):
+        big = 0.0
+        skew = 0.0
+        for p in range(3):
+            for q in range(3):
+                v = info[k, p, q]
+                if not math.isfinite(v):
+                    return False
+                big = max(big, abs(v))
+                skew = max(skew, abs(v - info[k, q, p]))
+        if skew > 1e-9 * big:
+            return False
+        d0 = info[k, 0, 0]
+        if not d0 > 0.0:
+            return False
+        l00 = math.sqrt(d0)
+        l10 = info[k, 1, 0] / l00
+        l20 = info[k, 2, 0] / l00
+        d1 = info[k, 1, 1] - l10 * l10
+        if not d1 > 0.0:
+            return False
+        l11 = math.sqrt(d1)
+        l21 = (info[k, 2, 1] - l20 * l10) / l11
+        d2 = info[k, 2, 2] - (l20 * l20 + l21 * l21)
+        if not d2 > 0.0:
+            return False
+        U[k, 0, 0], U[k, 0, 1], U[k, 0, 2] = l00, l10, l20
+        U[k, 1, 0], U[k, 1, 1], U[k, 1, 2] = 0.0, l11, l21
+        U[k, 2, 0], U[k, 2, 1], U[k, 2, 2] = 0.0, 0.0, math.sqrt(d2)
+    return True
+
+
+@_jit
+def _chain(x: FloatArray, z: FloatArray, reverse: bool, out: FloatArray) -> None:
+    """``out = x ⊕ z`` (``reverse``: ``x ⊕ z⁻¹``), θ wrapped, as ``pose2.compose``."""
+    zx, zy, zt = z[0], z[1], z[2]
+    if reverse:  # z⁻¹ = (-R_zᵀ t_z, -θ_z)
+        cz, sz = math.cos(zt), math.sin(zt)
+        zx, zy, zt = -cz * z[0] - sz * z[1], sz * z[0] - cz * z[1], _wrap(-zt)
+    c, s = math.cos(x[2]), math.sin(x[2])
+    out[0] = x[0] + c * zx - s * zy
+    out[1] = x[1] + s * zx + c * zy
+    out[2] = _wrap(x[2] + zt)
+
+
 class CompiledWindow:
     """The window step of :class:`~slamkit.optim.incremental.IncrementalOptimizer` over
     relative-pose edges in one compiled pass: normal equations, dense Cholesky and
@@ -392,6 +442,20 @@ class CompiledWindow:
         delta = np.empty(n)
         ok = _window_delta(X, a, b, z, U, cols, H, delta)
         return delta if ok else None
+
+    def whitening(self, information: FloatArray) -> FloatArray | None:
+        """``U`` ``(E, 3, 3)`` with ``Uᵀ U = Ω`` per edge, or ``None`` when an information
+        matrix fails the checks of :func:`~slamkit.optim.updates.check_update_edges` (which
+        then names the edge)."""
+        info = np.ascontiguousarray(information, dtype=np.float64)
+        U = np.empty_like(info)
+        return U if _whitening(info, U) else None
+
+    def chain(self, x: FloatArray, z: FloatArray, reverse: bool) -> FloatArray:
+        """``x ⊕ z`` (``reverse``: ``x ⊕ z⁻¹``) for one pose."""
+        out = np.empty(3)
+        _chain(np.asarray(x, dtype=np.float64), np.asarray(z, dtype=np.float64), reverse, out)
+        return out
 
     def retract(self, X: FloatArray, delta: FloatArray) -> FloatArray:
         """``X ⊕ δ`` row by row (``δ`` of length ``3 len(X)``)."""

@@ -304,7 +304,8 @@ class IncrementalOptimizer:
         t0 = time.perf_counter()
         new_ids = self._check_new_ids(pose_ids)
         guesses = check_guesses(initial_poses, new_ids)
-        checked = [check_update_edges(es) for es in edges]
+        whiten = None if self._compiled is None else self._compiled.whitening
+        checked = [check_update_edges(es, whiten) for es in edges]
         new_row = {pid: self._n + k for k, pid in enumerate(new_ids.tolist())}
         resolved = [self._resolve(es, new_row) for es in checked]
         X_new = self._initial_guesses(new_ids, new_row, guesses, resolved)
@@ -465,6 +466,8 @@ class IncrementalOptimizer:
 
         # Breadth-first from the poses with a value: old poses first, then new ones reached.
         def chained(x_src: FloatArray, z: FloatArray, rev: bool) -> FloatArray:
+            if self._compiled is not None:
+                return self._compiled.chain(x_src, z, rev)
             return pose2.compose(x_src, pose2.inverse(z) if rev else z)
 
         for dst, srcs in links.items():
