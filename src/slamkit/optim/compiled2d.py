@@ -1,17 +1,22 @@
-"""The inner loop of a 2D pose graph compiled with numba: one pass over the relative-pose
-edges gives χ², ``H`` (in the pattern's slots) and ``g``; one pass retracts every pose.
+"""The hot loops of a plain 2D pose graph compiled with numba: one pass over the
+relative-pose edges gives χ², ``H`` (in the pattern's slots) and ``g``; one pass retracts
+every pose; and the incremental optimiser's window step, whitening and odometry chaining.
 
 At the size of intel (1728 poses, 2512 edges) the NumPy path of
 :meth:`~slamkit.optim.graph.GraphProblem.linearize` spends its time in the fixed cost of some
 sixty array operations per linearisation (kernels, whitening ``einsum``, the block products,
-``bincount``), each on arrays of a few thousand numbers; the compiled pass does the same
-arithmetic in one loop per stage (the measurements are in ``docs/estimators/optim.md``).
+``bincount``), each on arrays of a few thousand numbers, and a window step of
+:class:`~slamkit.optim.incremental.IncrementalOptimizer` in some forty on arrays of a few
+dozen; the compiled passes do the same arithmetic in one loop per stage (the measurements
+are in ``docs/estimators/optim.md``).
 
-**Where it applies** (decided once, when the problem is built: :func:`compiled_se2` returns a
-:class:`CompiledSe2` or ``None``, and the problem keeps it): a 2D graph of relative-pose
+**Where it applies** (decided once, when the problem or the optimiser is built:
+:func:`compiled_se2` returns a :class:`CompiledSe2` or ``None``, :func:`compiled_window` a
+:class:`CompiledWindow` or ``None``, and the owner keeps it): a 2D graph of relative-pose
 edges only (one ``se2`` edge set, no priors, no landmarks, no ``EQUIV`` aliases) with g2o's
-objective, and numba installed (``pip install slamkit[fast]``). Robust kernels, SE-Sync's
-objective and every other graph take the NumPy path.
+objective, and numba installed (``pip install slamkit[fast]``); a window of at most
+``window.DENSE_MAX`` unknowns without prior edges. Robust kernels, SE-Sync's objective and
+every other graph or window take the NumPy path.
 
 **The same numbers.** Per edge the formulas of
 :func:`~slamkit.optim.factors.se2_between_error` (with ``d = R_iᵀ (t_j - t_i)``,
@@ -19,9 +24,10 @@ objective and every other graph take the NumPy path.
 ``r = U e``, ``A = U ∂e/∂δ_i``, ``B = U ∂e/∂δ_j``; each entry of ``H`` sums its block-product
 terms in the order ``np.bincount`` does on the NumPy path (every edge's ``AᵀA``, then
 ``AᵀB``, then ``BᵀB``, entry by entry, edges in order), and the retraction is
-:func:`~slamkit.optim.factors.retract_poses` (``X · Exp(δ)``, θ wrapped). Results agree with
-the NumPy path to rounding (``libm``'s sine against NumPy's): the tests hold ``H``, ``g``
-and χ² to 1e-12 relative and whole solves to 1e-9.
+:func:`~slamkit.optim.factors.retract_poses` (``X · Exp(δ)``, θ wrapped). The tests
+(``tests/optim/test_optim_compiled2d.py``) hold ``H`` and ``g`` bit for bit, χ² to 1e-13,
+the retraction to 1e-14 (``libm``'s sine against NumPy's) and whole solves, batch and
+incremental, to 1e-10 in the poses.
 """
 
 from __future__ import annotations
