@@ -214,3 +214,28 @@ def test_compiled_whitening_and_chaining_equal_numpy() -> None:
         np.testing.assert_allclose(
             window.chain(x, z, True), pose2.compose(x, pose2.inverse(z)), atol=1e-14
         )
+
+
+def test_compiled_pattern_equals_numpy() -> None:
+    """The pattern of ``H`` and every slot, built by the compiled pass, equal
+    ``NormalPattern.from_blocks``'s, with parallel edges in both directions."""
+    graph = _noisy_loop(np.random.default_rng(10))
+    es = graph.edges[0]
+    extra = np.array([3, 20, 0])  # parallel to 3 → 4, reversed 0 → 20, and 0 → 20 again
+    extra_j = np.array([4, 0, 20])
+    doubled = _edges(
+        "se2",
+        np.concatenate([es.i, extra]),
+        np.concatenate([es.j, extra_j]),
+        np.concatenate([es.measurement, es.measurement[:3]]),
+        np.concatenate([es.information, es.information[:3]]),
+    )
+    for data in (
+        graph,
+        GraphData(dim=2, pose_ids=graph.pose_ids, poses=graph.poses, edges=(doubled,)),
+    ):
+        fast = GraphProblem.from_data(data).pattern
+        slow = GraphProblem.from_data(data, compiled=False).pattern
+        assert fast.n == slow.n
+        for name in ("indptr", "indices", "slots", "grad_slots", "diag"):
+            np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name), err_msg=name)

@@ -42,6 +42,7 @@ import numpy as np
 
 from slamkit.optim.data import FloatArray, IntArray
 from slamkit.optim.linearization import Linearization
+from slamkit.optim.sparse import NormalPattern
 
 if TYPE_CHECKING:
     from slamkit.optim.graph import GraphProblem
@@ -212,6 +213,78 @@ def _retract(poses: FloatArray, pose_var: IntArray, delta: FloatArray, out: Floa
         out[i, 2] = _wrap(poses[i, 2] + dth)
 
 
+@_jit
+def _pose_pattern(V: int, va: IntArray, vb: IntArray) -> tuple[IntArray, IntArray, IntArray]:
+    """:meth:`NormalPattern.from_blocks <slamkit.optim.sparse.NormalPattern.from_blocks>`
+    for ``V`` free poses of 3 columns and relative-pose edges between variables ``va``,
+    ``vb`` (-1: fixed): ``indptr``, ``indices`` and the slots of the products ``AᵀA``,
+    ``AᵀB``, ``BᵀB`` raveled ``(3, 3, E)`` one after the other (``nnz`` when dropped).
+    Column ``3 v + q`` holds rows ``3 v + q … 3 v + 2`` of the diagonal block, then the three
+    rows of each later neighbour ``u > v`` in increasing order."""
+    E = va.shape[0]
+    count = np.zeros(V + 1, dtype=np.int64)
+    for k in range(E):
+        if va[k] >= 0 and vb[k] >= 0:
+            count[min(va[k], vb[k]) + 1] += 1
+    start = np.cumsum(count)
+    nb = np.empty(start[V], dtype=np.int64)
+    fill = start[:V].copy()
+    for k in range(E):
+        if va[k] >= 0 and vb[k] >= 0:
+            lo = min(va[k], vb[k])
+            nb[fill[lo]] = max(va[k], vb[k])
+            fill[lo] += 1
+    # Sort each variable's later neighbours and drop repeats (parallel edges).
+    deg = np.zeros(V, dtype=np.int64)
+    for v in range(V):
+        seg = np.sort(nb[start[v] : start[v + 1]])
+        m = 0
+        for t in range(seg.shape[0]):
+            if m == 0 or seg[t] != nb[start[v] + m - 1]:
+                nb[start[v] + m] = seg[t]
+                m += 1
+        deg[v] = m
+    n = 3 * V
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    for v in range(V):
+        for q in range(3):
+            indptr[3 * v + q + 1] = indptr[3 * v + q] + (3 - q) + 3 * deg[v]
+    nnz = indptr[n]
+    indices = np.empty(nnz, dtype=np.int64)
+    for v in range(V):
+        for q in range(3):
+            at = indptr[3 * v + q]
+            for r in range(q, 3):
+                indices[at] = 3 * v + r
+                at += 1
+            for t in range(deg[v]):
+                u = nb[start[v] + t]
+                for r in range(3):
+                    indices[at] = 3 * u + r
+                    at += 1
+    slots = np.empty(27 * E, dtype=np.int64)
+    for prod in range(3):
+        for p in range(3):
+            for q in range(3):
+                base = prod * 9 * E + (3 * p + q) * E
+                for k in range(E):
+                    a_, b_ = va[k], vb[k]
+                    pos = nnz
+                    if prod != 1:  # a diagonal block: entry (row p, column q), p >= q kept
+                        v = a_ if prod == 0 else b_
+                        if v >= 0 and p >= q:
+                            pos = indptr[3 * v + q] + (p - q)
+                    elif a_ >= 0 and b_ >= 0:
+                        # H[3 a + p, 3 b + q]: stored in the column of the smaller variable.
+                        col, row, pc, pr = (b_, a_, q, p) if a_ > b_ else (a_, b_, p, q)
+                        t = 0
+                        while nb[start[col] + t] != row:
+                            t += 1
+                        pos = indptr[3 * col + pc] + (3 - pc) + 3 * t + pr
+                    slots[base + k] = pos
+    return indptr, indices, slots
+
+
 class CompiledSe2:
     """The compiled pass over one problem's relative-pose edges (module docstring); build
     with :func:`compiled_se2`."""
@@ -229,6 +302,19 @@ class CompiledSe2:
         self._r = np.empty((E, 3))
         self._A = np.empty((E, 3, 3))
         self._B = np.empty((E, 3, 3))
+
+    def pattern_and_slots(self) -> tuple[NormalPattern, list[IntArray]]:
+        """The pattern of ``H`` and the slots of the products (``AᵀA``, ``AᵀB``, ``BᵀB``),
+        as :meth:`NormalPattern.from_blocks <slamkit.optim.sparse.NormalPattern.from_blocks>`
+        gives them (the slots as one flat array)."""
+        blk = self._problem.blocks[0]
+        assert blk.b_var is not None
+        V = self._problem.n_free_poses
+        va = np.ascontiguousarray(blk.a_var, dtype=np.int64)
+        vb = np.ascontiguousarray(blk.b_var, dtype=np.int64)
+        indptr, indices, slots = _pose_pattern(V, va, vb)
+        empty = np.zeros(0, dtype=np.int64)
+        return NormalPattern(3 * V, indptr, indices, empty, empty, indptr[:-1].copy()), [slots]
 
     def chi2(self, poses: FloatArray) -> float:
         """``Σ ‖U e‖²`` at ``poses`` ``(N, 3)``."""

@@ -508,8 +508,9 @@ class GraphProblem:
                         continue
                     g = offsets[np.maximum(v, 0)][None, :] + np.arange(d)[:, None]
                     grads.append(np.where(v[None, :] >= 0, g, self.n).ravel())
-            pattern, slots = NormalPattern.from_blocks(sizes, products)
             empty = np.zeros(0, dtype=np.int64)
+            made = None if self.compiled is None else self.compiled.pattern_and_slots()
+            pattern, slots = made or NormalPattern.from_blocks(sizes, products)  # the same
             self._pattern = pattern.with_slots(
                 np.concatenate([s.ravel() for s in slots]) if slots else empty,
                 np.concatenate(grads).astype(np.int64) if grads else empty,
