@@ -30,14 +30,16 @@ is the only place in slamkit that reads those environment variables.
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
+from functools import lru_cache
 
 # SciPy ships a BLAS of its own beside NumPy's, loaded with scipy.linalg. A limit reaches
 # only the libraries loaded when it is set, so load it before any limit is.
 import scipy.linalg  # noqa: F401
-from threadpoolctl import threadpool_info, threadpool_limits
+from threadpoolctl import ThreadpoolController, threadpool_info
 
 from slamkit.errors import InputError
 
@@ -58,6 +60,16 @@ of them set (not empty) means the user chose, and the default policy steps aside
 
 _DECIDED: ContextVar[bool] = ContextVar("slamkit_blas_threads_decided", default=False)
 """Inside a :func:`blas_threads` block (of this thread of control)."""
+
+
+@lru_cache(maxsize=1)
+def _controller(modules_loaded: int) -> ThreadpoolController:
+    """threadpoolctl's handle on the BLAS libraries loaded now. Finding them reads the
+    process's list of shared libraries (milliseconds, as long as a small graph solve), so the
+    handle is kept while the number of imported modules, the key, stays the same: a new BLAS
+    comes with a new extension module, which rebuilds it."""
+    del modules_loaded  # the cache key only
+    return ThreadpoolController()
 
 
 def _environment_chooses() -> bool:
@@ -82,7 +94,7 @@ def blas_threads(threads: int | None = None) -> Iterator[None]:
         if limit is None:
             yield
         else:
-            with threadpool_limits(limits=limit, user_api="blas"):
+            with _controller(len(sys.modules)).limit(limits=limit, user_api="blas"):
                 yield
     finally:
         _DECIDED.reset(token)

@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.sparse
 
 from slamkit.errors import GeometryError
 from slamkit.geometry import pose2
 from slamkit.optim import EdgeSet, GraphData, GraphProblem, OptimizerConfig, RobustConfig, optimize
-from slamkit.optim.sparse import NormalPattern
+from slamkit.optim.sparse import NormalPattern, SingularSystem, cholmod_available, factor_spd
 
 
 def _products(rng: np.random.Generator, sizes: np.ndarray) -> list:
@@ -165,3 +166,21 @@ def test_connectivity_shortcut_and_full_search_agree() -> None:
     broken = GraphData(dim=2, pose_ids=data.pose_ids, poses=data.poses, edges=(cut,))
     with pytest.raises(GeometryError, match="disconnected"):
         GraphProblem.from_data(broken)
+
+
+@pytest.mark.skipif(not cholmod_available(), reason="cvxopt (CHOLMOD) is not installed")
+def test_simplicial_cholmod_is_a_definiteness_test() -> None:
+    """Small systems are factored by CHOLMOD's simplicial L D Lᵀ, which does not stop at a
+    negative pivot by itself: the factoriser reads D and refuses an indefinite matrix, names
+    the column whose pivot failed, and solves a definite one as dense Cholesky does."""
+    rng = np.random.default_rng(7)
+    M = rng.normal(size=(12, 12))
+    spd = M @ M.T + 12 * np.eye(12)
+    fac = factor_spd(scipy.sparse.csc_matrix(spd), "cholmod")
+    b = rng.normal(size=12)
+    np.testing.assert_allclose(fac.solve(b), np.linalg.solve(spd, b), rtol=1e-12)
+    indefinite = spd.copy()
+    indefinite[5, 5] = -50.0  # a negative diagonal entry: not positive definite
+    with pytest.raises(SingularSystem) as err:
+        factor_spd(scipy.sparse.csc_matrix(indefinite), "cholmod")
+    assert err.value.column is not None and 0 <= err.value.column < 12

@@ -35,6 +35,7 @@ import scipy.sparse.csgraph
 
 from slamkit.errors import CovarianceError, GeometryError, InputError, NonFiniteError, ShapeError
 from slamkit.optim import factors, factors3d, gps
+from slamkit.optim.compiled2d import CompiledSe2, compiled_se2
 from slamkit.optim.data import EdgeSet, FloatArray, GraphData, IntArray
 from slamkit.optim.linearization import Linearization, WeightedBlock, normal_equations
 from slamkit.optim.robust import RobustKernel, robust_rho_and_weight
@@ -207,6 +208,7 @@ class GraphProblem:
         self.n = self.pose_dof * self.n_free_poses + 2 * landmark_ids.shape[0]
         self._pattern: NormalPattern | None = None
         self._other_blocks: list[_Block] | None = None  # the blocks of the other objective
+        self.compiled: CompiledSe2 | None = None  # the compiled pass, when it applies
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -216,8 +218,10 @@ class GraphProblem:
         *,
         objective: ObjectiveName = "g2o",
         gauge: GaugeMode = "anchor_first",
+        compiled: bool = True,
     ) -> GraphProblem:
         """Validate ``data`` and index its variables (see the module docstring for the gauge).
+        ``compiled=False`` keeps the NumPy path where :mod:`~slamkit.optim.compiled2d` applies.
 
         Raises :class:`~slamkit.errors.InputError` subclasses naming the edge (file and line
         when known) for unknown edge kinds, wrong shapes, NaN, non-symmetric or non-positive
@@ -294,6 +298,7 @@ class GraphProblem:
         cls._check_connected(data, pose_ids, landmark_ids, alias, fixed, blocks_raw)
         problem = cls(data, pose_ids, landmark_ids, [], fixed, alias, objective, anchored_first)
         problem.blocks = [problem._make_block(data, *raw) for raw in blocks_raw]
+        problem.compiled = compiled_se2(problem) if compiled else None
         return problem
 
     @staticmethod
@@ -503,8 +508,9 @@ class GraphProblem:
                         continue
                     g = offsets[np.maximum(v, 0)][None, :] + np.arange(d)[:, None]
                     grads.append(np.where(v[None, :] >= 0, g, self.n).ravel())
-            pattern, slots = NormalPattern.from_blocks(sizes, products)
             empty = np.zeros(0, dtype=np.int64)
+            made = None if self.compiled is None else self.compiled.pattern_and_slots()
+            pattern, slots = made or NormalPattern.from_blocks(sizes, products)  # the same
             self._pattern = pattern.with_slots(
                 np.concatenate([s.ravel() for s in slots]) if slots else empty,
                 np.concatenate(grads).astype(np.int64) if grads else empty,
@@ -598,6 +604,8 @@ class GraphProblem:
         chi2 = 0.0
         weighted: list[WeightedBlock] = []
         robust = kernel is not None and kernel.name != "none"
+        if self.compiled is not None and not robust:  # the same numbers in one compiled pass
+            return self.compiled.linearize(poses, jacobians=jacobians, deferred=deferred)
         for blk in self.blocks:
             r, A, B = self.block_residuals(blk, poses, landmarks)
             s = _squared_norms(blk, r)
@@ -663,8 +671,8 @@ class GraphProblem:
                 self.objective = mine
         g2o_blocks = self.blocks if self.objective == "g2o" else self._other_blocks
         sesync_blocks = self._other_blocks if self.objective == "g2o" else self.blocks
-        chi2 = 0.0
-        for blk in g2o_blocks:
+        chi2 = 0.0 if self.compiled is None else self.compiled.chi2(poses)
+        for blk in g2o_blocks if self.compiled is None else []:
             r, _, _ = self.block_residuals(blk, poses, landmarks)
             chi2 += float(_squared_norms(blk, r).sum())
         F = 0.0
@@ -682,6 +690,8 @@ class GraphProblem:
         Poses move by :func:`~slamkit.optim.factors.retract_poses`, landmarks additively;
         fixed poses keep their values and aliased rows copy their representative.
         """
+        if self.compiled is not None:  # a plain pose graph: no landmarks, no aliases
+            return self.compiled.retract(poses, delta), landmarks
         free = self.pose_var >= 0
         dof = self.pose_dof
         d = np.zeros((poses.shape[0], dof))

@@ -83,6 +83,7 @@ from slamkit.errors import (
 )
 from slamkit.geometry import pose2
 from slamkit.optim import factors
+from slamkit.optim.compiled2d import compiled_window
 from slamkit.optim.data import EdgeSet, FloatArray, GraphData, IntArray
 from slamkit.optim.graph import GraphProblem
 from slamkit.optim.loop import Estimate, SolverContext, run_least_squares
@@ -97,7 +98,12 @@ from slamkit.optim.updates import (
     edge_name,
     time_ordered_updates,
 )
-from slamkit.optim.window import solve_window, window_normal_equations, window_terms
+from slamkit.optim.window import (
+    DENSE_MAX,
+    solve_window,
+    window_normal_equations,
+    window_terms,
+)
 
 __all__ = [
     "GraphUpdate",
@@ -196,8 +202,10 @@ class IncrementalOptimizer:
     as a :class:`~slamkit.optim.data.GraphData` for batch tools.
     """
 
-    def __init__(self, config: IncrementalConfig | None = None) -> None:
+    def __init__(self, config: IncrementalConfig | None = None, *, compiled: bool = True) -> None:
         self.config = config if config is not None else IncrementalConfig()
+        # The window step in one compiled pass when numba is installed (compiled=False: NumPy).
+        self._compiled = compiled_window() if compiled else None
         cap = 256
         self._n = 0  # poses
         self._ids = np.zeros(cap, dtype=np.int64)
@@ -296,7 +304,8 @@ class IncrementalOptimizer:
         t0 = time.perf_counter()
         new_ids = self._check_new_ids(pose_ids)
         guesses = check_guesses(initial_poses, new_ids)
-        checked = [check_update_edges(es) for es in edges]
+        whiten = None if self._compiled is None else self._compiled.whitening
+        checked = [check_update_edges(es, whiten) for es in edges]
         new_row = {pid: self._n + k for k, pid in enumerate(new_ids.tolist())}
         resolved = [self._resolve(es, new_row) for es in checked]
         X_new = self._initial_guesses(new_ids, new_row, guesses, resolved)
@@ -457,6 +466,8 @@ class IncrementalOptimizer:
 
         # Breadth-first from the poses with a value: old poses first, then new ones reached.
         def chained(x_src: FloatArray, z: FloatArray, rev: bool) -> FloatArray:
+            if self._compiled is not None:
+                return self._compiled.chain(x_src, z, rev)
             return pose2.compose(x_src, pose2.inverse(z) if rev else z)
 
         for dst, srcs in links.items():
@@ -586,12 +597,19 @@ class IncrementalOptimizer:
         l6 = np.repeat(np.concatenate([la[:, None], lb[:, None]], axis=1), 3, axis=1)
         cols = np.where(l6 >= 0, 3 * l6 + np.tile(np.arange(3), 2), -1)  # (E, 6)
         first_step = 0.0
+        fast = self._compiled if 3 * w <= DENSE_MAX and not prior.any() else None
         for it in range(self.config.window_iterations):
             X = self._X
-            r, J = window_terms(X, a, b, z, U, prior)
-            flat, vals, g = window_normal_equations(3 * w, cols, r, J)
             try:
-                delta = solve_window(3 * w, flat, vals, g, self.config.linear_solver)
+                if fast is not None:  # the same step in one compiled pass
+                    found = fast.step(X, rows, a, b, z, U, cols)
+                    if found is None:
+                        raise SingularSystem("not positive definite")
+                    delta = found
+                else:
+                    r, J = window_terms(X, a, b, z, U, prior)
+                    flat, vals, g = window_normal_equations(3 * w, cols, r, J)
+                    delta = solve_window(3 * w, flat, vals, g, self.config.linear_solver)
             except SingularSystem:
                 names = ", ".join(str(int(self._ids[q])) for q in rows[:8].tolist())
                 raise GeometryError(
@@ -603,7 +621,10 @@ class IncrementalOptimizer:
             step = float(np.abs(delta).max())
             if it == 0:
                 first_step = step
-            self._X[rows] = factors.retract_poses(X[rows], delta.reshape(w, 3))
+            if fast is not None:
+                self._X[rows] = fast.retract(X[rows], delta)
+            else:
+                self._X[rows] = factors.retract_poses(X[rows], delta.reshape(w, 3))
         return first_step
 
     # ------------------------------------------------------------------ batch step

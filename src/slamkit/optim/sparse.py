@@ -9,7 +9,7 @@ strict upper triangle of diagonal blocks, go to one extra dummy slot that is dro
 
 Back-ends (:func:`make_factorizer`) factor ``H + D`` for a diagonal ``D`` (the LM damping):
 
-* ``"cholmod"``: CHOLMOD's supernodal Cholesky through ``cvxopt.cholmod`` (an optional
+* ``"cholmod"``: CHOLMOD's Cholesky through ``cvxopt.cholmod`` (an optional
   dependency). The symbolic analysis (AMD fill-reducing ordering, elimination tree,
   supernodes) runs once; each iteration only refactors numerically.
 * ``"superlu"``: SciPy's SuperLU in symmetric mode (minimum-degree ordering on ``H + Hᵀ``,
@@ -227,6 +227,13 @@ def cholmod_available() -> bool:
     return True
 
 
+SIMPLICIAL_MAX_NNZ = 50_000
+"""CHOLMOD factors ``H`` with at most this many stored (lower-triangle) entries by the
+simplicial method: faster than supernodal on the small 2D graphs (intel's 33k entries, MIT,
+CSAIL), slower on larger ones (manhattan's 70k, city10000, the 3D graphs); the
+measurements are in ``docs/estimators/optim.md``."""
+
+
 class _CholmodFactorizer:
     """CHOLMOD through cvxopt: one symbolic analysis, a numeric refactorisation per call."""
 
@@ -253,21 +260,41 @@ class _CholmodFactorizer:
         ):
             raise AssertionError("cvxopt changed the CCS pattern")  # internal invariant
         self._symbolic: Any = None
+        self._simplicial = False
         self._diag = pattern.diag
         self._perm: IntArray | None = None
 
     def factor(self, data: FloatArray) -> None:
         self._A.V = self._cvx.matrix(data)
         if self._symbolic is None:
-            self._symbolic = self._chol.symbolic(self._A, uplo="L")
+            # Simplicial below SIMPLICIAL_MAX_NNZ (CHOLMOD's own choice is supernodal there,
+            # slower for these small factors); the numeric phase follows the analysis's kind.
+            options = self._chol.options
+            before = options.get("supernodal", 2)
+            self._simplicial = self._A.V.size[0] <= SIMPLICIAL_MAX_NNZ
+            options["supernodal"] = 0 if self._simplicial else before
+            try:
+                self._symbolic = self._chol.symbolic(self._A, uplo="L")
+            finally:
+                options["supernodal"] = before
+        minor: int | None = None
         try:
             self._chol.numeric(self._A, self._symbolic)
         except ArithmeticError as exc:
-            minor = exc.args[0] if exc.args and isinstance(exc.args[0], int) else None
-            column = None if minor is None else int(self._permutation()[minor])
-            raise SingularSystem(
-                f"not positive definite (CHOLMOD pivot {minor} of the permuted matrix)", column
-            ) from exc
+            minor = exc.args[0] if exc.args and isinstance(exc.args[0], int) else -1
+        if minor is None and self._simplicial:
+            # The simplicial factor is L D Lᵀ, which goes on past a negative pivot: H is
+            # positive definite iff every d_k > 0, read as D⁻¹ 1 (sys=6 solves D x = b).
+            inv_d = self._cvx.matrix(np.ones(self._A.size[0]))
+            self._chol.solve(self._symbolic, inv_d, sys=6)
+            bad = ~(np.array(inv_d).ravel() > 0)  # 1/d: NaN or ±inf fail as well
+            bad |= ~np.isfinite(np.array(inv_d).ravel())
+            if bad.any():
+                minor = int(np.flatnonzero(bad)[0])
+        if minor is not None:
+            column = None if minor < 0 else int(self._permutation()[minor])
+            where = f"pivot {minor} of the permuted matrix" if minor >= 0 else "a pivot"
+            raise SingularSystem(f"not positive definite (CHOLMOD {where})", column)
 
     def _permutation(self) -> IntArray:
         """CHOLMOD's fill-reducing permutation ``p`` (row ``k`` of ``P H Pᵀ`` is row ``p[k]``
