@@ -55,6 +55,16 @@ class EkfSlamConfig:
     motion noise since the last sighting, so with long control steps many features would
     stay provisional to the end (``docs/estimators/ekf_slam.md``). ``None``: features join
     the map at their first reading."""
+    min_feature_spacing: float = 0.0
+    """Spatial spread of the features [m]: an unmatched reading starts a feature only if the
+    landmark it places is at least this far from every landmark of the state (provisional
+    ones included) and from the features the same scan starts; else it is counted in
+    ``not_selected`` (:mod:`slamkit.slam.ekf_slam.selection`). ``0``: no such test."""
+    max_new_feature_trace: float | None = None
+    """Expected information of a new feature [m²]: an unmatched reading starts a feature
+    only if the covariance it alone gives the landmark, ``L_z R L_zᵀ`` (trace
+    ``σ_r² + r² σ_b²`` for range and bearing), has a trace below this; else it is counted in
+    ``not_selected``. ``None``: no such test."""
     max_misses: int | None = 3
     """A provisional feature predicted inside the sensor's field of view and range (with a
     3σ margin) but not matched in this many consecutive scans is removed from the state
@@ -108,6 +118,13 @@ class EkfSlamConfig:
             v = getattr(self, name)
             if v is not None and not (isinstance(v, int) and v >= 1):
                 raise ConfigError(f"{name}: expected an integer >= 1 or None, got {v!r}")
+        if not (math.isfinite(self.min_feature_spacing) and self.min_feature_spacing >= 0):
+            raise ConfigError(
+                f"min_feature_spacing: expected a number >= 0, got {self.min_feature_spacing}"
+            )
+        v = self.max_new_feature_trace
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise ConfigError(f"max_new_feature_trace: expected a number > 0 or None, got {v}")
         if not (math.isfinite(self.min_range) and self.min_range >= 0):
             raise ConfigError(f"min_range: expected a number >= 0, got {self.min_range}")
         try:

@@ -54,8 +54,10 @@ from slamkit.slam.ekf_slam.provisional import (
     remove_missed,
     watched,
 )
+from slamkit.slam.ekf_slam.selection import NOT_SELECTED, select_features
 from slamkit.slam.ekf_slam.state import SlamState, diagonal_blocks
 from slamkit.slam.ekf_slam.update import check_diagonal
+from slamkit.slam.ekf_slam.window import reading_window
 
 __all__ = ["COUNTS", "GPS_COUNTS", "EkfSlam"]
 
@@ -69,6 +71,7 @@ COUNTS = (
     "removed_provisional",
     "removed_confirmed",
     "rejected",
+    "not_selected",
     "too_close",
     "degenerate",
     "jcbb_searches",
@@ -171,6 +174,7 @@ class EkfSlam(EstimatorShell):
         self._m = int(self._R.shape[0])
         self._R_inv = np.asarray(np.linalg.inv(self._R), dtype=np.float64)
         self._angular = angular_indices(self._model)
+        self._new_gate = chi2_gate(self._m, config.new_landmark_probability)  # the window's γ
         self._kernels = self.make_kernels(
             config, EkfKernels(self._motion, self._Q, self._model, meas, self._R, self._angular)
         )
@@ -318,17 +322,26 @@ class EkfSlam(EstimatorShell):
             target[k] = st.slot_of.get(int(ids[k]), NEW)
         free = np.flatnonzero(usable & (ids < 0))
         if free.size:
+            window = reading_window(*st.views(), z[free], self._meas, self._R, self._new_gate)
             match, res = associate_scan(*st.views(), z[free], self._model, self._R,
-                                        self._angular, cfg)  # fmt: skip
+                                        self._angular, cfg, window)  # fmt: skip
             _count_search(self._counts, res)
             if self._use_ids:  # unlabelled readings never start a landmark there
                 match = np.where(match == NEW, REJECTED, match)
+            new = np.flatnonzero(match == NEW)
+            if new.size:  # feature selection (selection.py)
+                chosen = select_features(
+                    st.mean_buf[: st.n], z[free[new]], self._meas, self._R,
+                    cfg.min_feature_spacing, cfg.max_new_feature_trace,
+                )  # fmt: skip
+                match[new[~chosen]] = NOT_SELECTED
             target[free] = match
         # 2. updates in reading order; 3. new features
         for k in range(K):
             j = int(target[k])
-            if not usable[k] or j == REJECTED:
-                self._counts["too_close" if not usable[k] else "rejected"] += 1
+            if not usable[k] or j in (REJECTED, NOT_SELECTED):
+                what = "too_close" if not usable[k] else "rejected"
+                self._counts[what if j != NOT_SELECTED else "not_selected"] += 1
                 self._log.add(t, -1, TOO_CLOSE if not usable[k] else DISCARDED)
                 continue
             if j == NEW:

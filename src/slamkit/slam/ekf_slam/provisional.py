@@ -45,7 +45,15 @@ def in_view(
 ) -> NDArray[np.bool_]:
     """Which of the landmarks ``sel`` have a predicted range and bearing inside the
     sensor's limits by three standard deviations of the prediction (state uncertainty
-    only, no sensor noise): those a scan should have seen."""
+    only, no sensor noise): those a scan should have seen.
+
+    The limits are the sensor's, judged from where it sits (``sensor.offset`` in the robot
+    frame: Victoria Park's laser is 3.78 m ahead of the rear axle, and the trees beside the
+    cab are behind its half-plane) and out to its detection range (``sensor.reach``: the
+    measured range within which it reads the landmarks it could see, shorter than
+    ``max_range`` for a laser that seldom detects a trunk far away). The 3σ margins are
+    those of the prediction from the pose's origin, the bearing's rescaled by ``r / r_s``
+    (the same sideways uncertainty seen from the sensor at range ``r_s``)."""
     U = sel.size
     lm = mean[3:].reshape(-1, 2)[sel]
     dx, dy = lm[:, 0] - mean[0], lm[:, 1] - mean[1]
@@ -72,7 +80,14 @@ def in_view(
     )
     sr = 3.0 * np.sqrt(np.clip(P[:, 0, 0], 0.0, None))
     sb = 3.0 * np.sqrt(np.clip(P[:, 1, 1], 0.0, None))
-    inside = ok & (r + sr <= sensor.max_range) & (r - sr >= sensor.min_range)
+    a, o = sensor.offset
+    if a or o:  # range and bearing from the sensor: the point in the sensor's frame
+        c, s = np.cos(mean[2]), np.sin(mean[2])
+        xs, ys = c * dx + s * dy - a, c * dy - s * dx - o
+        r_s = np.hypot(xs, ys)
+        sb = sb * r / np.maximum(r_s, MIN_RANGE)
+        r, b = r_s, np.arctan2(ys, xs)
+    inside = ok & (r + sr <= sensor.reach) & (r - sr >= sensor.min_range)
     if sensor.fov < 2.0 * np.pi:
         inside &= np.abs(b) + sb <= sensor.fov / 2.0
     return np.asarray(inside)
