@@ -11,6 +11,8 @@ a miss; after ``max_misses`` consecutive misses it is removed.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -29,6 +31,7 @@ __all__ = [
     "count_misses",
     "in_view",
     "is_confirmed",
+    "miss_limit",
     "reading_information",
     "remove_missed",
     "watched",
@@ -134,6 +137,7 @@ def count_misses(
     seen: NDArray[np.bool_],
     L: int,
     config: EkfSlamConfig,
+    limit: int | None = None,
 ) -> NDArray[np.int64]:
     """Count a miss (in place, in ``misses``) for every landmark expected in a scan and not
     matched — ``seen`` is ``matched | ~in_view`` over the ``n_before`` landmarks the scan
@@ -142,7 +146,7 @@ def count_misses(
     n_before = seen.size
     missed = np.flatnonzero(~seen)
     misses[missed] += 1
-    limit_p = config.max_misses
+    limit_p = config.max_misses if limit is None else limit
     limit_c = config.max_misses_confirmed
     prov = provisional[:n_before]
     drop = np.zeros(L, dtype=bool)
@@ -153,12 +157,26 @@ def count_misses(
     return np.flatnonzero(drop)
 
 
+def miss_limit(probability: float, expected: int, seen: int) -> int:
+    """The consecutive misses that remove a provisional feature when a real one, detected
+    as often as the map's landmarks, would be missed that many times in a row with at most
+    ``probability``: the smallest ``n ≥ 1`` with ``(1 − p_D)ⁿ ≤ probability``, where
+    ``p_D = (seen + 1) / (expected + 2)`` is the detection rate of the confirmed landmarks
+    (``seen`` of ``expected`` predictions in view matched; Laplace's rule, ``1/2`` before
+    any)."""
+    p_d = (seen + 1.0) / (expected + 2.0)
+    if p_d >= 1.0:
+        return 1
+    return max(1, math.ceil(math.log(probability) / math.log1p(-p_d) - 1e-12))
+
+
 def remove_missed(
-    state: SlamState, seen: NDArray[np.bool_], config: EkfSlamConfig
+    state: SlamState, seen: NDArray[np.bool_], config: EkfSlamConfig, limit: int | None = None
 ) -> tuple[int, int]:
-    """:func:`count_misses` on the state, and remove (marginalise out) the landmarks that
-    reached their limit; returns how many provisional and confirmed ones were removed."""
-    rows = count_misses(state.misses, state.provisional, seen, state.n_landmarks, config)
+    """:func:`count_misses` on the state (``limit``: the provisional features' miss limit
+    instead of ``max_misses``), and remove (marginalise out) the landmarks that reached
+    their limit; returns how many provisional and confirmed ones were removed."""
+    rows = count_misses(state.misses, state.provisional, seen, state.n_landmarks, config, limit)
     if not rows.size:
         return 0, 0
     n_prov = int(np.count_nonzero(state.provisional[rows]))
