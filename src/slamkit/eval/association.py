@@ -14,6 +14,15 @@ map. Given the ids of the final map (``kept``), the map's counts are over the ma
 a spurious landmark is a landmark *of the map* that is no true landmark's estimate, and the
 features that got readings but are not in the map are counted apart (``not_in_map``), so
 ``estimated_landmarks = in_map + not_in_map``.
+
+``spurious_created`` counts over every feature instead, the deleted ones included: the
+features started that are no true landmark's estimate (each true landmark's estimate chosen
+among all features), so ``estimated_landmarks = (true landmarks with an estimate) +
+spurious_created``. A true landmark whose provisional feature was deleted and started again
+adds one to it each time, though the map holds none of them: Victoria Park's EKF-SLAM
+started 972 features for 299 trees, 675 of them spurious creations, and ended with 331
+landmarks, 49 of them spurious (``duplicates``): 641 features were deleted while
+provisional.
 """
 
 from __future__ import annotations
@@ -53,6 +62,10 @@ class AssociationScores:
     """Of those, the ones in the final map (all of them when its ids are not given)."""
     not_in_map: int
     """Of those, features deleted or still provisional at the end."""
+    spurious_created: int = 0
+    """Features started (with a reading) that are no true landmark's estimate, counted over
+    every feature, deleted ones included: a landmark started again after its feature was
+    deleted counts here once more, though it is not in the map."""
 
     def as_dict(self) -> dict[str, float | int]:
         return {
@@ -66,6 +79,7 @@ class AssociationScores:
             "estimated_landmarks": self.estimated_landmarks,
             "in_map": self.in_map,
             "not_in_map": self.not_in_map,
+            "spurious_created": self.spurious_created,
         }
 
 
@@ -139,4 +153,5 @@ def association_scores(
         estimated_landmarks=int(estimated.size),
         in_map=int(in_map.size),
         not_in_map=int(estimated.size - in_map.size),
+        spurious_created=int(np.setdiff1d(estimated, primary_est).size),
     )

@@ -125,6 +125,9 @@ METRICS: tuple[MetricInfo, ...] = (
        "clutter); deleted features are not counted", fmt="d", console=True),
     _m("association.not_in_map", ACCURACY, "features with readings not in the map", "",
        "features deleted or still provisional at the end; not counted as spurious", fmt="d"),
+    _m("association.spurious_created", ACCURACY, "spurious feature creations", "",
+       "features started that are no true landmark's estimate, deleted ones included (a "
+       "landmark started again after its feature was deleted counts each time)", fmt="d"),
     _m("association.merged", ACCURACY, "merged landmarks (one for several true)", "",
        "landmarks of the final map that stand for more than one true landmark", fmt="d",
        console=True),

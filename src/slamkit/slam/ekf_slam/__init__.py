@@ -63,7 +63,11 @@ The package, by concern:
   state.SlamState`) and the in-place prediction and landmark initialisation;
 * :mod:`~slamkit.slam.ekf_slam.update` — the in-place 5-column Joseph update;
 * :mod:`~slamkit.slam.ekf_slam.association` — distances, nearest neighbour, JCBB;
-* :mod:`~slamkit.slam.ekf_slam.provisional` — the provisional feature list;
+* :mod:`~slamkit.slam.ekf_slam.window` — each reading's candidates (windowed
+  correspondence);
+* :mod:`~slamkit.slam.ekf_slam.selection` — which unmatched readings may start a feature;
+* :mod:`~slamkit.slam.ekf_slam.provisional` — the provisional feature list: the in-view
+  test, the miss limit from the detection rate, removal;
 * :mod:`~slamkit.slam.ekf_slam.kernels` — the prediction, update and new landmark as one
   object the estimator holds (:class:`~slamkit.slam.ekf_slam.kernels.EkfKernels`; UKF-SLAM
   passes its unscented ones);

@@ -267,16 +267,23 @@ def reading_distances(
     model: LandmarkModel,
     R: FloatArray,
     angular: tuple[int, ...],
+    window: NDArray[np.bool_] | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """``(d² (K, L), ν (K, L, m))`` of readings ``z (K, m)`` against every landmark
-    (``d² = inf`` for a landmark on the sensor, whose reading and Jacobian are undefined)."""
+    (``d² = inf`` for a landmark on the sensor, whose reading and Jacobian are undefined).
+    ``window (K, L)``: each reading's candidates (:func:`~slamkit.slam.ekf_slam.window.
+    reading_window`); the others get ``d² = inf`` and no prediction is formed for a
+    landmark in no window."""
     K, L = z.shape[0], (mean.size - 3) // 2
     d2 = np.full((K, L), np.inf)
     nu = np.zeros((K, L, int(R.shape[0])))
     if L == 0 or K == 0:
         return d2, nu
     lm = mean[3:].reshape(L, 2)
-    sel = np.flatnonzero(np.hypot(lm[:, 0] - mean[0], lm[:, 1] - mean[1]) >= MIN_RANGE)
+    off = np.hypot(lm[:, 0] - mean[0], lm[:, 1] - mean[1]) >= MIN_RANGE
+    if window is not None:
+        off &= window.any(axis=0)
+    sel = np.flatnonzero(off)
     if sel.size == 0:
         return d2, nu
     z_hat, _, _, S = predicted_readings(mean, cov, sel, model, R)
@@ -284,7 +291,10 @@ def reading_distances(
     for i in angular:
         v[..., i] = wrap_angle(v[..., i])
     nu[:, sel, :] = v
-    d2[:, sel] = np.einsum("kli,lij,klj->kl", v, np.linalg.inv(S), v)
+    d2_sel = np.einsum("kli,lij,klj->kl", v, np.linalg.inv(S), v)
+    if window is not None:
+        d2_sel[~window[:, sel]] = np.inf
+    d2[:, sel] = d2_sel
     return d2, nu
 
 
@@ -313,15 +323,17 @@ def associate_scan(
     R: FloatArray,
     angular: tuple[int, ...],
     config: EkfSlamConfig,
+    window: NDArray[np.bool_] | None = None,
 ) -> tuple[NDArray[np.int64], JcbbResult | None]:
     """Landmark index per reading of ``z (K, m)``, or NEW / REJECTED (codes of
     :mod:`~slamkit.mapping.ekf_mapping`), by ``config.association``; and the JCBB search
     when one ran. A reading not paired starts a feature only if ``d² > χ²_m(new_landmark_
-    probability)`` for every landmark."""
+    probability)`` for every landmark. ``window``: each reading's candidates, as in
+    :func:`reading_distances`."""
     K, m = z.shape[0], int(R.shape[0])
     gate = _chi2(m, config.gate_probability)
     new_gate = _chi2(m, config.new_landmark_probability)
-    d2, nu = reading_distances(mean, cov, z, model, R, angular)
+    d2, nu = reading_distances(mean, cov, z, model, R, angular, window)
     if config.association == "nn" or mean.size == 3:
         return associate_nearest_unchecked(d2, gate, new_gate), None
     # JCBB over the landmarks individually compatible with some reading.

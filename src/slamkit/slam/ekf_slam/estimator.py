@@ -6,6 +6,7 @@ state buffers (:mod:`~slamkit.slam.ekf_slam.state`), the update kernel
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -50,12 +51,15 @@ from slamkit.slam.ekf_slam.provisional import (
     TRACKED,
     in_view,
     is_confirmed,
+    miss_limit,
     reading_information,
     remove_missed,
     watched,
 )
+from slamkit.slam.ekf_slam.selection import NOT_SELECTED, select_features
 from slamkit.slam.ekf_slam.state import SlamState, diagonal_blocks
 from slamkit.slam.ekf_slam.update import check_diagonal
+from slamkit.slam.ekf_slam.window import reading_window
 
 __all__ = ["COUNTS", "GPS_COUNTS", "EkfSlam"]
 
@@ -68,7 +72,10 @@ COUNTS = (
     "promoted",
     "removed_provisional",
     "removed_confirmed",
+    "expected_confirmed",
+    "seen_confirmed",
     "rejected",
+    "not_selected",
     "too_close",
     "degenerate",
     "jcbb_searches",
@@ -132,11 +139,18 @@ class EkfSlam(EstimatorShell):
     3. **New features** from their first reading (:func:`slam_add_landmark` on the buffers),
        provisional unless ``provisional_trace`` is ``None``. Readings with an id keep it;
        without ids the filter numbers its features from :data:`OWN_ID_BASE`.
-    4. **Removal**: a feature predicted well inside the field of view and range (3σ margin,
-       at the state before the scan) but not matched counts a miss; after
-       ``max_misses`` consecutive misses a provisional feature is removed
+    4. **Removal**: a feature predicted well inside the field of view and detection range
+       (3σ margin, at the state before the scan, judged from where the sensor sits) but not
+       matched counts a miss; after as many consecutive misses as ``miss_probability``
+       derives from the confirmed landmarks' detection rate (``max_misses`` without it, or
+       for a sensor without a finite range) a provisional feature is removed
        (``max_misses_confirmed`` for confirmed ones). Removing marginalises the feature out
        of the Gaussian: its rows and columns are dropped.
+
+    Between 1 and 3, **feature selection**: an unlabelled reading that association would let
+    start a feature starts one only at least ``min_feature_spacing`` from every landmark
+    (:mod:`~slamkit.slam.ekf_slam.selection`); and association compares each reading with
+    the landmarks in its window only (:mod:`~slamkit.slam.ekf_slam.window`).
 
     :class:`~slamkit.datasets.GpsFix` events (a stream whose loader was asked to fuse GPS)
     measure the antenna at ``gps_lever_arm``: after the first fixes have moved the filter into
@@ -171,10 +185,13 @@ class EkfSlam(EstimatorShell):
         self._m = int(self._R.shape[0])
         self._R_inv = np.asarray(np.linalg.inv(self._R), dtype=np.float64)
         self._angular = angular_indices(self._model)
+        self._new_gate = chi2_gate(self._m, config.new_landmark_probability)  # the window's γ
         self._kernels = self.make_kernels(
             config, EkfKernels(self._motion, self._Q, self._model, meas, self._R, self._angular)
         )
         self._sensor = sensor
+        # A detection rate is the sensor's only within a stated reach (miss_probability).
+        self._bounded_view = math.isfinite(sensor.reach)
         self._use_ids = config.use_ids and sensor.identities
         self._state = SlamState(config.initial_capacity, dataset.initial_pose, dataset.initial_cov)
         self._next_id = OWN_ID_BASE
@@ -307,9 +324,7 @@ class EkfSlam(EstimatorShell):
         # Landmarks that misses may remove and that this scan should see.
         n_before = st.n_landmarks
         watch = watched(st.provisional[:n_before], cfg)
-        expected = np.zeros(n_before, dtype=bool)
-        if watch.size:
-            expected[watch] = in_view(*st.views(), watch, self._sensor)
+        expected = in_view(*st.views(), np.arange(n_before), self._sensor)
         matched = np.zeros(n_before, dtype=bool)
         # 1. association at the state before the scan
         target = np.full(K, REJECTED, dtype=np.int64)  # landmark index, NEW or REJECTED
@@ -318,17 +333,24 @@ class EkfSlam(EstimatorShell):
             target[k] = st.slot_of.get(int(ids[k]), NEW)
         free = np.flatnonzero(usable & (ids < 0))
         if free.size:
+            window = reading_window(*st.views(), z[free], self._meas, self._R, self._new_gate)
             match, res = associate_scan(*st.views(), z[free], self._model, self._R,
-                                        self._angular, cfg)  # fmt: skip
+                                        self._angular, cfg, window)  # fmt: skip
             _count_search(self._counts, res)
             if self._use_ids:  # unlabelled readings never start a landmark there
                 match = np.where(match == NEW, REJECTED, match)
+            new = np.flatnonzero(match == NEW)
+            if new.size:  # feature selection (selection.py)
+                chosen = select_features(st.mean_buf[: st.n], z[free[new]], self._meas,
+                                         cfg.min_feature_spacing)  # fmt: skip
+                match[new[~chosen]] = NOT_SELECTED
             target[free] = match
         # 2. updates in reading order; 3. new features
         for k in range(K):
             j = int(target[k])
-            if not usable[k] or j == REJECTED:
-                self._counts["too_close" if not usable[k] else "rejected"] += 1
+            if not usable[k] or j in (REJECTED, NOT_SELECTED):
+                what = "too_close" if not usable[k] else "rejected"
+                self._counts[what if j != NOT_SELECTED else "not_selected"] += 1
                 self._log.add(t, -1, TOO_CLOSE if not usable[k] else DISCARDED)
                 continue
             if j == NEW:
@@ -342,8 +364,16 @@ class EkfSlam(EstimatorShell):
             if j < n_before:
                 matched[j] = True
         # 4. features expected but not seen
+        confirmed = expected & ~st.provisional[:n_before]
+        self._counts["expected_confirmed"] += int(np.count_nonzero(confirmed))
+        self._counts["seen_confirmed"] += int(np.count_nonzero(confirmed & matched))
         if watch.size:
-            n_prov, n_conf = remove_missed(st, matched | ~expected, cfg)
+            limit = None
+            if cfg.miss_probability is not None and self._bounded_view:
+                c = self._counts
+                limit = miss_limit(cfg.miss_probability, c["expected_confirmed"],
+                                   c["seen_confirmed"])  # fmt: skip
+            n_prov, n_conf = remove_missed(st, matched | ~expected, cfg, limit)
             self._counts["removed_provisional"] += n_prov
             self._counts["removed_confirmed"] += n_conf
 

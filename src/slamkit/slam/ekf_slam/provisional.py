@@ -11,6 +11,8 @@ a miss; after ``max_misses`` consecutive misses it is removed.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -29,6 +31,7 @@ __all__ = [
     "count_misses",
     "in_view",
     "is_confirmed",
+    "miss_limit",
     "reading_information",
     "remove_missed",
     "watched",
@@ -45,7 +48,15 @@ def in_view(
 ) -> NDArray[np.bool_]:
     """Which of the landmarks ``sel`` have a predicted range and bearing inside the
     sensor's limits by three standard deviations of the prediction (state uncertainty
-    only, no sensor noise): those a scan should have seen."""
+    only, no sensor noise): those a scan should have seen.
+
+    The limits are the sensor's, judged from where it sits (``sensor.offset`` in the robot
+    frame: Victoria Park's laser is 3.78 m ahead of the rear axle, and the trees beside the
+    cab are behind its half-plane) and out to its detection range (``sensor.reach``: the
+    measured range within which it reads the landmarks it could see, shorter than
+    ``max_range`` for a laser that seldom detects a trunk far away). The 3σ margins are
+    those of the prediction from the pose's origin, the bearing's rescaled by ``r / r_s``
+    (the same sideways uncertainty seen from the sensor at range ``r_s``)."""
     U = sel.size
     lm = mean[3:].reshape(-1, 2)[sel]
     dx, dy = lm[:, 0] - mean[0], lm[:, 1] - mean[1]
@@ -72,7 +83,14 @@ def in_view(
     )
     sr = 3.0 * np.sqrt(np.clip(P[:, 0, 0], 0.0, None))
     sb = 3.0 * np.sqrt(np.clip(P[:, 1, 1], 0.0, None))
-    inside = ok & (r + sr <= sensor.max_range) & (r - sr >= sensor.min_range)
+    a, o = sensor.offset
+    if a or o:  # range and bearing from the sensor: the point in the sensor's frame
+        c, s = np.cos(mean[2]), np.sin(mean[2])
+        xs, ys = c * dx + s * dy - a, c * dy - s * dx - o
+        r_s = np.hypot(xs, ys)
+        sb = sb * r / np.maximum(r_s, MIN_RANGE)
+        r, b = r_s, np.arctan2(ys, xs)
+    inside = ok & (r + sr <= sensor.reach) & (r - sr >= sensor.min_range)
     if sensor.fov < 2.0 * np.pi:
         inside &= np.abs(b) + sb <= sensor.fov / 2.0
     return np.asarray(inside)
@@ -119,6 +137,7 @@ def count_misses(
     seen: NDArray[np.bool_],
     L: int,
     config: EkfSlamConfig,
+    limit: int | None = None,
 ) -> NDArray[np.int64]:
     """Count a miss (in place, in ``misses``) for every landmark expected in a scan and not
     matched — ``seen`` is ``matched | ~in_view`` over the ``n_before`` landmarks the scan
@@ -127,7 +146,7 @@ def count_misses(
     n_before = seen.size
     missed = np.flatnonzero(~seen)
     misses[missed] += 1
-    limit_p = config.max_misses
+    limit_p = config.max_misses if limit is None else limit
     limit_c = config.max_misses_confirmed
     prov = provisional[:n_before]
     drop = np.zeros(L, dtype=bool)
@@ -138,12 +157,26 @@ def count_misses(
     return np.flatnonzero(drop)
 
 
+def miss_limit(probability: float, expected: int, seen: int) -> int:
+    """The consecutive misses that remove a provisional feature when a real one, detected
+    as often as the map's landmarks, would be missed that many times in a row with at most
+    ``probability``: the smallest ``n ≥ 1`` with ``(1 − p_D)ⁿ ≤ probability``, where
+    ``p_D = (seen + 1) / (expected + 2)`` is the detection rate of the confirmed landmarks
+    (``seen`` of ``expected`` predictions in view matched; Laplace's rule, ``1/2`` before
+    any)."""
+    p_d = (seen + 1.0) / (expected + 2.0)
+    if p_d >= 1.0:
+        return 1
+    return max(1, math.ceil(math.log(probability) / math.log1p(-p_d) - 1e-12))
+
+
 def remove_missed(
-    state: SlamState, seen: NDArray[np.bool_], config: EkfSlamConfig
+    state: SlamState, seen: NDArray[np.bool_], config: EkfSlamConfig, limit: int | None = None
 ) -> tuple[int, int]:
-    """:func:`count_misses` on the state, and remove (marginalise out) the landmarks that
-    reached their limit; returns how many provisional and confirmed ones were removed."""
-    rows = count_misses(state.misses, state.provisional, seen, state.n_landmarks, config)
+    """:func:`count_misses` on the state (``limit``: the provisional features' miss limit
+    instead of ``max_misses``), and remove (marginalise out) the landmarks that reached
+    their limit; returns how many provisional and confirmed ones were removed."""
+    rows = count_misses(state.misses, state.provisional, seen, state.n_landmarks, config, limit)
     if not rows.size:
         return 0, 0
     n_prov = int(np.count_nonzero(state.provisional[rows]))
