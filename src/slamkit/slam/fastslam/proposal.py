@@ -15,7 +15,7 @@ from slamkit.errors import ConvergenceError
 from slamkit.geometry.angles import wrap_angle
 from slamkit.models import MIN_RANGE, MotionModel
 from slamkit.models.measurement import InvertibleLandmarkModel, LandmarkModelBase
-from slamkit.models.motion import propagate_gaussian_unchecked
+from slamkit.models.motion import motion_kernels
 from slamkit.slam.fastslam.association import (
     labelled_rounds,
     normalised_log_weights,
@@ -25,6 +25,7 @@ from slamkit.slam.fastslam.association import (
 )
 from slamkit.slam.fastslam.config import steering_limit
 from slamkit.slam.fastslam.kernels import congruence
+from slamkit.slam.fastslam.marginal import best_landmarks
 from slamkit.slam.fastslam.particles import LOG_2PI, IntArray
 from slamkit.slam.fastslam.settings import UpdateSettings
 from slamkit.slam.fastslam.store import Work
@@ -162,6 +163,9 @@ class _Proposal:
     ) -> None:
         n, k = x0.shape[0], Qu.shape[0]
         self.motion, self.x0, self.u, self.dt = motion, x0, u, dt
+        # The unchecked kernels (validated once by the caller; the checks of apply/jacobians
+        # cost more than a few particles' motion): the same numbers.
+        self.kernels = motion_kernels(motion)
         self.limit = steering_limit(motion)
         self.b = 0 if pose_cov is None else 3  # where the control noise starts in δ
         d = self.b + k
@@ -186,8 +190,8 @@ class _Proposal:
         x, u = self._motion_at(rows, self.e[rows])
         if not (math.isfinite(float(x.sum())) and math.isfinite(float(u.sum()))):
             raise ConvergenceError("the proposal's poses or controls became non-finite")
-        self.x_bar[rows] = self.motion.apply(x, u, self.dt)
-        G, V = self.motion.jacobians(x, u, self.dt)
+        self.x_bar[rows] = self.kernels.apply_unchecked(x, u, self.dt)
+        G, V = self.kernels.jacobians_unchecked(x, u, self.dt)
         if self.b:
             self.V[rows, :, :3] = G
             self.V[rows, :, 3:] = V
@@ -224,7 +228,7 @@ class _Proposal:
         n, d = self.e.shape
         draws = rng.standard_normal((n, d))
         delta = self.e + (sym_sqrt(self.S) @ draws[..., None])[..., 0]
-        return self.motion.apply(*self._motion_at(slice(None), delta), self.dt)
+        return self.kernels.apply_unchecked(*self._motion_at(slice(None), delta), self.dt)
 
     def _feasible(self, u: FloatArray) -> FloatArray:
         """Controls with the steering saturated (Ackermann, see :func:`steering_limit`)."""
@@ -253,7 +257,6 @@ def update2(
     ``pose_cov (P, 3, 3)`` if given, see :class:`_Proposal`): the sampled poses, the new
     normalised log-weights and each particle's log-weight increment ``(P,)``."""
     n = poses0.shape[0]
-    rows_all = np.arange(n)
     prop = _Proposal(motion, poses0, u, dt, Qu, pose_cov)
     w.begin_scan()
     log_p0 = s.log_p0
@@ -277,24 +280,25 @@ def update2(
         ll_total += ll
     # Unlabelled readings: maximum likelihood under the marginal, excluding used landmarks.
     forced = np.full((unl.size, n), -1, dtype=np.intp)
+    pose_xy = (prop.x_bar[:, 0], prop.x_bar[:, 1], prop.x_bar[:, 2])  # views: kept current
+    sigma_trace: FloatArray | None = None
     for j, k in enumerate(unl):
         cmax, cand = _candidates(w)
         ll = np.full(n, log_p0)
         if cmax:
-            mu_all, cov_all = w.gaussians((slice(0, cmax), slice(None)))  # (C, P, ...)
-            tall = _terms(model, prop.x_bar[:, None, :], np.swapaxes(mu_all, 0, 1),
-                          np.swapaxes(cov_all, 0, 1), z[k], R)  # fmt: skip
-            L_all = prop.marginal(tall, (rows_all, None))
-            ll_all, _ = _log_gauss(tall.nu, L_all)
-            ll_all = np.where(cand & tall.ok, ll_all, -np.inf)
-            best = np.argmax(ll_all, axis=1)
-            lb = ll_all[rows_all, best]
+            # Every landmark of every particle (gated, planar): the bulk of a 2.0 run.
+            if sigma_trace is None or sigma_trace.shape[0] != cmax:
+                sigma_trace = w.lm[2, :cmax] + w.lm[4, :cmax]  # fixed until the sampling
+            best, lb = best_landmarks(model, pose_xy, prop.Px, w.lm[:, :cmax], cand, z[k], R,
+                                      log_p0, sigma_trace)  # fmt: skip
             match = np.flatnonzero(lb >= log_p0)
             if match.size:
                 bm = best[match]
                 ll[match] = lb[match]
                 forced[j, match] = bm
-                prop.update(match, tall.take((match, bm)), L_all[match, bm])
+                # The chosen pairs' terms again, as matrices (the same numbers as the planes).
+                t = _terms(model, prop.x_bar[match], *w.gaussians((bm, match)), z[k], R)
+                prop.update(match, t, prop.marginal(t, match))
                 w.seen[bm, match] = True
         ll_total += ll
     poses = prop.sample(rng)
@@ -326,11 +330,19 @@ def fold_motion(
     ``mean ← g(mean, u)``, ``cov ← G cov Gᵀ + V Q_u Vᵀ``. FastSLAM 2.0 keeps the motion since
     the last scan this way, so that its proposal covers all of it (see :class:`_Proposal`)."""
     P = np.zeros((mean.shape[0], 3, 3)) if cov is None else cov
-    return propagate_gaussian_unchecked(motion, mean, P, u, dt, Qu)
+    # propagate_gaussian_unchecked's lines on the motion's unchecked kernels (its apply and
+    # jacobians validate the poses again, half the cost of a fold): the same numbers.
+    kernels = motion_kernels(motion)
+    ub = np.broadcast_to(u, (mean.shape[0], u.shape[-1]))
+    new_mean = kernels.apply_unchecked(mean, ub, dt)
+    G, V = kernels.jacobians_unchecked(mean, ub, dt)
+    Gt, Vt = np.swapaxes(G, -1, -2), np.swapaxes(V, -1, -2)
+    new_cov = G @ P @ Gt + V @ Qu @ Vt
+    return new_mean, 0.5 * (new_cov + np.swapaxes(new_cov, -1, -2))
 
 
 def _candidates(w: Work) -> tuple[int, NDArray[np.bool_]]:
-    """Columns in use and the slots an unlabelled reading may still match ``(P, cmax)``."""
+    """Columns in use and the slots an unlabelled reading may still match ``(cmax, P)``."""
     cmax = int(w.counts.max())
     cand = w.valid(cmax) & ~w.seen[:cmax]
-    return cmax, cand.T
+    return cmax, cand
