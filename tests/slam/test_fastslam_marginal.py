@@ -16,6 +16,7 @@ from slamkit.slam.fastslam.marginal import (
     best_landmarks,
     gate_bound,
     marginal_log_likelihoods,
+    pair_terms,
 )
 
 R = np.diag([0.6**2, 0.06**2])  # Victoria Park's tree readings with the preset's scale
@@ -62,6 +63,14 @@ def test_marginal_log_likelihoods_equal_the_matrix_oracle(model) -> None:
     ll, ok = marginal_log_likelihoods(model, tuple(poses.T), pose_cov, g, z, R)
     assert ll.shape == (7, 5) and bool(np.all(ok))
     np.testing.assert_allclose(ll, _oracle(model, poses, pose_cov, mu, cov, z), rtol=1e-11)
+    # The terms handed to the proposal's update, against the same matrices.
+    nu, Hx, Q, L = pair_terms(model, tuple(poses.T), pose_cov, g, z, R).take((2, 4))
+    Hx_ref, Hm_ref = model.jacobians(poses[4], mu[2, 4])
+    Q_ref = Hm_ref @ cov[2, 4] @ Hm_ref.T + R
+    np.testing.assert_allclose(Hx, Hx_ref, rtol=1e-12)
+    np.testing.assert_allclose(Q, Q_ref, rtol=1e-12)
+    np.testing.assert_allclose(L, Hx_ref @ pose_cov[4] @ Hx_ref.T + Q_ref, rtol=1e-12)
+    np.testing.assert_allclose(nu, model.residual(z, model.predict(poses[4], mu[2, 4])), rtol=1e-12)
 
 
 def test_a_gathered_subset_gives_the_same_bits() -> None:
@@ -118,12 +127,18 @@ def test_best_landmarks_equal_the_ungated_maximum(seed: int) -> None:
             ll[~(cand & ok)] = -np.inf
             best_ref = np.argmax(ll, axis=0)
             lb_ref = ll[best_ref, np.arange(n)]
-            best, lb = best_landmarks(model, tuple(poses.T), pose_cov, g, cand, z, R, log_p0)
+            found = best_landmarks(model, tuple(poses.T), pose_cov, g, cand, z, R, log_p0)
+            best, lb = found.slot, found.ll
             hit = lb_ref >= log_p0
             assert np.array_equal(lb >= log_p0, hit)
             assert np.array_equal(best[hit], best_ref[hit])
             assert np.array_equal(lb[hit], lb_ref[hit])
             matched += int(hit.sum())
+            if hit.any():  # the terms of the chosen pairs: those of the full evaluation
+                rows = np.flatnonzero(hit)
+                full = pair_terms(model, tuple(poses.T), pose_cov, g, z, R)
+                for a, b in zip(found.take(rows), full.take((best[rows], rows)), strict=True):
+                    assert np.array_equal(a, b)
     assert matched > 100  # the readings did find their trees
 
 
@@ -136,7 +151,7 @@ def test_best_landmarks_without_a_gate_for_other_models() -> None:
     cand[5, 3] = False
     ll, _ = marginal_log_likelihoods(model, tuple(poses.T), pose_cov, g, z, R)
     ll[~cand] = -np.inf
-    best, lb = best_landmarks(model, tuple(poses.T), pose_cov, g, cand, z, R, -50.0)
-    assert np.array_equal(best, np.argmax(ll, axis=0))
-    assert np.array_equal(lb, ll.max(axis=0))
-    assert best[3] != 5
+    found = best_landmarks(model, tuple(poses.T), pose_cov, g, cand, z, R, -50.0)
+    assert np.array_equal(found.slot, np.argmax(ll, axis=0))
+    assert np.array_equal(found.ll, ll.max(axis=0))
+    assert found.slot[3] != 5

@@ -23,6 +23,7 @@ is ``a``, and ``−1·s`` is ``−s``, exactly.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -75,6 +76,50 @@ def _dot3(a: list[Any], h: tuple[_Entry, _Entry, _Entry]) -> Any:
     return acc
 
 
+def _wrapped(a: FloatArray) -> FloatArray:
+    """:func:`wrap_angle`, skipped when every angle is in ``[-π, π)`` already (it returns
+    those bit-identical): two reductions instead of its ~10 operations."""
+    if a.size and float(a.min()) >= -math.pi and float(a.max()) < math.pi:
+        return a
+    return wrap_angle(a)
+
+
+@dataclass(frozen=True)
+class PairTerms:
+    """What :func:`pair_terms` computed for a batch of (landmark, pose) pairs, as planes of
+    that batch: ``ll``, ``ok``, the innovation ``ν``, ``H_x`` (entries: planes, or the
+    structural floats 0.0 / −1.0), ``Q = H_m Σ H_mᵀ + R`` and ``L = H_x P_x H_xᵀ + Q``."""
+
+    ll: FloatArray
+    ok: NDArray[np.bool_]
+    nu: tuple[FloatArray, FloatArray]
+    Hx: tuple[tuple[Any, Any, Any], tuple[Any, Any, Any]]
+    Q: tuple[FloatArray, FloatArray, FloatArray, FloatArray]  # 00, 01, 10, 11
+    L: tuple[FloatArray, FloatArray, FloatArray, FloatArray]
+
+    def take(self, index: Any) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """``(ν (N, 2), H_x (N, 2, 3), Q (N, 2, 2), L (N, 2, 2))`` of the pairs ``index``
+        (a NumPy index into the batch), as stacked matrices for the proposal's update."""
+        shape = self.ll.shape
+
+        def at(a: Any) -> Any:
+            return a if isinstance(a, float) else np.broadcast_to(a, shape)[index]
+
+        n = np.broadcast_to(self.ll, shape)[index].shape
+        nu = np.empty((*n, 2))
+        Hx = np.empty((*n, 2, 3))
+        Q = np.empty((*n, 2, 2))
+        L = np.empty((*n, 2, 2))
+        for i in range(2):
+            nu[..., i] = at(self.nu[i])
+            for k in range(3):
+                Hx[..., i, k] = at(self.Hx[i][k])
+            for k in range(2):
+                Q[..., i, k] = at(self.Q[2 * i + k])
+                L[..., i, k] = at(self.L[2 * i + k])
+        return nu, Hx, Q, L
+
+
 def marginal_log_likelihoods(
     model: InvertibleLandmarkModel,
     pose: tuple[FloatArray, FloatArray, FloatArray],
@@ -83,6 +128,19 @@ def marginal_log_likelihoods(
     z: FloatArray,
     R: FloatArray,
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """:func:`pair_terms`' log-likelihoods and ``ok`` only."""
+    t = pair_terms(model, pose, pose_cov, g, z, R)
+    return t.ll, t.ok
+
+
+def pair_terms(
+    model: InvertibleLandmarkModel,
+    pose: tuple[FloatArray, FloatArray, FloatArray],
+    pose_cov: FloatArray,
+    g: FloatArray,
+    z: FloatArray,
+    R: FloatArray,
+) -> PairTerms:
     """``log p(z)`` of one reading ``z (2,)`` against the landmarks ``g (5, C, P)`` (planar:
     mean x, y and Σ00, Σ01, Σ11) from the proposal poses ``pose = (x, y, θ)`` ``(P,)`` with
     covariances ``pose_cov (P, 3, 3)`` (symmetric): ``(C, P)``, and ``ok (C, P)``: False
@@ -104,7 +162,7 @@ def marginal_log_likelihoods(
         dx, dy = mx - px, my - py
         r = np.hypot(dx, dy)
         zh0 = r
-        zh1 = wrap_angle(np.arctan2(dy, dx) - pth)
+        zh1 = _wrapped(np.arctan2(dy, dx) - pth)
         q = r * r
         h00, h01 = dx / r, dy / r
         h10, h11 = -dy / q, dx / q
@@ -126,9 +184,9 @@ def marginal_log_likelihoods(
     nu0, nu1 = z[0] - zh0, z[1] - zh1
     a0, a1 = model.angular
     if a0:
-        nu0 = wrap_angle(nu0)
+        nu0 = _wrapped(nu0)
     if a1:
-        nu1 = wrap_angle(nu1)
+        nu1 = _wrapped(nu1)
     # Q = H_m Σ H_mᵀ + R (``congruence``: T = H_m Σ row by row, then T H_mᵀ).
     t00, t01 = h00 * s00 + h01 * s01, h00 * s01 + h01 * s11
     t10, t11 = h10 * s00 + h11 * s01, h10 * s01 + h11 * s11
@@ -139,18 +197,21 @@ def marginal_log_likelihoods(
     S = [[pose_cov[..., i, k] for k in range(3)] for i in range(3)]
     hs0 = _row_times_symmetric(hx[0], S)
     hs1 = _row_times_symmetric(hx[1], S)
-    L00 = _dot3(hs0, hx[0]) + (c00 + float(R[0, 0]))
+    q00, q01, q11 = c00 + float(R[0, 0]), c01 + float(R[0, 1]), c11 + float(R[1, 1])
+    q10 = q01 if R[1, 0] == R[0, 1] else c01 + float(R[1, 0])
+    L00 = _dot3(hs0, hx[0]) + q00
     e01 = _dot3(hs0, hx[1])
-    L01 = e01 + (c01 + float(R[0, 1]))
-    L10 = L01 if R[1, 0] == R[0, 1] else e01 + (c01 + float(R[1, 0]))
-    L11 = _dot3(hs1, hx[1]) + (c11 + float(R[1, 1]))
+    L01 = e01 + q01
+    L10 = L01 if q10 is q01 else e01 + q10
+    L11 = _dot3(hs1, hx[1]) + q11
     # log N(ν; 0, L) with L⁻¹ in closed form (``_inv2``, ``_log_gauss``).
     det = L00 * L11 - L01 * L10
     i00, i01, i10, i11 = L11 / det, -L01 / det, -L10 / det, L00 / det
     d2 = nu0 * (i00 * nu0 + i01 * nu1) + nu1 * (i10 * nu0 + i11 * nu1)
     with np.errstate(invalid="ignore", divide="ignore"):
         ll = -0.5 * (d2 + np.log(det)) - LOG_2PI
-    return ll, ok
+    return PairTerms(ll, ok, (nu0, nu1), (hx[0], hx[1]), (q00, q01, q10, q11),
+                     (L00, L01, L10, L11))  # fmt: skip
 
 
 def gate_bound(log_p0: float, R: FloatArray) -> float:
@@ -166,6 +227,25 @@ def gate_bound(log_p0: float, R: FloatArray) -> float:
     return max(d, 0.0) * (1.0 + 1e-6) + 1.0
 
 
+@dataclass(frozen=True)
+class BestLandmarks:
+    """:func:`best_landmarks`' answer: each particle's best slot ``(P,)`` and its
+    log-likelihood ``(P,)``, and the terms of those pairs (``where``: their index into
+    ``terms``' batch)."""
+
+    slot: NDArray[np.intp]
+    ll: FloatArray
+    terms: PairTerms
+    where: Any
+
+    def take(self, rows: NDArray[np.intp]) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """:meth:`PairTerms.take` of the best pairs of the particles ``rows`` (which must
+        have reached ``log_p0``: the others' pairs may not have been evaluated)."""
+        if isinstance(self.where, tuple):
+            return self.terms.take((self.where[0][rows], self.where[1][rows]))
+        return self.terms.take(self.where[rows])
+
+
 def best_landmarks(
     model: InvertibleLandmarkModel,
     pose: tuple[FloatArray, FloatArray, FloatArray],
@@ -176,7 +256,7 @@ def best_landmarks(
     R: FloatArray,
     log_p0: float,
     sigma_trace: FloatArray | None = None,
-) -> tuple[NDArray[np.intp], FloatArray]:
+) -> BestLandmarks:
     """Each particle's most likely landmark for one reading: the slot ``(P,)`` maximising
     :func:`marginal_log_likelihoods` over the candidates ``cand (C, P)`` (at the sensor: not
     a candidate), and its log-likelihood ``(P,)``. Where that maximum is at least
@@ -192,11 +272,12 @@ def best_landmarks(
     the full evaluation. ``sigma_trace (C, P)``: ``Σ00 + Σ11`` of ``g`` if known (it does
     not change while a scan's proposal is built)."""
     n = cand.shape[1]
+    rows = np.arange(n)
     if not isinstance(model, RangeBearing):
-        ll, ok = marginal_log_likelihoods(model, pose, pose_cov, g, z, R)
-        ll[~(cand & ok)] = -np.inf
+        t = pair_terms(model, pose, pose_cov, g, z, R)
+        ll = np.where(cand & t.ok, t.ll, -np.inf)
         best = np.argmax(ll, axis=0)
-        return best, ll[best, np.arange(n)]
+        return BestLandmarks(best, ll[best, rows], t, (best, rows))
     px, py, _ = pose
     mx, my = g[0], g[1]
     tr = g[2] + g[4] if sigma_trace is None else sigma_trace
@@ -209,11 +290,12 @@ def best_landmarks(
     keep = nu <= bound
     keep &= cand
     c_in, p_in = np.nonzero(keep)
+    t = pair_terms(
+        model, (px[p_in], py[p_in], pose[2][p_in]), pose_cov[p_in], g[:, c_in, p_in], z, R
+    )
     ll_all = np.full(cand.shape, -np.inf)
-    if c_in.size:
-        ll, ok = marginal_log_likelihoods(
-            model, (px[p_in], py[p_in], pose[2][p_in]), pose_cov[p_in], g[:, c_in, p_in], z, R
-        )
-        ll_all[c_in, p_in] = np.where(ok, ll, -np.inf)
+    ll_all[c_in, p_in] = np.where(t.ok, t.ll, -np.inf)
+    where = np.zeros(cand.shape, dtype=np.intp)  # each pair's index among the evaluated
+    where[c_in, p_in] = np.arange(c_in.size)
     best = np.argmax(ll_all, axis=0)
-    return best, ll_all[best, np.arange(n)]
+    return BestLandmarks(best, ll_all[best, rows], t, where[best, rows])

@@ -208,17 +208,20 @@ class _Proposal:
         ``δ``, and written out: the association tries every landmark of every particle."""
         return _congruence_2x3(t.Hx, self.Px[rows]) + t.Q
 
-    def update(self, rows: NDArray[np.intp], t: _Terms, L: FloatArray) -> None:
-        """Fold one reading (terms ``t``, marginal covariance ``L``) into the proposal of
-        the particles ``rows``, then relinearise the motion at the new mean."""
-        A = t.Hx @ self.V[rows]  # (N, 2, d): ∂h/∂δ = H_x V
+    def update(
+        self, rows: NDArray[np.intp], nu: FloatArray, Hx: FloatArray, Q: FloatArray, L: FloatArray
+    ) -> None:
+        """Fold one reading (innovation ``ν (N, 2)``, pose Jacobian ``H_x (N, 2, 3)``, its
+        covariance without the motion ``Q`` and with it ``L``, ``(N, 2, 2)``) into the
+        proposal of the particles ``rows``, then relinearise the motion at the new mean."""
+        A = Hx @ self.V[rows]  # (N, 2, d): ∂h/∂δ = H_x V
         S = self.S[rows]
         L_inv, _ = _inv2(L)
         K = S @ np.swapaxes(A, -1, -2) @ L_inv  # K_δ = Σ_δ Aᵀ L⁻¹, (N, d, 2)
-        self.e[rows] += (K @ t.nu[..., None])[..., 0]
+        self.e[rows] += (K @ nu[..., None])[..., 0]
         IKA = np.eye(S.shape[-1]) - K @ A
         # Joseph form, with Q (L without the motion part) as the noise of the reading.
-        S_new = IKA @ S @ np.swapaxes(IKA, -1, -2) + K @ t.Q @ np.swapaxes(K, -1, -2)
+        S_new = IKA @ S @ np.swapaxes(IKA, -1, -2) + K @ Q @ np.swapaxes(K, -1, -2)
         self.S[rows] = 0.5 * (S_new + np.swapaxes(S_new, -1, -2))
         self._linearise(rows)
 
@@ -275,7 +278,8 @@ def update2(
             ll[upd] = np.where(t.ok, l_upd, -np.inf)
             g = t.ok
             if g.any():
-                prop.update(upd[g], t.take(g), L[g])
+                tg = t.take(g)
+                prop.update(upd[g], tg.nu, tg.Hx, tg.Q, L[g])
                 w.seen[slot[upd[g]], upd[g]] = True
         ll_total += ll
     # Unlabelled readings: maximum likelihood under the marginal, excluding used landmarks.
@@ -289,16 +293,15 @@ def update2(
             # Every landmark of every particle (gated, planar): the bulk of a 2.0 run.
             if sigma_trace is None or sigma_trace.shape[0] != cmax:
                 sigma_trace = w.lm[2, :cmax] + w.lm[4, :cmax]  # fixed until the sampling
-            best, lb = best_landmarks(model, pose_xy, prop.Px, w.lm[:, :cmax], cand, z[k], R,
-                                      log_p0, sigma_trace)  # fmt: skip
+            found = best_landmarks(model, pose_xy, prop.Px, w.lm[:, :cmax], cand, z[k], R,
+                                   log_p0, sigma_trace)  # fmt: skip
+            best, lb = found.slot, found.ll
             match = np.flatnonzero(lb >= log_p0)
             if match.size:
                 bm = best[match]
                 ll[match] = lb[match]
                 forced[j, match] = bm
-                # The chosen pairs' terms again, as matrices (the same numbers as the planes).
-                t = _terms(model, prop.x_bar[match], *w.gaussians((bm, match)), z[k], R)
-                prop.update(match, t, prop.marginal(t, match))
+                prop.update(match, *found.take(match))
                 w.seen[bm, match] = True
         ll_total += ll
     poses = prop.sample(rng)
