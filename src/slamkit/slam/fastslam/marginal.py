@@ -103,9 +103,11 @@ class PairTerms:
         shape = self.ll.shape
 
         def at(a: Any) -> Any:
-            return a if isinstance(a, float) else np.broadcast_to(a, shape)[index]
+            if isinstance(a, float):
+                return a
+            return (a if a.shape == shape else np.broadcast_to(a, shape))[index]
 
-        n = np.broadcast_to(self.ll, shape)[index].shape
+        n = self.ll[index].shape
         nu = np.empty((*n, 2))
         Hx = np.empty((*n, 2, 3))
         Q = np.empty((*n, 2, 2))
