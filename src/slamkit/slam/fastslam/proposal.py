@@ -285,14 +285,14 @@ def update2(
     # Unlabelled readings: maximum likelihood under the marginal, excluding used landmarks.
     forced = np.full((unl.size, n), -1, dtype=np.intp)
     pose_xy = (prop.x_bar[:, 0], prop.x_bar[:, 1], prop.x_bar[:, 2])  # views: kept current
-    sigma_trace: FloatArray | None = None
+    cmax = int(w.counts.max()) if unl.size else 0
+    if cmax:  # the landmarks stay as they are until the sampling: Σ00 + Σ11 once
+        cand = _candidates(w, cmax)  # kept current below
+        sigma_trace = w.lm[2, :cmax] + w.lm[4, :cmax]
     for j, k in enumerate(unl):
-        cmax, cand = _candidates(w)
         ll = np.full(n, log_p0)
         if cmax:
             # Every landmark of every particle (gated, planar): the bulk of a 2.0 run.
-            if sigma_trace is None or sigma_trace.shape[0] != cmax:
-                sigma_trace = w.lm[2, :cmax] + w.lm[4, :cmax]  # fixed until the sampling
             found = best_landmarks(model, pose_xy, prop.Px, w.lm[:, :cmax], cand, z[k], R,
                                    log_p0, sigma_trace)  # fmt: skip
             best, lb = found.slot, found.ll
@@ -303,6 +303,7 @@ def update2(
                 forced[j, match] = bm
                 prop.update(match, *found.take(match))
                 w.seen[bm, match] = True
+                cand[bm, match] = False  # a landmark takes one reading per scan
         ll_total += ll
     poses = prop.sample(rng)
     # The landmarks, from the sampled poses, with the proposal's associations.
@@ -344,8 +345,6 @@ def fold_motion(
     return new_mean, 0.5 * (new_cov + np.swapaxes(new_cov, -1, -2))
 
 
-def _candidates(w: Work) -> tuple[int, NDArray[np.bool_]]:
-    """Columns in use and the slots an unlabelled reading may still match ``(cmax, P)``."""
-    cmax = int(w.counts.max())
-    cand = w.valid(cmax) & ~w.seen[:cmax]
-    return cmax, cand
+def _candidates(w: Work, cmax: int) -> NDArray[np.bool_]:
+    """The slots an unlabelled reading may still match ``(cmax, P)``."""
+    return w.valid(cmax) & ~w.seen[:cmax]
