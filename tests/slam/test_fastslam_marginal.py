@@ -155,3 +155,19 @@ def test_best_landmarks_without_a_gate_for_other_models() -> None:
     assert np.array_equal(found.slot, np.argmax(ll, axis=0))
     assert np.array_equal(found.ll, ll.max(axis=0))
     assert found.slot[3] != 5
+
+
+def test_best_landmarks_break_ties_by_the_first_slot() -> None:
+    """Two slots holding the same landmark (as after a duplicate start): the first one is
+    chosen, as argmax chooses it."""
+    rng = np.random.default_rng(8)
+    poses, pose_cov, g, mu, _ = _scene(rng, 12, 6)
+    g[:, 9] = g[:, 4]  # slot 9 a copy of slot 4 in every particle
+    model = RangeBearing()
+    z = model.predict(poses[0], mu[4, 0])
+    cand = np.ones((12, 6), dtype=bool)
+    found = best_landmarks(model, tuple(poses.T), pose_cov, g, cand, z, R, -50.0)
+    assert found.slot.tolist() == [4] * 6
+    cand[4, 2] = False
+    found = best_landmarks(model, tuple(poses.T), pose_cov, g, cand, z, R, -50.0)
+    assert found.slot.tolist() == [4, 4, 9, 4, 4, 4]

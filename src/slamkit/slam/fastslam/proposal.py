@@ -209,11 +209,12 @@ class _Proposal:
         return _congruence_2x3(t.Hx, self.Px[rows]) + t.Q
 
     def update(
-        self, rows: NDArray[np.intp], nu: FloatArray, Hx: FloatArray, Q: FloatArray, L: FloatArray
+        self, rows: Any, nu: FloatArray, Hx: FloatArray, Q: FloatArray, L: FloatArray
     ) -> None:
         """Fold one reading (innovation ``ν (N, 2)``, pose Jacobian ``H_x (N, 2, 3)``, its
         covariance without the motion ``Q`` and with it ``L``, ``(N, 2, 2)``) into the
-        proposal of the particles ``rows``, then relinearise the motion at the new mean."""
+        proposal of the particles ``rows`` (indices or a slice), then relinearise the motion
+        at the new mean."""
         A = Hx @ self.V[rows]  # (N, 2, d): ∂h/∂δ = H_x V
         S = self.S[rows]
         L_inv, _ = _inv2(L)
@@ -301,7 +302,8 @@ def update2(
                 bm = best[match]
                 ll[match] = lb[match]
                 forced[j, match] = bm
-                prop.update(match, *found.take(match))
+                # Usually every particle matches: a slice (views) instead of fancy copies.
+                prop.update(slice(None) if match.size == n else match, *found.take(match))
                 w.seen[bm, match] = True
                 cand[bm, match] = False  # a landmark takes one reading per scan
         ll_total += ll
