@@ -10,8 +10,8 @@ proposal`):
     log p(z) = −½ (νᵀ L⁻¹ ν + log det L) − log 2π        (m = 2)
 
 with ``H_x = ∂h/∂x``, ``H_m = ∂h/∂m`` at ``(x̄, μ)``. The proposal evaluates this for every
-unlabelled reading (the association is the maximum over landmarks), and it was 90 % of a
-FastSLAM 2.0 run as stacked ``(P, C, 2, 3)`` matrices (see docs/estimators/fastslam.md). Here
+unlabelled reading (the association is the maximum over landmarks): the bulk of a FastSLAM
+2.0 run as stacked ``(P, C, 2, 3)`` matrices (profile in docs/estimators/fastslam.md). Here
 every matrix entry is one contiguous ``(C, P)`` plane and the 2×2 / 2×3 products are written
 out, in the SAME order of floating-point operations as the matrix form
 (:func:`~slamkit.slam.fastslam.proposal.update2`'s reference, ``_terms`` → ``marginal`` →
@@ -157,7 +157,7 @@ def pair_terms(
     px, py, pth = pose
     mx, my, s00, s01, s11 = g
     dx, dy = mx - px, my - py
-    r = np.hypot(dx, dy)  # (np.hypot is ~50x a product on this machine: computed once)
+    r = np.hypot(dx, dy)  # (np.hypot costs many products: computed once)
     ok = r >= 2.0 * MIN_RANGE
     if not ok.all():
         mx = np.where(ok, mx, px + 1.0)
@@ -272,7 +272,7 @@ def best_landmarks(
     positive definite ``L``; ``D`` from :func:`gate_bound`), and with ``H_x = [−u, 0]``,
     ``H_m = u`` in the range row (``u`` the unit direction) ``L_rr = uᵀ (P_xy + Σ) u + R_rr
     ≤ tr P_xy + tr Σ + R_rr``. So only the pairs with ``(z_r − r)² ≤ D (tr P_xy + tr Σ +
-    R_rr)`` — a ring around the reading's range, 4-8 % of the pairs on Victoria Park — get
+    R_rr)`` — a ring around the reading's range, a few % of the pairs (docs) — get
     the full evaluation. ``sigma_trace (C, P)``: ``Σ00 + Σ11`` of ``g`` if known (it does
     not change while a scan's proposal is built)."""
     n = cand.shape[1]
@@ -286,7 +286,7 @@ def best_landmarks(
     mx, my = g[0], g[1]
     tr = g[2] + g[4] if sigma_trace is None else sigma_trace
     # (z_r − r)² ≤ B = D (tr Σ + tr P_xy + R_rr) over every pair, without a square root
-    # (np.hypot on (C, P) cost more than all the rest): with d² = r², a = z_r² + d² − B,
+    # (np.hypot over (C, P) cost more than all the rest, docs): with d² = r², a = z_r² + d² − B,
     # (z_r − r)² ≤ B ⟺ a ≤ 2 z_r r ⟺ a ≤ 0 or a² ≤ 4 z_r² d² (z_r, r ≥ 0). The slack of
     # gate_bound (≥ R_rr in B) dwarfs the round-off of either side.
     zr = float(z[0])
@@ -304,7 +304,7 @@ def best_landmarks(
     d2 *= 4.0 * zr * zr
     keep |= a <= d2
     keep &= cand
-    flat = np.flatnonzero(keep)  # (C, P) order: slot-major; 2-D nonzero costs ~10x
+    flat = np.flatnonzero(keep)  # (C, P) order: slot-major (2-D nonzero is much slower)
     c_in, p_in = np.divmod(flat, n)
     t = pair_terms(
         model, (px[p_in], py[p_in], pose[2][p_in]), pose_cov[p_in], g[:, c_in, p_in], z, R
