@@ -171,3 +171,14 @@ def test_best_landmarks_break_ties_by_the_first_slot() -> None:
     cand[4, 2] = False
     found = best_landmarks(model, tuple(poses.T), pose_cov, g, cand, z, R, -50.0)
     assert found.slot.tolist() == [4, 4, 9, 4, 4, 4]
+
+
+def test_best_landmarks_without_candidates_find_nothing() -> None:
+    g = np.zeros((5, 3, 4))
+    g[0], g[2], g[4] = 10.0, 1.0, 1.0
+    pose = (np.zeros(4), np.zeros(4), np.zeros(4))
+    found = best_landmarks(
+        RangeBearing(), pose, np.zeros((4, 3, 3)), g, np.zeros((3, 4), dtype=bool),
+        np.array([10.0, 0.0]), R, -5.0,
+    )  # fmt: skip
+    assert found.ll.tolist() == [-np.inf] * 4
