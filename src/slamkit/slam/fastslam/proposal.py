@@ -15,7 +15,7 @@ from slamkit.errors import ConvergenceError
 from slamkit.geometry.angles import wrap_angle
 from slamkit.models import MIN_RANGE, MotionModel
 from slamkit.models.measurement import InvertibleLandmarkModel, LandmarkModelBase
-from slamkit.models.motion import propagate_gaussian_unchecked
+from slamkit.models.motion import motion_kernels
 from slamkit.slam.fastslam.association import (
     labelled_rounds,
     normalised_log_weights,
@@ -25,6 +25,7 @@ from slamkit.slam.fastslam.association import (
 )
 from slamkit.slam.fastslam.config import steering_limit
 from slamkit.slam.fastslam.kernels import congruence
+from slamkit.slam.fastslam.marginal import best_landmarks
 from slamkit.slam.fastslam.particles import LOG_2PI, IntArray
 from slamkit.slam.fastslam.settings import UpdateSettings
 from slamkit.slam.fastslam.store import Work
@@ -162,6 +163,9 @@ class _Proposal:
     ) -> None:
         n, k = x0.shape[0], Qu.shape[0]
         self.motion, self.x0, self.u, self.dt = motion, x0, u, dt
+        # The unchecked kernels (validated once by the caller; the checks of apply/jacobians
+        # cost more than a few particles' motion): the same numbers.
+        self.kernels = motion_kernels(motion)
         self.limit = steering_limit(motion)
         self.b = 0 if pose_cov is None else 3  # where the control noise starts in δ
         d = self.b + k
@@ -186,8 +190,8 @@ class _Proposal:
         x, u = self._motion_at(rows, self.e[rows])
         if not (math.isfinite(float(x.sum())) and math.isfinite(float(u.sum()))):
             raise ConvergenceError("the proposal's poses or controls became non-finite")
-        self.x_bar[rows] = self.motion.apply(x, u, self.dt)
-        G, V = self.motion.jacobians(x, u, self.dt)
+        self.x_bar[rows] = self.kernels.apply_unchecked(x, u, self.dt)
+        G, V = self.kernels.jacobians_unchecked(x, u, self.dt)
         if self.b:
             self.V[rows, :, :3] = G
             self.V[rows, :, 3:] = V
@@ -204,17 +208,21 @@ class _Proposal:
         ``δ``, and written out: the association tries every landmark of every particle."""
         return _congruence_2x3(t.Hx, self.Px[rows]) + t.Q
 
-    def update(self, rows: NDArray[np.intp], t: _Terms, L: FloatArray) -> None:
-        """Fold one reading (terms ``t``, marginal covariance ``L``) into the proposal of
-        the particles ``rows``, then relinearise the motion at the new mean."""
-        A = t.Hx @ self.V[rows]  # (N, 2, d): ∂h/∂δ = H_x V
+    def update(
+        self, rows: Any, nu: FloatArray, Hx: FloatArray, Q: FloatArray, L: FloatArray
+    ) -> None:
+        """Fold one reading (innovation ``ν (N, 2)``, pose Jacobian ``H_x (N, 2, 3)``, its
+        covariance without the motion ``Q`` and with it ``L``, ``(N, 2, 2)``) into the
+        proposal of the particles ``rows`` (indices or a slice), then relinearise the motion
+        at the new mean."""
+        A = Hx @ self.V[rows]  # (N, 2, d): ∂h/∂δ = H_x V
         S = self.S[rows]
         L_inv, _ = _inv2(L)
         K = S @ np.swapaxes(A, -1, -2) @ L_inv  # K_δ = Σ_δ Aᵀ L⁻¹, (N, d, 2)
-        self.e[rows] += (K @ t.nu[..., None])[..., 0]
+        self.e[rows] += (K @ nu[..., None])[..., 0]
         IKA = np.eye(S.shape[-1]) - K @ A
         # Joseph form, with Q (L without the motion part) as the noise of the reading.
-        S_new = IKA @ S @ np.swapaxes(IKA, -1, -2) + K @ t.Q @ np.swapaxes(K, -1, -2)
+        S_new = IKA @ S @ np.swapaxes(IKA, -1, -2) + K @ Q @ np.swapaxes(K, -1, -2)
         self.S[rows] = 0.5 * (S_new + np.swapaxes(S_new, -1, -2))
         self._linearise(rows)
 
@@ -224,7 +232,7 @@ class _Proposal:
         n, d = self.e.shape
         draws = rng.standard_normal((n, d))
         delta = self.e + (sym_sqrt(self.S) @ draws[..., None])[..., 0]
-        return self.motion.apply(*self._motion_at(slice(None), delta), self.dt)
+        return self.kernels.apply_unchecked(*self._motion_at(slice(None), delta), self.dt)
 
     def _feasible(self, u: FloatArray) -> FloatArray:
         """Controls with the steering saturated (Ackermann, see :func:`steering_limit`)."""
@@ -253,7 +261,6 @@ def update2(
     ``pose_cov (P, 3, 3)`` if given, see :class:`_Proposal`): the sampled poses, the new
     normalised log-weights and each particle's log-weight increment ``(P,)``."""
     n = poses0.shape[0]
-    rows_all = np.arange(n)
     prop = _Proposal(motion, poses0, u, dt, Qu, pose_cov)
     w.begin_scan()
     log_p0 = s.log_p0
@@ -272,30 +279,33 @@ def update2(
             ll[upd] = np.where(t.ok, l_upd, -np.inf)
             g = t.ok
             if g.any():
-                prop.update(upd[g], t.take(g), L[g])
+                tg = t.take(g)
+                prop.update(upd[g], tg.nu, tg.Hx, tg.Q, L[g])
                 w.seen[slot[upd[g]], upd[g]] = True
         ll_total += ll
     # Unlabelled readings: maximum likelihood under the marginal, excluding used landmarks.
     forced = np.full((unl.size, n), -1, dtype=np.intp)
+    pose_xy = (prop.x_bar[:, 0], prop.x_bar[:, 1], prop.x_bar[:, 2])  # views: kept current
+    cmax = int(w.counts.max()) if unl.size else 0
+    if cmax:  # the landmarks stay as they are until the sampling: Σ00 + Σ11 once
+        cand = _candidates(w, cmax)  # kept current below
+        sigma_trace = w.lm[2, :cmax] + w.lm[4, :cmax]
     for j, k in enumerate(unl):
-        cmax, cand = _candidates(w)
         ll = np.full(n, log_p0)
         if cmax:
-            mu_all, cov_all = w.gaussians((slice(0, cmax), slice(None)))  # (C, P, ...)
-            tall = _terms(model, prop.x_bar[:, None, :], np.swapaxes(mu_all, 0, 1),
-                          np.swapaxes(cov_all, 0, 1), z[k], R)  # fmt: skip
-            L_all = prop.marginal(tall, (rows_all, None))
-            ll_all, _ = _log_gauss(tall.nu, L_all)
-            ll_all = np.where(cand & tall.ok, ll_all, -np.inf)
-            best = np.argmax(ll_all, axis=1)
-            lb = ll_all[rows_all, best]
+            # Every landmark of every particle (gated, planar): the bulk of a 2.0 run.
+            found = best_landmarks(model, pose_xy, prop.Px, w.lm[:, :cmax], cand, z[k], R,
+                                   log_p0, sigma_trace)  # fmt: skip
+            best, lb = found.slot, found.ll
             match = np.flatnonzero(lb >= log_p0)
             if match.size:
                 bm = best[match]
                 ll[match] = lb[match]
                 forced[j, match] = bm
-                prop.update(match, tall.take((match, bm)), L_all[match, bm])
+                # Usually every particle matches: a slice (views) instead of fancy copies.
+                prop.update(slice(None) if match.size == n else match, *found.take(match))
                 w.seen[bm, match] = True
+                cand[bm, match] = False  # a landmark takes one reading per scan
         ll_total += ll
     poses = prop.sample(rng)
     # The landmarks, from the sampled poses, with the proposal's associations.
@@ -326,11 +336,17 @@ def fold_motion(
     ``mean ← g(mean, u)``, ``cov ← G cov Gᵀ + V Q_u Vᵀ``. FastSLAM 2.0 keeps the motion since
     the last scan this way, so that its proposal covers all of it (see :class:`_Proposal`)."""
     P = np.zeros((mean.shape[0], 3, 3)) if cov is None else cov
-    return propagate_gaussian_unchecked(motion, mean, P, u, dt, Qu)
+    # propagate_gaussian_unchecked's lines on the motion's unchecked kernels (its apply and
+    # jacobians validate the poses again, half the cost of a fold): the same numbers.
+    kernels = motion_kernels(motion)
+    ub = np.broadcast_to(u, (mean.shape[0], u.shape[-1]))
+    new_mean = kernels.apply_unchecked(mean, ub, dt)
+    G, V = kernels.jacobians_unchecked(mean, ub, dt)
+    Gt, Vt = np.swapaxes(G, -1, -2), np.swapaxes(V, -1, -2)
+    new_cov = G @ P @ Gt + V @ Qu @ Vt
+    return new_mean, 0.5 * (new_cov + np.swapaxes(new_cov, -1, -2))
 
 
-def _candidates(w: Work) -> tuple[int, NDArray[np.bool_]]:
-    """Columns in use and the slots an unlabelled reading may still match ``(P, cmax)``."""
-    cmax = int(w.counts.max())
-    cand = w.valid(cmax) & ~w.seen[:cmax]
-    return cmax, cand.T
+def _candidates(w: Work, cmax: int) -> NDArray[np.bool_]:
+    """The slots an unlabelled reading may still match ``(cmax, P)``."""
+    return w.valid(cmax) & ~w.seen[:cmax]
