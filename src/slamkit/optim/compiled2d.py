@@ -35,8 +35,8 @@ from __future__ import annotations
 import importlib
 import math
 import time
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, TypeVar, cast
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol, TypeVar, cast
 
 import numpy as np
 
@@ -44,12 +44,33 @@ from slamkit.optim.data import FloatArray, IntArray
 from slamkit.optim.linearization import Linearization
 from slamkit.optim.sparse import NormalPattern
 
-if TYPE_CHECKING:
-    from slamkit.optim.graph import GraphProblem
-
 __all__ = ["AVAILABLE", "CompiledSe2", "CompiledWindow", "compiled_se2", "compiled_window"]
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+
+class GraphProblem(Protocol):
+    """What the compiled pass reads of :class:`slamkit.optim.graph.GraphProblem` (a
+    protocol, so that this module, which the problem imports, does not import it back)."""
+
+    @property
+    def dim(self) -> int: ...
+    @property
+    def objective(self) -> str: ...
+    @property
+    def pose_ids(self) -> IntArray: ...
+    @property
+    def landmark_ids(self) -> IntArray: ...
+    @property
+    def alias(self) -> IntArray: ...
+    @property
+    def pose_var(self) -> IntArray: ...
+    @property
+    def n_free_poses(self) -> int: ...
+    @property
+    def blocks(self) -> Sequence[Any]: ...
+    @property
+    def pattern(self) -> NormalPattern: ...
 
 
 def _import_numba() -> Any:
