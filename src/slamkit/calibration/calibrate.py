@@ -28,6 +28,7 @@ from slamkit.calibration.noise import (
     NoiseFit,
     NoiseModelName,
     fit_noise,
+    negative_log_likelihood,
     odometry_cov_bases,
 )
 from slamkit.calibration.pairs import ScanPairs, scan_pairs
@@ -67,7 +68,8 @@ class CalibrationSettings(Section):
     fit_mounting: bool = True
     """Estimate the laser's mounting; False holds it at the data set's."""
     rounds: int = setting(2, int_at_least(1), "an integer >= 1")
-    """Systematic-then-noise rounds (each re-weights the least squares by the new noise)."""
+    """Systematic-then-noise rounds (each re-weights the least squares by the likelier of
+    the two noise models just fitted)."""
 
 
 def _adjoint_inverse(M: FloatArray) -> FloatArray:
@@ -102,6 +104,8 @@ class CalibrationResult:
     systematic: SystematicFit
     noise: dict[str, NoiseFit]
     nominal_mounting: tuple[float, float, float]
+    weights: str
+    """The noise model that weighed the final least squares (the likelier one)."""
     pairs: int
     keyframes: int
     dropped: dict[str, int]
@@ -123,12 +127,29 @@ class CalibrationResult:
             "systematic": self.systematic.as_dict(),
             "noise": {name: fit.as_dict() for name, fit in self.noise.items()},
             "nominal_mounting": list(self.nominal_mounting),
+            "weighted_by": self.weights,
             "dataset_options": self.dataset_options(),
             "pairs": self.pairs,
             "keyframes": self.keyframes,
             "pairs_dropped": dict(self.dropped),
             "settings": config_to_dict(self.settings),
         }
+
+
+def _better(
+    fits: dict[str, NoiseFit], r: FloatArray, cov: FloatArray, bases: dict[str, FloatArray]
+) -> NoiseFit:
+    """The noise model of the smaller Akaike criterion, ``2 (NLL + k)``, on the pairs both
+    fits kept: the one the least squares should weigh its pairs by."""
+    masks = [f.kept for f in fits.values() if f.kept is not None]
+    common = np.logical_and.reduce(masks)
+
+    def score(name: str) -> float:
+        f = fits[name]
+        nll = negative_log_likelihood(f.theta(), r[common], cov[common], bases[name][:, common])
+        return nll + len(f.names)
+
+    return fits[min(fits, key=score)]
 
 
 def calibrate_pairs(
@@ -143,24 +164,25 @@ def calibrate_pairs(
         )
     start = np.concatenate([[1.0, 1.0], pairs.nominal_mounting])
     theta = np.array([start_noise[0, 0], start_noise[1, 1]])
-    noise = NoiseFit("per_step", NOISE_MODELS["per_step"], tuple(np.sqrt(theta)), (0.0, 0.0),
-                     pairs.n_pairs, 0, math.nan)  # fmt: skip
+    weights = NoiseFit("per_step", NOISE_MODELS["per_step"], tuple(np.sqrt(theta)), (0.0, 0.0),
+                       pairs.n_pairs, 0, math.nan)  # fmt: skip
     fit: SystematicFit | None = None
+    fits: dict[str, NoiseFit] = {}
     for _ in range(settings.rounds):
         base = SystematicFit(start, np.zeros((5, 5)), settings.fit_mounting, 0, 0, math.nan)
-        cov = _noise_cov(pairs, fit or base, noise)
+        cov = _noise_cov(pairs, fit or base, weights)
         fit = fit_systematic(pairs.steps, pairs.first, pairs.last, pairs.T_laser, cov,
                              start if fit is None else fit.params,
                              fit_mounting=settings.fit_mounting)  # fmt: skip
         r = pair_residuals(pairs.steps, pairs.first, pairs.last, pairs.T_laser, fit.params)
-        noise = fit_noise(r, pairs.cov, _laser_bases(pairs, fit, "per_step"), "per_step",
-                          np.square(np.asarray(noise.values)))  # fmt: skip
+        bases = {name: _laser_bases(pairs, fit, name) for name in NOISE_MODELS}  # type: ignore[arg-type]
+        fits = {name: fit_noise(r, pairs.cov, bases[name], name) for name in NOISE_MODELS}  # type: ignore[arg-type]
+        weights = _better(fits, r, pairs.cov, bases)
     assert fit is not None
-    r = pair_residuals(pairs.steps, pairs.first, pairs.last, pairs.T_laser, fit.params)
-    per_distance = fit_noise(r, pairs.cov, _laser_bases(pairs, fit, "per_distance"), "per_distance")
     return CalibrationResult(
         systematic=fit,
-        noise={"per_step": noise, "per_distance": per_distance},
+        noise=fits,
+        weights=weights.model,
         nominal_mounting=tuple(float(v) for v in pairs.nominal_mounting),  # type: ignore[arg-type]
         pairs=pairs.n_pairs,
         keyframes=pairs.keyframes,

@@ -61,6 +61,7 @@ __all__ = [
     "NoiseFit",
     "NoiseModelName",
     "fit_noise",
+    "negative_log_likelihood",
     "odometry_cov_bases",
 ]
 
@@ -137,7 +138,7 @@ def odometry_cov_bases(
     return out
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class NoiseFit:
     """A fitted noise model: ``values`` (standard deviations, see :data:`NOISE_MODELS`),
     their ``stds`` (delta method from the inverse Fisher information; 0 for a value at 0,
@@ -152,6 +153,12 @@ class NoiseFit:
     used: int
     trimmed: int
     chi2_per_dof: float
+    kept: NDArray[np.bool_] | None = None
+    """The pairs the fit kept (None: not fitted, a starting value)."""
+
+    def theta(self) -> FloatArray:
+        """``θ``: the parameters' squares (variances per unit feature)."""
+        return np.square(np.asarray(self.values, dtype=np.float64))
 
     def as_dict(self) -> dict[str, object]:
         return {
@@ -247,4 +254,15 @@ def fit_noise(
         used=int(keep.sum()),
         trimmed=int((~keep).sum()),
         chi2_per_dof=chi2,
+        kept=keep,
     )
+
+
+def negative_log_likelihood(
+    theta: FloatArray, residuals: FloatArray, base_cov: FloatArray, bases: FloatArray
+) -> float:
+    """``½ Σ_p [log det S_p + r_pᵀ S_p⁻¹ r_p]`` with ``S_p = base_cov_p + Σ_k θ_k bases[k, p]``
+    (the module docstring): to compare noise models on the same pairs."""
+    S = base_cov + np.einsum("k,kpij->pij", np.asarray(theta, dtype=np.float64), bases)
+    _, logdet = np.linalg.slogdet(S)
+    return 0.5 * float(np.sum(logdet) + np.sum(_mahalanobis(residuals, S)))
