@@ -5,8 +5,9 @@ third of its turn noise, chosen systematic errors). The issue's bar: a 2 % wheel
 a 3 % wheel-base error each recovered to within 0.3 %, the 5 cm mounting to within 1 cm.
 
 The turn noise is lowered because the wheel-base error is read from the turns: its standard
-deviation is about ``k_rot / √(Σ|turn|)`` (0.25 % for the typical 0.03 rad/√rad over this
-tour's ~150 rad, 0.085 % at 0.01; ``docs/estimators/calibration.md``)."""
+deviation is at least ``k_rot / √(Σ|turn|)`` (0.20 % for the typical 0.03 rad/√rad over this
+tour's 221 rad, 0.07 % at 0.01; the fit states 0.22 % and 0.10 %;
+``docs/estimators/calibration.md``)."""
 
 from __future__ import annotations
 
