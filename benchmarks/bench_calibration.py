@@ -6,7 +6,9 @@ scans cast again from ``robot ⊕ (0.05, 0, 0)`` while the data set states the l
 centre (:func:`slamkit.sim.remount_laser`), and its odometry rebuilt under the stated error
 model (:func:`slamkit.sim.corrupt_odometry`) with chosen systematic errors: the corpus's
 typical random noise, or the same with a third of its turn noise (``k_rot`` 0.01), with and
-without glitches. Five seeds per case.
+without glitches. Five seeds per case. (``corrupt_odometry`` scales the unsigned ``rot1 = ±π``
+of the simulated robot's small steps back when the turn scale is not 1, a heading jump the
+calibration must trim: ``tests/sim/test_odometry_errors_backward.py``.)
 
 No peer library implements this calibration. The comparison is with the *oracle*: the same
 fits on the true laser motions (the pairs' matches replaced by the truth, the matcher's

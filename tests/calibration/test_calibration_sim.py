@@ -63,16 +63,19 @@ def test_injected_wheel_errors_and_mounting_are_recovered(
 
 
 def test_learned_noise_matches_the_injected_model(remounted: Dataset) -> None:
+    # Equal radius and base errors leave the turns unscaled (s = 1): any other pair meets
+    # corrupt_odometry's fault at steps back (tests/sim/test_odometry_errors_backward.py),
+    # whose heading jumps lift k_rot.
     truth = ERRORS
-    result = calibrate(_corrupted(remounted, 0.02, 0.03, seed=22))
+    result = calibrate(_corrupted(remounted, 0.02, 0.02, seed=22))
     fit = result.noise["per_distance"]
     k_trans, k_rot, _ = fit.values
-    assert k_trans == pytest.approx(truth.k_trans, rel=0.25)
-    assert k_rot == pytest.approx(truth.k_rot, rel=0.25)
+    assert k_trans == pytest.approx(truth.k_trans, rel=0.1)
+    assert k_rot == pytest.approx(truth.k_rot, rel=0.1)
     assert fit.chi2_per_dof == pytest.approx(1.0, abs=0.3)
     # The per-step model is what a MotionSpec holds: fed back by apply_calibration.
     sr, st = result.noise["per_step"].values
-    fed = apply_calibration(_corrupted(remounted, 0.02, 0.03, seed=22), result)
+    fed = apply_calibration(_corrupted(remounted, 0.02, 0.02, seed=22), result)
     assert fed.motion is not None
     np.testing.assert_allclose(np.diag(fed.motion.noise_cov), [sr**2, st**2, sr**2])
     assert fed.laser is not None and fed.laser.mounting == pytest.approx(result.systematic.mounting)

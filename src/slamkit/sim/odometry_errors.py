@@ -18,9 +18,7 @@ distance ``d = trans`` and true turn ``a = rot1 + rot2``:
 
        d' = (1 + ε_r) d,        a' = (1 + ε_r) / (1 + ε_b) · a = s · a,
 
-   applied as ``trans' = (1 + ε_r) trans``, ``rot1' = s rot1``, ``rot2' = s rot2`` on the
-   step with a signed translation (:func:`~slamkit.models.signed_odometry_steps`: a step
-   backward has ``trans < 0`` and small rotations, not ``rot1 ≈ π``). This is
+   applied as ``trans' = (1 + ε_r) trans``, ``rot1' = s rot1``, ``rot2' = s rot2``. This is
    exact for straight steps and turns on the spot; on an arc the reported chord differs from
    ``(1 + ε_r)`` times the true one by a relative ``(a² / 24) |1 - s²|`` (1e-4 for a 0.2 rad
    step with ``s = 1.03``), which is neglected.
@@ -70,12 +68,7 @@ from slamkit.datasets.stream import Control, Dataset, Event, LaserScan, MotionSp
 from slamkit.errors import InputError
 from slamkit.geometry import wrap_angle
 from slamkit.geometry.pose2 import interpolate_poses
-from slamkit.models import (
-    OdometryModel,
-    integrate_odometry,
-    odometry_control,
-    signed_odometry_steps,
-)
+from slamkit.models import OdometryModel, integrate_odometry, odometry_control
 
 __all__ = [
     "GlitchKind",
@@ -290,8 +283,7 @@ def corrupt_odometry(
             "stamps; expected at least 2"
         )
     true_poses = interpolate_poses(truth.times, truth.poses, stamps)
-    # Signed steps: a backward step's rotations are small, so scaling them scales its turn.
-    u = signed_odometry_steps(odometry_control(true_poses[:-1], true_poses[1:]))
+    u = odometry_control(true_poses[:-1], true_poses[1:])
     sys_rng, noise_rng, glitch_rng = rng.spawn(3)
 
     eps_r, eps_b = (
