@@ -25,6 +25,7 @@ from slamkit.cli._common import (
     progress_bar,
     terminate,
 )
+from slamkit.cli.calibrate_cmd import calibrate_command
 from slamkit.cli.compare_cmd import compare_command
 from slamkit.cli.config_cmd import config_app
 from slamkit.cli.data_cmd import data_app
@@ -328,6 +329,7 @@ def demo_command(
 app.command("optimize")(optimize_command)
 app.command("compare")(compare_command)
 app.command("landmark-graph")(landmark_graph_command)
+app.command("calibrate")(calibrate_command)
 
 
 @app.command("estimators")

@@ -26,6 +26,7 @@ from slamkit.models.motion import (
     odometry_noise_cov,
     propagate_gaussian,
     propagate_gaussian_unchecked,
+    signed_odometry_steps,
 )
 
 __all__ = [
@@ -54,4 +55,5 @@ __all__ = [
     "odometry_noise_cov",
     "propagate_gaussian",
     "propagate_gaussian_unchecked",
+    "signed_odometry_steps",
 ]

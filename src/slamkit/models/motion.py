@@ -653,6 +653,21 @@ def odometry_control(
     return np.stack(np.broadcast_arrays(rot1, trans, rot2), axis=-1)
 
 
+def signed_odometry_steps(u: ArrayLike) -> FloatArray:
+    """Steps ``(..., 3)`` of :func:`odometry_control` with a signed translation: a step
+    whose first turn exceeds 90° (the robot backed up, or jittered while turning in place)
+    becomes ``(rot1 ∓ π, -trans, turn - rot1')``, ``turn = wrap(rot1 + rot2)``: the same
+    motion under :class:`OdometryModel`, both rotations small. Scaling the rotations of a
+    step (a wheel-base error) is only right in this form: in the unsigned one a backward
+    step's ``rot1 ≈ π`` would scale the heading by ``(s - 1) 2π`` instead of ``s · turn``."""
+    ua = as_array(u, "odometry steps", (..., 3))
+    rot1, trans = ua[..., 0], ua[..., 1]
+    turn = wrap_angle(rot1 + ua[..., 2])
+    back = np.abs(rot1) > 0.5 * np.pi
+    r1 = np.where(back, rot1 - np.pi * np.sign(rot1), rot1)
+    return np.stack([r1, np.where(back, -trans, trans), turn - r1], axis=-1)
+
+
 def integrate_odometry(start: ArrayLike, u: ArrayLike) -> FloatArray:
     """Odometry poses ``(N + 1, 3)``: ``start (3,)`` followed by the poses reached by applying
     the increments ``u (N, 3) = (rot1, trans, rot2)`` one after the other with

@@ -8,6 +8,7 @@ from slamkit.sim.buildings import (
     corpus_buildings,
     generate_building,
 )
+from slamkit.sim.mounted_laser import remount_laser
 from slamkit.sim.odometry_errors import (
     OdometryErrorModel,
     OdometryGlitch,
@@ -59,6 +60,7 @@ __all__ = [
     "random_scan_pairs",
     "rasterize_segments",
     "rectangle_segments",
+    "remount_laser",
     "rooms_world",
     "simulate_motion",
     "simulate_scan",
