@@ -28,8 +28,8 @@ import numpy as np
 from _common import Record, best_of, write_results
 from slamkit.datasets import load_dataset
 from slamkit.datasets.stream import Control, LaserScan
+from slamkit.estimation.particles import ParticleSet, low_variance_resample
 from slamkit.localization.mcl import mcl_predict, mcl_resample, mcl_update_laser
-from slamkit.localization.particles import ParticleSet, low_variance_resample
 from slamkit.maps.likelihood_field import LikelihoodField, log_likelihood
 from slamkit.models import UnicycleEuler
 

@@ -18,9 +18,9 @@ from slamkit.estimation.gaussian import (
     check_covariance_entries,
     check_state_covariance,
 )
+from slamkit.estimation.kalman import Gaussian, KalmanFilter
 from slamkit.localization import GaussianBelief
 from slamkit.localization.ekf import EkfConfig, EkfLocalization
-from slamkit.localization.kalman import Gaussian, KalmanFilter
 from slamkit.localization.ukf import SigmaPointParams, UkfConfig, UkfLocalization, ukf_update
 from slamkit.models import RangeOnly
 from slamkit.slam.ekf_slam import EkfSlam, EkfSlamConfig

@@ -25,6 +25,7 @@ from slamkit.errors import (
     InputError,
     NonFiniteError,
 )
+from slamkit.estimation.kalman import kf_predict, kf_update
 from slamkit.eval import chi2_bounds, consistency_report, nees
 from slamkit.eval.trajectory import pose_errors
 from slamkit.geometry import wrap_angle
@@ -36,7 +37,6 @@ from slamkit.localization.ekf import (
     ekf_predict_unchecked,
     ekf_update,
 )
-from slamkit.localization.kalman import kf_predict, kf_update
 from slamkit.localization.ukf import (
     SigmaPointParams,
     UkfConfig,

@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from slamkit.errors import ConvergenceError, CovarianceError, NonFiniteError, ShapeError
+from slamkit.estimation.kalman import Gaussian, KalmanFilter, kf_predict, kf_update
 from slamkit.localization import GaussianBelief
-from slamkit.localization.kalman import Gaussian, KalmanFilter, kf_predict, kf_update
 
 # A 1-D constant-velocity target: state (position, velocity), position observed.
 A_CV = np.array([[1.0, 1.0], [0.0, 1.0]])

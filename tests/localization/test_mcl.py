@@ -15,6 +15,7 @@ from slamkit.config import config_from_mapping, config_to_dict
 from slamkit.datasets import load_dataset
 from slamkit.datasets.stream import Dataset, LandmarkReadings, LaserScan, group_by_time
 from slamkit.errors import ConfigError, ConvergenceError, InputError
+from slamkit.estimation.particles import ParticleSet, effective_sample_size
 from slamkit.geometry import angle_diff
 from slamkit.localization import GaussianBelief
 from slamkit.localization.ekf import ekf_update
@@ -36,7 +37,6 @@ from slamkit.localization.mcl import (
     mcl_update_laser,
     reweight,
 )
-from slamkit.localization.particles import ParticleSet, effective_sample_size
 from slamkit.maps import LandmarkMap, OccupancyGrid
 from slamkit.maps.likelihood_field import (
     LikelihoodField,

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from slamkit.errors import ConvergenceError, InputError
-from slamkit.localization.particles import (
+from slamkit.estimation.particles import (
     ParticleSet,
     effective_sample_size,
     low_variance_resample,
@@ -192,7 +192,7 @@ def test_uniform_particles_in_free_space_only_in_free_cells() -> None:
 
 
 def test_unchecked_estimate_equals_the_validated_one() -> None:
-    from slamkit.localization.particles import particle_estimate_unchecked
+    from slamkit.estimation.particles import particle_estimate_unchecked
 
     rng = np.random.default_rng(7)
     poses = np.column_stack([rng.normal(size=(400, 2)), rng.uniform(-np.pi, np.pi, 400)])

@@ -28,14 +28,14 @@ from slamkit.errors import (
     InputError,
     NonFiniteError,
 )
-from slamkit.eval import absolute_trajectory_error, landmark_map_error
-from slamkit.geometry.alignment import align_points_2d
-from slamkit.localization.particles import (
+from slamkit.estimation.particles import (
     effective_sample_size,
     low_variance_resample,
     low_variance_resample_unchecked,
     particle_estimate,
 )
+from slamkit.eval import absolute_trajectory_error, landmark_map_error
+from slamkit.geometry.alignment import align_points_2d
 from slamkit.models import (
     Ackermann,
     DifferentialDrive,

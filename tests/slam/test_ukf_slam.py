@@ -12,10 +12,10 @@ import pytest
 
 from slamkit.datasets import Dataset, LandmarkReadings, load_dataset
 from slamkit.errors import ConfigError
+from slamkit.estimation.belief import GaussianBelief
 from slamkit.estimation.gaussian import motion_jacobians_unchecked
 from slamkit.eval import chi2_bounds, landmark_map_error, nees, pose_errors
 from slamkit.geometry import circular_mean
-from slamkit.localization.belief import GaussianBelief
 from slamkit.localization.ukf import (
     SigmaPointParams,
     circular_mean_about,

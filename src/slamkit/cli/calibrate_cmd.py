@@ -59,7 +59,7 @@ def _table(result: CalibrationResult) -> Table:
 def calibrate_command(
     data: Annotated[str, typer.Option(help="A data set's name or a log's path.")],
     min_distance: Annotated[
-        float, typer.Option(help="Keyframe spacing by the wheels' travel [m].")
+        float, typer.Option(help="Keyframe spacing by the wheels' travel, in metres.")
     ] = 0.5,
     fit_mounting: Annotated[
         bool, typer.Option(help="Estimate the laser's mounting (else the data set's).")

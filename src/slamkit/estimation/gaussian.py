@@ -11,7 +11,7 @@ covariance any more raises :class:`~slamkit.errors.ConvergenceError`, from
 (``docs/consistency.md`` lists where). The Joseph form
 ``P ← (I − K H) P (I − K H)ᵀ + K R Kᵀ`` is a sum of two PSD terms, so it stays positive
 semi-definite up to rounding where the short form ``(I − K H) P`` can cancel into an
-indefinite matrix (see :mod:`slamkit.localization.kalman`).
+indefinite matrix (see :mod:`slamkit.estimation.kalman`).
 
 Models built on :class:`~slamkit.models.MotionModelBase` and
 :class:`~slamkit.models.LandmarkModelBase` are evaluated through their unchecked kernels; any

@@ -5,20 +5,20 @@ frozen beliefs; the estimator classes are thin stateful shells registered in
 :mod:`slamkit.pipeline.registry`.
 """
 
-from slamkit.localization.association import Association, associate_ml
-from slamkit.localization.belief import GaussianBelief, predict, predict_unchecked
-from slamkit.localization.dead_reckoning import DeadReckoning, DeadReckoningConfig
-from slamkit.localization.ekf import EkfConfig, EkfLocalization, ekf_predict, ekf_update
-from slamkit.localization.kalman import Gaussian, KalmanFilter, UpdateInfo, kf_predict, kf_update
-from slamkit.localization.least_squares import LeastSquaresConfig, LeastSquaresLocalization
-from slamkit.localization.mcl import MclConfig, MonteCarloLocalization
-from slamkit.localization.particles import (
+from slamkit.estimation.belief import GaussianBelief, predict, predict_unchecked
+from slamkit.estimation.kalman import Gaussian, KalmanFilter, UpdateInfo, kf_predict, kf_update
+from slamkit.estimation.particles import (
     ParticleSet,
     effective_sample_size,
     low_variance_resample,
     normalize_log_weights,
     particle_estimate,
 )
+from slamkit.localization.association import Association, associate_ml
+from slamkit.localization.dead_reckoning import DeadReckoning, DeadReckoningConfig
+from slamkit.localization.ekf import EkfConfig, EkfLocalization, ekf_predict, ekf_update
+from slamkit.localization.least_squares import LeastSquaresConfig, LeastSquaresLocalization
+from slamkit.localization.mcl import MclConfig, MonteCarloLocalization
 from slamkit.localization.static import (
     LeastSquaresResult,
     PoseFix,

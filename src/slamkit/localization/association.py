@@ -22,8 +22,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.errors import InputError
+from slamkit.estimation.belief import GaussianBelief
 from slamkit.estimation.gaussian import angular_indices, measure_unchecked, wrap_array
-from slamkit.localization.belief import GaussianBelief
 from slamkit.maps import LandmarkMap
 from slamkit.models import MIN_RANGE, LandmarkModel
 from slamkit.prob import chi2_gate, mahalanobis_squared

@@ -14,10 +14,10 @@ import numpy as np
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset
 from slamkit.errors import ConfigError, InputError
+from slamkit.estimation.belief import GaussianBelief, predict_unchecked
 from slamkit.estimation.contract import EstimatorOutput, PoseEstimate
 from slamkit.estimation.gaussian import check_covariance
 from slamkit.estimation.shell import EstimatorShell
-from slamkit.localization.belief import GaussianBelief, predict_unchecked
 
 __all__ = ["DeadReckoning", "DeadReckoningConfig"]
 

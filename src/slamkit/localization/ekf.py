@@ -2,13 +2,13 @@
 
 The extended Kalman filter linearises the motion and measurement models at the current mean:
 
-* **prediction** (:func:`ekf_predict`, which is :func:`slamkit.localization.belief.predict`):
+* **prediction** (:func:`ekf_predict`, which is :func:`slamkit.estimation.belief.predict`):
   ``μ ← g(μ, u, dt)``, ``P ← G P Gᵀ + V Q Vᵀ`` with ``G = ∂g/∂x`` and ``V = ∂g/∂u``;
 * **update** with one reading ``z`` of the landmark ``l`` (:func:`ekf_update`):
   ``ν = z ⊖ h(μ, l)`` (angular components wrapped by the model's residual),
   ``H = ∂h/∂x``, ``S = H P Hᵀ + R``, ``K = P Hᵀ S⁻¹``, ``μ ← μ + K ν`` (heading wrapped) and the
   Joseph form ``P ← (I − K H) P (I − K H)ᵀ + K R Kᵀ``, symmetrised (see
-  :mod:`slamkit.localization.kalman` for why).
+  :mod:`slamkit.estimation.kalman` for why).
 
 Several readings of one time step are applied one at a time, each linearised at the mean the
 previous one left (*Probabilistic Robotics*, table 7.2).
@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.datasets.stream import Dataset, LandmarkReadings
 from slamkit.errors import ConfigError, GeometryError, InputError, SlamkitError
+from slamkit.estimation.belief import GaussianBelief, predict
 from slamkit.estimation.contract import EstimatorOutput, LandmarkIds, PoseEstimate
 from slamkit.estimation.gaussian import (
     angular_indices,
@@ -42,11 +43,10 @@ from slamkit.estimation.gaussian import (
     measure_unchecked,
     wrap_components,
 )
+from slamkit.estimation.kalman import UpdateInfo
 from slamkit.estimation.shell import AssociationRecorder, EstimatorShell, InnovationRecorder
 from slamkit.localization.association import associate_arrays_unchecked
-from slamkit.localization.belief import GaussianBelief, predict
 from slamkit.localization.closed_form import EkfClosedForm, FilterSteps, closed_form_supports
-from slamkit.localization.kalman import UpdateInfo
 from slamkit.models import LandmarkModel, MotionModel
 from slamkit.models.motion import motion_kernels
 from slamkit.prob import chi2_gate
@@ -77,7 +77,7 @@ def ekf_predict(
     model: MotionModel,
     control_cov: ArrayLike,
 ) -> GaussianBelief:
-    """The EKF prediction: :func:`slamkit.localization.belief.predict` (shared with dead
+    """The EKF prediction: :func:`slamkit.estimation.belief.predict` (shared with dead
     reckoning), ``μ ← g(μ, u, dt)``, ``P ← G P Gᵀ + V Q Vᵀ`` with ``Q = control_cov``."""
     return predict(belief, u, dt, model, control_cov)
 
@@ -91,7 +91,7 @@ def ekf_predict_unchecked(
     Q: FloatArray,
 ) -> tuple[FloatArray, FloatArray]:
     """:func:`ekf_predict` on validated arrays (the estimators' fast path; same equations as
-    :func:`slamkit.localization.belief.predict`, checked against it in the tests)."""
+    :func:`slamkit.estimation.belief.predict`, checked against it in the tests)."""
     x = mean[:3]
     moved, G, V = motion_kernels(model).step_single(x, u, dt)  # the fused one-pose kernel
     if mean.size == 3:

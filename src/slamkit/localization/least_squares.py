@@ -5,7 +5,7 @@ enough readings of known landmarks is solved on its own by
 :func:`~slamkit.localization.static.localize_from_readings`, and the estimate becomes that fix
 and its covariance. Between fixes it keeps the last fix, or — with
 ``predict_between`` and a data set that has a motion model — dead-reckons from it with
-:func:`~slamkit.localization.belief.predict`, so the covariance grows until the next fix
+:func:`~slamkit.estimation.belief.predict`, so the covariance grows until the next fix
 replaces it. Events whose geometry does not determine the pose are *refused* (counted) and
 leave the estimate unchanged.
 
@@ -24,10 +24,10 @@ import numpy as np
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset, LandmarkReadings
 from slamkit.errors import ConfigError, GeometryError, InputError
+from slamkit.estimation.belief import GaussianBelief, predict
 from slamkit.estimation.contract import EstimatorOutput, PoseEstimate
 from slamkit.estimation.shell import EstimatorShell
 from slamkit.eval import associate, nees, pose_errors
-from slamkit.localization.belief import GaussianBelief, predict
 from slamkit.localization.static import (
     MAX_CONDITION,
     MIN_READINGS,

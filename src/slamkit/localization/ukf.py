@@ -44,6 +44,7 @@ from numpy.typing import ArrayLike
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.datasets.stream import Dataset
 from slamkit.errors import ConfigError, ConvergenceError, InputError
+from slamkit.estimation.belief import GaussianBelief
 from slamkit.estimation.gaussian import (
     angular_indices,
     check_covariance,
@@ -54,11 +55,10 @@ from slamkit.estimation.gaussian import (
     wrap_array,
     wrap_components,
 )
+from slamkit.estimation.kalman import UpdateInfo
 from slamkit.geometry import circular_mean, wrap_angle
-from slamkit.localization.belief import GaussianBelief
 from slamkit.localization.closed_form import FilterSteps, UkfClosedForm, closed_form_supports
 from slamkit.localization.ekf import GaussianFilterConfig, GaussianLocalization, check_reading
-from slamkit.localization.kalman import UpdateInfo
 from slamkit.models import LandmarkModel, MotionModel
 
 __all__ = [

@@ -1,7 +1,7 @@
 """Monte Carlo localization: particle-filter steps and the ``mcl`` estimator.
 
 The filter (Probabilistic Robotics, chapter 8) as pure functions over a
-:class:`~slamkit.localization.particles.ParticleSet`:
+:class:`~slamkit.estimation.particles.ParticleSet`:
 
 * :func:`mcl_predict` moves every particle through the motion model with its own control
   noise draw;

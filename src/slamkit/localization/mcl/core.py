@@ -1,5 +1,5 @@
 """The particle filter's steps as pure functions over a
-:class:`~slamkit.localization.particles.ParticleSet` (Probabilistic Robotics, chapter 8):
+:class:`~slamkit.estimation.particles.ParticleSet` (Probabilistic Robotics, chapter 8):
 prediction through the motion model, Bayes' rule in log space, the laser-scan correction
 through the likelihood field (tempered), and low-variance resampling with augmented MCL's
 random particles.
@@ -15,12 +15,12 @@ from numpy.typing import ArrayLike
 
 from slamkit._validation import FloatArray, as_array, as_positive
 from slamkit.errors import ConvergenceError, InputError
-from slamkit.localization.mcl.sampling import PoseSampler, sample_poses
-from slamkit.localization.particles import (
+from slamkit.estimation.particles import (
     ParticleSet,
     low_variance_resample,
     normalize_log_weights,
 )
+from slamkit.localization.mcl.sampling import PoseSampler, sample_poses
 from slamkit.maps.likelihood_field import LikelihoodField, log_likelihood, usable_beams
 from slamkit.models import MotionModel
 from slamkit.models.motion import motion_kernels
@@ -107,7 +107,7 @@ def reweight(particles: ParticleSet, log_lik: ArrayLike) -> MeasurementUpdate:
     """Bayes' rule in log space: ``log w_i ← log w_i + log p(z | x_i)``, then normalise.
 
     Raises :class:`ConvergenceError` when no particle has a non-zero weight afterwards (see
-    :func:`~slamkit.localization.particles.normalize_log_weights`); the particles are never
+    :func:`~slamkit.estimation.particles.normalize_log_weights`); the particles are never
     silently reset.
     """
     ll = as_array(log_lik, "log_likelihood", (len(particles),), finite=False)

@@ -24,6 +24,11 @@ from slamkit.estimation.contract import (
     PoseEstimate,
     SnapshotSchedule,
 )
+from slamkit.estimation.particles import (
+    ParticleSet,
+    effective_sample_size,
+    particle_estimate_unchecked,
+)
 from slamkit.estimation.shell import EstimatorShell, InnovationRecorder
 from slamkit.localization.mcl.augmented import Augmentation, advance_augmentation
 from slamkit.localization.mcl.config import MclConfig
@@ -47,11 +52,6 @@ from slamkit.localization.mcl.sampling import (
     free_space_sampler,
     initial_poses,
     landmark_box_sampler,
-)
-from slamkit.localization.particles import (
-    ParticleSet,
-    effective_sample_size,
-    particle_estimate_unchecked,
 )
 from slamkit.maps import LandmarkMap
 from slamkit.maps.likelihood_field import LikelihoodField, usable_beams

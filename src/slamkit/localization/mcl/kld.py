@@ -13,10 +13,10 @@ from scipy.special import ndtri
 
 from slamkit._validation import FloatArray, as_positive
 from slamkit.errors import InputError
+from slamkit.estimation.particles import ParticleSet
 from slamkit.geometry.angles import wrap_angle
 from slamkit.localization.mcl.core import moved_finite
 from slamkit.localization.mcl.sampling import PoseSampler, sample_poses
-from slamkit.localization.particles import ParticleSet
 from slamkit.models import MotionModel
 
 __all__ = ["kld_resample_predict", "kld_sample_size"]

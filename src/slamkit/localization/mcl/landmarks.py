@@ -12,8 +12,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.errors import InputError
+from slamkit.estimation.particles import ParticleSet
 from slamkit.localization.mcl.core import MeasurementUpdate, reweight
-from slamkit.localization.particles import ParticleSet
 from slamkit.maps import LandmarkMap
 from slamkit.models import LandmarkModel
 
@@ -149,7 +149,7 @@ def landmark_innovations(
     Jacobian of ``h`` at the mean.
 
     For a particle filter, pass the weighted mean and covariance of the particles *before*
-    the update (:func:`~slamkit.localization.particles.particle_estimate`): if the filter is
+    the update (:func:`~slamkit.estimation.particles.particle_estimate`): if the filter is
     consistent, each ``nis`` is then (approximately) ``χ²_m`` distributed, so the standard
     NIS statistics apply to it. Every reading of the call is compared with the same belief
     (an EKF would condition the second reading on the first): readings of one event share

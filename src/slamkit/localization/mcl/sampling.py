@@ -15,7 +15,7 @@ import numpy as np
 
 from slamkit._validation import FloatArray, as_array
 from slamkit.errors import InputError
-from slamkit.localization.particles import (
+from slamkit.estimation.particles import (
     uniform_particles_in_box,
     uniform_particles_in_free_space,
 )

@@ -17,8 +17,8 @@ from numpy.typing import ArrayLike, NDArray
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.errors import InputError, ShapeError
 from slamkit.estimation.gaussian import angular_indices
+from slamkit.estimation.kalman import UpdateInfo
 from slamkit.geometry.angles import wrap_angle_float
-from slamkit.localization.kalman import UpdateInfo
 from slamkit.models import LandmarkModel, MotionModel
 from slamkit.models.measurement import InvertibleLandmarkModel
 from slamkit.slam.ekf_slam.state import add_landmark_inplace, diagonal_blocks, predict_inplace

@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import LandmarkReadings
-from slamkit.localization.particles import (
+from slamkit.estimation.particles import (
     normalize_log_weights,
 )
 from slamkit.mapping.ekf_mapping import (

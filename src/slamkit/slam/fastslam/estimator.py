@@ -19,10 +19,10 @@ from slamkit.estimation.contract import (
     SnapshotSchedule,
     SpreadSnapshots,
 )
-from slamkit.estimation.shell import EstimatorShell
-from slamkit.localization.particles import (
+from slamkit.estimation.particles import (
     low_variance_resample_unchecked,
 )
+from slamkit.estimation.shell import EstimatorShell
 from slamkit.mapping.ekf_mapping import (
     INITIALISED,
 )

@@ -10,7 +10,7 @@ from numpy.typing import ArrayLike
 
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.errors import InputError, ShapeError
-from slamkit.localization.particles import (
+from slamkit.estimation.particles import (
     low_variance_resample,
 )
 from slamkit.models import MotionModel

@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
-from slamkit.localization.particles import particle_estimate_unchecked
+from slamkit.estimation.particles import particle_estimate_unchecked
 from slamkit.mapping.ekf_mapping import TOO_CLOSE
 from slamkit.slam.fastslam.particles import FastSlamParticles, IntArray
 

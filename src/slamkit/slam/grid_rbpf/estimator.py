@@ -61,13 +61,13 @@ from slamkit.estimation.contract import (
     SpreadSnapshots,
 )
 from slamkit.estimation.health import UnmatchedStretch, override_rows, tracking_warnings
-from slamkit.estimation.shell import EstimatorShell
-from slamkit.geometry.angles import wrap_angle_float
-from slamkit.geometry.pose2 import between, compose, transform_points
-from slamkit.localization.particles import (
+from slamkit.estimation.particles import (
     low_variance_resample_unchecked,
     normalize_log_weights,
 )
+from slamkit.estimation.shell import EstimatorShell
+from slamkit.geometry.angles import wrap_angle_float
+from slamkit.geometry.pose2 import between, compose, transform_points
 from slamkit.mapping.grid import lattice_cells
 from slamkit.mapping.inverse_model import InverseSensorModel
 from slamkit.mapping.logodds import expit

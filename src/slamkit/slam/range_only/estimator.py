@@ -15,6 +15,7 @@ import numpy as np
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset, Event, LandmarkReadings
 from slamkit.errors import ConfigError, ConvergenceError, InputError
+from slamkit.estimation.belief import GaussianBelief, predict_unchecked
 from slamkit.estimation.contract import (
     EstimatorOutput,
     LandmarkEstimate,
@@ -25,7 +26,6 @@ from slamkit.estimation.contract import (
 )
 from slamkit.estimation.shell import EstimatorShell
 from slamkit.geometry.pose2 import compose
-from slamkit.localization.belief import GaussianBelief, predict_unchecked
 from slamkit.maps import LandmarkMap
 from slamkit.optim.robust import KernelName, RobustKernel
 from slamkit.slam.range_only.problem import RangeOnlyProblem, RangeOnlySolution, solve_range_only

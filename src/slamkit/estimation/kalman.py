@@ -34,9 +34,9 @@ from numpy.typing import ArrayLike
 
 from slamkit._validation import FloatArray, as_array, as_covariance
 from slamkit.errors import ShapeError
+from slamkit.estimation.belief import GaussianBelief
 from slamkit.estimation.gaussian import check_covariance, gain_update
 from slamkit.geometry import wrap_angle
-from slamkit.localization.belief import GaussianBelief
 
 __all__ = ["Gaussian", "KalmanFilter", "UpdateInfo", "kf_predict", "kf_update"]
 
