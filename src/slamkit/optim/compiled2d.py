@@ -32,21 +32,20 @@ incremental, to 1e-10 in the poses.
 
 from __future__ import annotations
 
-import importlib
 import math
 import time
-from collections.abc import Callable, Sequence
-from typing import Any, Protocol, TypeVar, cast
+from collections.abc import Sequence
+from typing import Any, Protocol
 
 import numpy as np
 
+from slamkit.geometry.angles import wrap_angle_float
 from slamkit.optim.data import FloatArray, IntArray
 from slamkit.optim.linearization import Linearization
 from slamkit.optim.sparse import NormalPattern
+from slamkit.scanmatch.compiled import AVAILABLE, jit
 
 __all__ = ["AVAILABLE", "CompiledSe2", "CompiledWindow", "compiled_se2", "compiled_window"]
-
-F = TypeVar("F", bound=Callable[..., Any])
 
 
 class GraphProblem(Protocol):
@@ -73,41 +72,15 @@ class GraphProblem(Protocol):
     def pattern(self) -> NormalPattern: ...
 
 
-def _import_numba() -> Any:
-    try:  # numba is optional: without it the NumPy path runs
-        return importlib.import_module("numba")
-    except ImportError:  # pragma: no cover - depends on the environment
-        return None
+_jit = jit
+"""The scan matchers' ``numba.njit(cache=True)`` (a plain function without numba)."""
 
 
-_NUMBA = _import_numba()
-AVAILABLE: bool = _NUMBA is not None
-"""numba could be imported: plain 2D pose graphs use the compiled pass."""
-
-
-def _jit(fn: F) -> F:
-    if _NUMBA is None:  # pragma: no cover - depends on the environment
-        return fn
-    return cast(F, _NUMBA.njit(cache=True)(fn))
-
-
-_TWO_PI = 2.0 * math.pi
 _SMALL_ANGLE = 1e-3  # below it the SE(2) exponential takes its Taylor series (as geometry)
 
 
-@_jit
-def _wrap(a: float) -> float:
-    """``a`` wrapped to ``[-π, π)``, unchanged when already there (as ``wrap_angle``)."""
-    if -math.pi <= a < math.pi:
-        return a
-    if not math.isfinite(a):
-        return math.nan
-    w = a - _TWO_PI * math.floor((a + math.pi) / _TWO_PI)
-    if w < -math.pi:
-        w += _TWO_PI
-    if w >= math.pi:
-        w -= _TWO_PI
-    return w
+_wrap = jit(wrap_angle_float)
+"""``a`` wrapped to ``[-π, π)``, unchanged when already there, compiled."""
 
 
 @_jit
