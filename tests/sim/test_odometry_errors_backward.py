@@ -1,7 +1,6 @@
 """The wheel-base error on steps backward: the turn of every step should be scaled by ``s``,
-not the unsigned decomposition's ``rot1 ≈ π`` (which turns a 2 % error into 7° heading jumps
-at every step back). A known fault of :func:`slamkit.sim.corrupt_odometry`, held here as a
-strict expected failure until it is fixed (the fix changes the laser corpus's odometry)."""
+not the unsigned decomposition's ``rot1 ≈ π`` (which would turn a 2 % error into 7° heading
+jumps at every step back)."""
 
 from __future__ import annotations
 
@@ -35,12 +34,6 @@ def _back_and_forth(n: int) -> Dataset:
     )
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="corrupt_odometry scales the unsigned rot1 = ±π of a step back (fix: scale "
-    "models.signed_odometry_steps(u)); left for the owners of the laser corpus, whose numbers "
-    "it moves (tests/slam/test_laser_graph_places.py's people test falls below its 0.2 m bound)",
-)
 @pytest.mark.parametrize(("eps_r", "eps_b"), [(0.02, 0.0), (0.0, 0.03)])
 def test_every_step_turns_by_s_times_its_turn(eps_r: float, eps_b: float) -> None:
     data = _back_and_forth(200)

@@ -68,7 +68,12 @@ from slamkit.datasets.stream import Control, Dataset, Event, LaserScan, MotionSp
 from slamkit.errors import InputError
 from slamkit.geometry import wrap_angle
 from slamkit.geometry.pose2 import interpolate_poses
-from slamkit.models import OdometryModel, integrate_odometry, odometry_control
+from slamkit.models import (
+    OdometryModel,
+    integrate_odometry,
+    odometry_control,
+    signed_odometry_steps,
+)
 
 __all__ = [
     "GlitchKind",
@@ -283,7 +288,9 @@ def corrupt_odometry(
             "stamps; expected at least 2"
         )
     true_poses = interpolate_poses(truth.times, truth.poses, stamps)
-    u = odometry_control(true_poses[:-1], true_poses[1:])
+    # Signed steps: a step back (or a jitter while turning in place) keeps both rotations
+    # small, so scaling them scales the turn, not the unsigned form's rot1 = ±π.
+    u = signed_odometry_steps(odometry_control(true_poses[:-1], true_poses[1:]))
     sys_rng, noise_rng, glitch_rng = rng.spawn(3)
 
     eps_r, eps_b = (
