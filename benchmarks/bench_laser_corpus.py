@@ -27,6 +27,7 @@ parallel on the two cores each count only their own work. Needs the real data
 
     python benchmarks/bench_laser_corpus.py [--parts raw corrected buildings]
         [--estimators graph-slam laser-odometry grid-rbpf] [--buildings 20] [--jobs 2]
+        [--building-seeds 2 3]   # each building again under these odometry-error seeds
         [--merge]   # re-run some cases, keep the recorded rows of the others
 """
 
@@ -65,6 +66,7 @@ CORRECTED = (
     "seattle",
 )
 ESTIMATORS = ("graph-slam", "laser-odometry", "grid-rbpf")
+DEFAULT_SEED = 1  # the odometry errors' seed of the corrected logs and of each building's first row
 WRONG_CLOSURE = (0.5, np.radians(5.0))
 """A closure whose measurement disagrees with the true relative pose by more than this
 (metres, radians) is wrong."""
@@ -140,6 +142,8 @@ def wrong_closures(result: Any, data: Dataset) -> tuple[int, int]:
 def run_case(part: str, name: str, estimator: str, seed: int, root: Path | None) -> dict[str, Any]:
     """One corpus row: load, run with the defaults, score."""
     data, glitches = load_case(part, name, seed, root)
+    if seed != DEFAULT_SEED:
+        name = f"{name}/s{seed}"
     cpu = time.process_time()
     try:
         result = run(estimator, data, seed=0)
@@ -172,6 +176,12 @@ def run_case(part: str, name: str, estimator: str, seed: int, root: Path | None)
     if estimator == "graph-slam" and data.truth.poses is not None:
         row["closures"], row["wrong_closures"] = wrong_closures(result, data)
     return row
+
+
+def _log_key(log: str) -> tuple[int, str, int]:
+    """Buildings by number, then odometry seed; logs by name."""
+    head, _, seed = log.partition("/s")
+    return (int(head), "", int(seed or DEFAULT_SEED)) if head.isdigit() else (-1, log, 0)
 
 
 def _cell(row: dict[str, Any], key: str, fmt: str) -> str:
@@ -237,7 +247,14 @@ def main() -> str:
     parser.add_argument("--estimators", nargs="*", default=list(ESTIMATORS))
     parser.add_argument("--logs", nargs="*", default=None, help="only these logs / seeds")
     parser.add_argument("--buildings", type=int, default=20)
-    parser.add_argument("--seed", type=int, default=1, help="the odometry errors' seed")
+    parser.add_argument("--seed", type=int, default=DEFAULT_SEED, help="the odometry errors' seed")
+    parser.add_argument(
+        "--building-seeds",
+        type=int,
+        nargs="*",
+        default=[],
+        help="more odometry-error seeds for the buildings (rows named BUILDING/sSEED)",
+    )
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument(
         "--merge",
@@ -255,10 +272,18 @@ def main() -> str:
         cases += [("buildings", str(s)) for s in range(args.buildings)]
     if args.logs:
         cases = [c for c in cases if c[1] in args.logs]
-    jobs = [(p, n, e) for p, n in cases for e in args.estimators]
+    jobs = [(p, n, e, args.seed) for p, n in cases for e in args.estimators]
+    jobs += [
+        ("buildings", n, e, s)
+        for p, n in cases
+        if p == "buildings"
+        for s in args.building_seeds
+        if s != args.seed
+        for e in args.estimators
+    ]
     wall = time.perf_counter()
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        futures = [pool.submit(run_case, p, n, e, args.seed, root) for p, n, e in jobs]
+        futures = [pool.submit(run_case, p, n, e, s, root) for p, n, e, s in jobs]
         rows = []
         for f in futures:
             rows.append(f.result())
@@ -269,11 +294,12 @@ def main() -> str:
         recorded = json.loads((RESULTS_DIR / "laser_corpus.json").read_text(encoding="utf-8"))
         rows += [r for r in recorded["rows"] if (r["part"], r["log"], r["estimator"]) not in done]
     order = {p: k for k, p in enumerate(("raw", "corrected", "buildings"))}
-    rows.sort(key=lambda r: (order[r["part"]], r["estimator"], r["log"]))
+    rows.sort(key=lambda r: (order[r["part"]], r["estimator"], _log_key(r["log"])))
     total_cpu = sum(r.get("cpu_s", 0.0) for r in rows)
     notes = (
         f"Every estimator with its defaults, seed 0; odometry errors seed {args.seed} "
-        "(OdometryErrorModel defaults) on the corrected logs and the buildings. Raw logs: the "
+        "(OdometryErrorModel defaults) on the corrected logs and the buildings, and on the "
+        "buildings the further seeds of the rows named BUILDING/sSEED. Raw logs: the "
         "published relations; corrected logs and buildings: relations drawn from the true "
         "poses (each scan to the next, to one 2-20 scans on, to one anywhere), ATE SE(2)-"
         f"aligned. CPU is each run's own process time. The whole corpus: {total_cpu:.0f} s of "
