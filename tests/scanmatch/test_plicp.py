@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from slamkit.backend import AVAILABLE, SEAM, Backend
 from slamkit.errors import ConfigError, MatchError, NonFiniteError, ShapeError
 from slamkit.geometry.angles import wrap_angle
 from slamkit.geometry.pose2 import between, compose, inverse_transform_points
@@ -241,15 +242,15 @@ def test_covariance_matches_monte_carlo_scatter():
 
 # --- the compiled kernels (numba) against the NumPy path ---------------------------------------
 
-needs_numba = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
+needs_numba = pytest.mark.skipif(not AVAILABLE, reason="numba is not installed")
 
 
 def _both_paths(reference, current, init, config=None):
     """``plicp`` through the kernels and through NumPy: per path the result or the reason."""
     out = []
     for numpy_only in (False, True):
-        with kernels.use_numpy() if numpy_only else contextlib.nullcontext():
-            assert kernels.enabled() is not numpy_only
+        with SEAM.use(Backend.NUMPY) if numpy_only else contextlib.nullcontext():
+            assert (SEAM.backend is Backend.NUMPY) is numpy_only
             try:
                 out.append(plicp(reference, current, init, config))
             except MatchError as exc:
@@ -438,13 +439,13 @@ def test_root_of_multiplier_is_largest_real_root():
         )
 
 
-def test_use_numpy_switches_the_path_and_restores_it():
-    before = kernels.enabled()
-    assert before is kernels.AVAILABLE
-    with pytest.raises(RuntimeError), kernels.use_numpy():
-        assert kernels.enabled() is False
+def test_the_seam_switches_the_path_and_restores_it():
+    before = SEAM.backend
+    assert before is SEAM.default is (Backend.NUMBA if AVAILABLE else Backend.NUMPY)
+    with pytest.raises(RuntimeError), SEAM.use(Backend.NUMPY):
+        assert SEAM.backend is Backend.NUMPY
         raise RuntimeError
-    assert kernels.enabled() is before
+    assert SEAM.backend is before
 
 
 def test_without_numba_the_numpy_path_gives_the_same_numbers():
@@ -458,11 +459,12 @@ def test_without_numba_the_numpy_path_gives_the_same_numbers():
         import json, sys
         import numpy as np
         sys.modules["numba"] = None  # import numba now raises ImportError
-        from slamkit.scanmatch import kernels, plicp
+        from slamkit.backend import AVAILABLE, SEAM
+        from slamkit.scanmatch import plicp
         ref = np.array({pair.reference.tolist()!r})
         cur = np.array({pair.current.tolist()!r})
         r = plicp(ref, cur, {init.tolist()!r})
-        print(json.dumps([kernels.AVAILABLE, kernels.enabled(), r.pose.tolist(),
+        print(json.dumps([AVAILABLE, SEAM.backend.value, r.pose.tolist(),
                           r.cov.tolist(), r.iterations]))
         """
     )
@@ -471,7 +473,7 @@ def test_without_numba_the_numpy_path_gives_the_same_numbers():
         [sys.executable, "-c", script], capture_output=True, text=True, env=env, check=True
     )
     available, enabled, pose, cov, iterations = json.loads(done.stdout)
-    assert available is False and enabled is False
+    assert available is False and enabled == "numpy"
     assert iterations == here.iterations
     np.testing.assert_allclose(pose, here.pose, rtol=0, atol=1e-9)
     np.testing.assert_allclose(cov, here.cov, rtol=0, atol=1e-9 * np.abs(here.cov).max())

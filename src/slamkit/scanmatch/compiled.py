@@ -1,93 +1,34 @@
-"""numba on or off for the compiled scan-matching kernels, and the small compiled numeric
-helpers they share (:mod:`slamkit.scanmatch.kernels`, :mod:`~slamkit.scanmatch.
-kernel_covariance`).
+"""The small compiled numeric helpers of the scan matchers (order statistics, the IEEE
+remainder, a 3×3 eigenvalue) and the correlative search's bounded gather-sums and
+depth-first branch and bound (:mod:`slamkit.scanmatch.correlative`, its NumPy forms there).
 
-numba is optional (``pip install slamkit[fast]``): :data:`AVAILABLE` says whether it could
-be imported; :func:`jit` compiles with ``numba.njit(cache=True)`` when it is there and leaves
-a function as it is otherwise; :func:`use_numpy` turns the compiled path off inside a block.
+Compiled with :func:`slamkit.backend.jit` (numba when it is installed); the matchers reach
+them through the kernel pairs declared on :data:`slamkit.backend.SEAM`, never directly
+choosing between them and NumPy.
 """
 
 from __future__ import annotations
 
-import importlib
 import math
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
-from typing import Any, TypeVar, cast
 
 import numpy as np
 
 from slamkit._validation import FloatArray
+from slamkit.backend import jit
 
 __all__ = [
-    "AVAILABLE",
     "BELOW",
     "NO_BOUND",
     "bounded_counts",
     "bounded_sums",
     "depth_first",
-    "enabled",
     "group_bounds",
     "ieee_remainder",
-    "jit",
     "median_in_place",
     "min_eigenvalue_sym3",
     "select_kth",
     "stamp_max",
-    "use_numpy",
-    "writable",
 ]
-
-F = TypeVar("F", bound=Callable[..., Any])
-
-
-def _import_numba() -> Any:
-    try:  # numba is optional: without it the NumPy twins run
-        return importlib.import_module("numba")
-    except ImportError:  # pragma: no cover - depends on the environment
-        return None
-
-
-_NUMBA = _import_numba()
-AVAILABLE: bool = _NUMBA is not None
-"""numba could be imported: the matchers use the compiled kernels (unless :func:`use_numpy`)."""
-
-
-def jit(fn: F) -> F:
-    """``numba.njit(cache=True)`` when numba is installed, else ``fn`` itself (the matchers
-    never call it then, but the module stays importable)."""
-    if _NUMBA is None:  # pragma: no cover - depends on the environment
-        return fn
-    return cast(F, _NUMBA.njit(cache=True)(fn))
-
-
-_STATE = {"enabled": AVAILABLE}
-
-
-def enabled() -> bool:
-    """True when the matchers use these compiled kernels: numba is installed and no
-    :func:`use_numpy` block is active."""
-    return _STATE["enabled"]
-
-
-@contextmanager
-def use_numpy() -> Iterator[None]:
-    """Run the NumPy twins instead of the kernels inside the block (for tests and benchmarks
-    comparing the two; not thread-safe)."""
-    before = _STATE["enabled"]
-    _STATE["enabled"] = False
-    try:
-        yield
-    finally:
-        _STATE["enabled"] = before
-
-
-def writable(a: np.ndarray) -> np.ndarray:
-    """``a`` itself when C-contiguous and writable, else a copy that is: the kernels are
-    compiled once per array type, and a read-only or strided array is another type."""
-    if a.flags.c_contiguous and a.flags.writeable:
-        return a
-    return np.array(a, order="C")
 
 
 @jit

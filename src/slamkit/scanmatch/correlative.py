@@ -65,6 +65,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray, as_array
+from slamkit.backend import SEAM
 from slamkit.errors import ConfigError, InputError, MatchError
 from slamkit.geometry.angles import wrap_angle_float
 from slamkit.maps import FREE_THRESHOLD, OCCUPIED_THRESHOLD, OccupancyGrid
@@ -343,17 +344,35 @@ def _score(
     sum stops early). Gathered in chunks."""
     table = lookup.tables[level]
     assert table[0, 0] == lookup.floor  # the padding's corner: compiled reads outside
+    return _node_scores(lookup, level, cells, k, i, j, threshold)
+
+
+def _scores_compiled(
+    lookup: LookupGrid, level: int, cells: Cells, k: IntArray, i: IntArray, j: IntArray,
+    threshold: float,
+) -> FloatArray:  # fmt: skip
+    """:func:`_score` by the compiled bounded sums (in integer quanta when the grid has
+    them: exact), each stopped once below ``threshold``."""
     rows, cols = cells
     out = np.empty(k.size)
-    if compiled.enabled():
-        if lookup.counts is not None:  # the same sums in integer quanta (exact)
-            compiled.bounded_counts(
-                lookup.counts[level], rows, cols, k, i, j, _quanta_below(threshold),
-                QUANTUM, out,
-            )  # fmt: skip
-        else:
-            compiled.bounded_sums(table, rows, cols, k, i, j, threshold, out)
-        return out
+    if lookup.counts is not None:  # the same sums in integer quanta (exact)
+        compiled.bounded_counts(
+            lookup.counts[level], rows, cols, k, i, j, _quanta_below(threshold), QUANTUM, out,
+        )  # fmt: skip
+    else:
+        compiled.bounded_sums(lookup.tables[level], rows, cols, k, i, j, threshold, out)
+    return out
+
+
+def _scores_numpy(
+    lookup: LookupGrid, level: int, cells: Cells, k: IntArray, i: IntArray, j: IntArray,
+    threshold: float,
+) -> FloatArray:  # fmt: skip
+    """:func:`_score` by NumPy gathers in chunks: the path without numba and the oracle
+    of :func:`_scores_compiled` (to the last bit: the scores are exact sums)."""
+    table = lookup.tables[level]
+    rows, cols = cells
+    out = np.empty(k.size)
     step = max(1, _CHUNK_ELEMENTS // max(rows.shape[1], 1))
     for a in range(0, k.size, step):
         b = min(a + step, k.size)
@@ -363,6 +382,10 @@ def _score(
         np.sum(values, axis=1, out=out[a:b])
     out[out < threshold] = -np.inf
     return out
+
+
+_node_scores = SEAM.pair(compiled=_scores_compiled, oracle=_scores_numpy)
+"""Node scores, compiled under numba, else in NumPy (:mod:`slamkit.backend`)."""
 
 
 def _quanta_below(threshold: float) -> int:
@@ -472,8 +495,29 @@ def _branch_and_bound(
     best = start or _Optimum(
         mid, 0, 0, float(_score(lookup, 0, cells, zero + mid, zero, zero)[0]), 0
     )
-    if cut and compiled.enabled() and lookup.counts is not None:
+    return _top_search(lookup, cells, n, starts, best, cut, box)
+
+
+def _search_compiled(
+    lookup: LookupGrid, cells: Cells, n: int, starts: IntArray, best: _Optimum, cut: bool,
+    box: Box,
+) -> _Optimum:  # fmt: skip
+    """The search below the top level: :func:`_depth_first` on integer tables when the sums
+    may be cut short, else :func:`_search_rounds`."""
+    if cut and lookup.counts is not None:
         return _depth_first(lookup, cells, n, starts, best, box)
+    return _search_rounds(lookup, cells, n, starts, best, cut, box)
+
+
+def _search_rounds(
+    lookup: LookupGrid, cells: Cells, n: int, starts: IntArray, best: _Optimum, cut: bool,
+    box: Box,
+) -> _Optimum:  # fmt: skip
+    """The search below the top level in NumPy: the top nodes in rounds, best bounds first,
+    each round's blocks searched down to the leaves (the path without numba and the oracle
+    of :func:`_search_compiled`: the same optimum)."""
+    level = lookup.levels - 1
+    n_k = cells[0].shape[0]
     ks, ii, jj = np.meshgrid(np.arange(n_k), starts, starts, indexing="ij")
     k, i, j = ks.ravel(), ii.ravel(), jj.ravel()
     bound = _score(lookup, level, cells, k, i, j, best.score if cut else -np.inf)
@@ -494,6 +538,11 @@ def _branch_and_bound(
         if found is not None and _better(found, best):
             best = found
     return _Optimum(best.k, best.i, best.j, best.score, lookup.levels)
+
+
+_top_search = SEAM.pair(compiled=_search_compiled, oracle=_search_rounds)
+"""The search from the top level, depth first compiled under numba, else in rounds
+(:mod:`slamkit.backend`)."""
 
 
 def _depth_first(

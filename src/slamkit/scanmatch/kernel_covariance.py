@@ -1,5 +1,6 @@
-"""The compiled covariance of point-to-line ICP: the twin of
-:func:`slamkit.scanmatch.covariance.point_to_line_covariance` (see there for the maths)."""
+"""The compiled covariance of point-to-line ICP; its NumPy oracle is
+:func:`slamkit.scanmatch.covariance.point_to_line_covariance_numpy` (see there for the
+maths)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,8 @@ import math
 import numpy as np
 
 from slamkit._validation import FloatArray
-from slamkit.scanmatch.compiled import jit, median_in_place
+from slamkit.backend import jit
+from slamkit.scanmatch.compiled import median_in_place
 
 __all__ = ["point_to_line_cov"]
 
@@ -24,7 +26,7 @@ def point_to_line_cov(
     pose: FloatArray,
     kept: np.ndarray,
 ) -> FloatArray:
-    """Compiled twin of :func:`slamkit.scanmatch.covariance.point_to_line_covariance` (same
+    """Compiled form of :func:`slamkit.scanmatch.covariance.point_to_line_covariance` (same
     arguments, same formulas; see there)."""
     m = current.shape[0]
     tx, ty, th = pose[0], pose[1], pose[2]
