@@ -216,26 +216,21 @@ def depth_first(
     m = bounds.shape[0]
     # A pop pushes at most `size` (a group) or four (a node) entries, a level lower.
     cap = m + size + 4 * levels
-    s_level = np.empty(cap, np.int64)
-    s_k = np.empty(cap, np.int64)
-    s_i = np.empty(cap, np.int64)
-    s_j = np.empty(cap, np.int64)
-    s_bound = np.empty(cap, np.int64)
+    stack = (np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap, np.int64),
+             np.empty(cap, np.int64), np.empty(cap, np.int64))  # fmt: skip
+    s_level, s_k, s_i, s_j, s_bound = stack
     top = 0
     for u in np.argsort(bounds, kind="mergesort"):  # ascending: the best ends on top
         if bounds[u] < best[0]:
             continue
         g, offset = divmod(u, n_s * n_s)
-        s_level[top] = levels  # a group: one above the top level
-        s_k[top] = g
-        s_i[top] = starts[offset // n_s]
-        s_j[top] = starts[offset % n_s]
-        s_bound[top] = bounds[u]
-        top += 1
+        # a group: one above the top level
+        top = _push(stack, top, (levels, g, starts[offset // n_s], starts[offset % n_s]), bounds[u])
     c_k = np.empty(size, np.int64)
     c_i = np.empty(size, np.int64)
     c_j = np.empty(size, np.int64)
     c_bound = np.empty(size, np.int64)
+    children = (c_k, c_i, c_j, c_bound)
     while top > 0:
         top -= 1
         level, k, i, j, bound = s_level[top], s_k[top], s_i[top], s_j[top], s_bound[top]
@@ -265,21 +260,37 @@ def depth_first(
             total = _bounded_total(flat, n_rows, n_cols, rows, cols, ck, ci, cj, best[0])
             if total < best[0]:
                 continue
-            # insertion into the children sorted by bound, ascending
-            p = found
-            while p > 0 and c_bound[p - 1] > total:
-                c_k[p], c_i[p], c_j[p] = c_k[p - 1], c_i[p - 1], c_j[p - 1]
-                c_bound[p] = c_bound[p - 1]
-                p -= 1
-            c_k[p], c_i[p], c_j[p], c_bound[p] = ck, ci, cj, total
+            _insert_sorted(children, found, ck, ci, cj, total)
             found += 1
         for a in range(found):
-            s_level[top] = level - 1
-            s_k[top] = c_k[a]
-            s_i[top] = c_i[a]
-            s_j[top] = c_j[a]
-            s_bound[top] = c_bound[a]
-            top += 1
+            top = _push(stack, top, (level - 1, c_k[a], c_i[a], c_j[a]), c_bound[a])
+
+
+@jit
+def _push(
+    stack: tuple[np.ndarray, ...], top: int, entry: tuple[int, int, int, int], bound: int
+) -> int:
+    """Put ``entry = (level, k, i, j)`` with its ``bound`` on :func:`depth_first`'s stack
+    (five arrays: level, k, i, j, bound) at ``top``; return the new top."""
+    s_level, s_k, s_i, s_j, s_bound = stack
+    s_level[top], s_k[top], s_i[top], s_j[top] = entry
+    s_bound[top] = bound
+    return top + 1
+
+
+@jit
+def _insert_sorted(
+    children: tuple[np.ndarray, ...], found: int, k: int, i: int, j: int, total: np.int64
+) -> None:
+    """Insert child ``(k, i, j)`` of bound ``total`` into the first ``found`` entries of
+    ``children = (k, i, j, bound)``, kept sorted by bound, ascending (after its equals)."""
+    c_k, c_i, c_j, c_bound = children
+    p = found
+    while p > 0 and c_bound[p - 1] > total:
+        c_k[p], c_i[p], c_j[p] = c_k[p - 1], c_i[p - 1], c_j[p - 1]
+        c_bound[p] = c_bound[p - 1]
+        p -= 1
+    c_k[p], c_i[p], c_j[p], c_bound[p] = k, i, j, total
 
 
 @jit
