@@ -78,15 +78,12 @@ from slamkit.scanmatch.lookup import (
     lookup_from_log_table,
     lookup_from_points,
 )
+from slamkit.scanmatch.node_scores import Cells, level_values, node_scores, quanta_below
 from slamkit.scanmatch.result import MatchResult, require_points
 
 __all__ = ["CorrelativeConfig", "CorrelativeReference", "correlative_match", "correlative_rival"]
 
 IntArray = NDArray[np.int64]
-
-# Gathers run in chunks of at most this many (node, point) pairs: 2^18 int64 indices and
-# float64 values are 2 MB each, small enough to stay in cache-friendly temporaries.
-_CHUNK_ELEMENTS = 1 << 18
 
 # The NumPy branch and bound searches the top nodes in rounds of at most these many (best
 # bounds first), then all that are left: on loop-closure searches of Intel, 1.3x faster
@@ -313,10 +310,6 @@ def _prepare(
     return CorrelativeReference.from_points(reference, cfg), cfg
 
 
-Cells = tuple[IntArray, IntArray]
-"""Row and column indices ``(K, N)`` of every point at every rotation."""
-
-
 def _rotated_cells(
     lookup: LookupGrid, points: FloatArray, xy: FloatArray, thetas: FloatArray
 ) -> Cells:
@@ -341,68 +334,10 @@ def _score(
     """``sum_p T[row_p + i_u, col_p + j_u]`` at rotation ``k_u`` for every node ``u``, with
     ``T = lookup.tables[level]`` and reads outside it ``lookup.floor``; ``-inf`` for a node
     whose sum is below ``threshold`` (which needs every table value ``<= 0``: the compiled
-    sum stops early). Gathered in chunks."""
+    sum stops early): :func:`~slamkit.scanmatch.node_scores.node_scores`."""
     table = lookup.tables[level]
     assert table[0, 0] == lookup.floor  # the padding's corner: compiled reads outside
-    return _node_scores(lookup, level, cells, k, i, j, threshold)
-
-
-def _scores_compiled(
-    lookup: LookupGrid, level: int, cells: Cells, k: IntArray, i: IntArray, j: IntArray,
-    threshold: float,
-) -> FloatArray:  # fmt: skip
-    """:func:`_score` by the compiled bounded sums (in integer quanta when the grid has
-    them: exact), each stopped once below ``threshold``."""
-    rows, cols = cells
-    out = np.empty(k.size)
-    if lookup.counts is not None:  # the same sums in integer quanta (exact)
-        compiled.bounded_counts(
-            lookup.counts[level], rows, cols, k, i, j, _quanta_below(threshold), QUANTUM, out,
-        )  # fmt: skip
-    else:
-        compiled.bounded_sums(lookup.tables[level], rows, cols, k, i, j, threshold, out)
-    return out
-
-
-def _scores_numpy(
-    lookup: LookupGrid, level: int, cells: Cells, k: IntArray, i: IntArray, j: IntArray,
-    threshold: float,
-) -> FloatArray:  # fmt: skip
-    """:func:`_score` by NumPy gathers in chunks: the path without numba and the oracle
-    of :func:`_scores_compiled` (to the last bit: the scores are exact sums)."""
-    table = lookup.tables[level]
-    rows, cols = cells
-    out = np.empty(k.size)
-    step = max(1, _CHUNK_ELEMENTS // max(rows.shape[1], 1))
-    for a in range(0, k.size, step):
-        b = min(a + step, k.size)
-        values = _level_values(
-            table, lookup.floor, rows[k[a:b]] + i[a:b, None], cols[k[a:b]] + j[a:b, None]
-        )
-        np.sum(values, axis=1, out=out[a:b])
-    out[out < threshold] = -np.inf
-    return out
-
-
-_node_scores = SEAM.pair(compiled=_scores_compiled, oracle=_scores_numpy)
-"""Node scores, compiled under numba, else in NumPy (:mod:`slamkit.backend`)."""
-
-
-def _quanta_below(threshold: float) -> int:
-    """The integer ``c`` with ``n < c ⇔ n · QUANTUM < threshold`` for every integer ``n``:
-    ``ceil(threshold / QUANTUM)``, clamped far beyond any sum for infinite thresholds."""
-    if math.isinf(threshold):
-        return -(2**62) if threshold < 0 else 2**62
-    return math.ceil(threshold / QUANTUM)
-
-
-def _level_values(table: FloatArray, floor: float, rows: IntArray, cols: IntArray) -> FloatArray:
-    """``table`` at cells ``(rows, cols)`` (any shape), ``floor`` outside it."""
-    inside = (rows >= 0) & (rows < table.shape[0]) & (cols >= 0) & (cols < table.shape[1])
-    out: FloatArray = np.where(
-        inside, table[np.where(inside, rows, 0), np.where(inside, cols, 0)], floor
-    )
-    return out
+    return node_scores(lookup, level, cells, k, i, j, threshold)
 
 
 def _first_best(scores: FloatArray, k: IntArray, i: IntArray, j: IntArray) -> int:
@@ -556,7 +491,7 @@ def _depth_first(
     assert lookup.counts is not None
     level = lookup.levels - 1
     near = _near_groups(cells)
-    threshold = _quanta_below(start.score)  # the score's own count: a multiple of QUANTUM
+    threshold = quanta_below(start.score)  # the score's own count: a multiple of QUANTUM
     bounds = np.empty(near.size * starts.size**2, dtype=np.int64)
     compiled.group_bounds(
         lookup.dilated_counts(level, _SPREAD), _SPREAD, near, rows, cols, starts, starts,
@@ -792,7 +727,7 @@ def correlative_match(
             wrap_angle_float(float(thetas[opt.k])),
         ]
     )
-    values = _level_values(
+    values = level_values(
         lookup.tables[0], lookup.floor, cells[0][opt.k] + opt.i, cells[1][opt.k] + opt.j
     )
     n_pts = pts.shape[0]
