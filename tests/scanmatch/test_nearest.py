@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 
 from slamkit.backend import AVAILABLE, SEAM, Backend
 from slamkit.errors import MatchError
-from slamkit.scanmatch.nearest import CellIndex, GridShape, NearestGrid, grid_nearest
+from slamkit.scanmatch.nearest import NearestGrid, grid_nearest
 from slamkit.scanmatch.normal_icp import NormalCloud, normal_icp
 from slamkit.scanmatch.normal_terms import pair_terms, pair_terms_numpy
 from slamkit.scanmatch.point_map import PointMap
@@ -63,9 +63,7 @@ def test_ties_are_left_to_the_kdtree() -> None:
     grid = _grid(ring, 0.7)
     if AVAILABLE:
         out = np.empty(3, dtype=np.intp)
-        cells = CellIndex(grid.xs, grid.ys, grid.index, grid.start)
-        shape = GridShape(grid.origin[0], grid.origin[1], grid.cell, *grid.shape)
-        tied = grid_nearest(cells, shape, x, 2.0, out)
+        tied = grid_nearest(grid.cells, grid.geometry, x, 2.0, out)
         assert tied and list(out) == [-1, 4, 0]
     np.testing.assert_array_equal(grid.query(x, 2.0), _kdtree(ring, x, 2.0))
 

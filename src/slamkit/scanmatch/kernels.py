@@ -76,6 +76,7 @@ __all__ = [
     "root_of_multiplier",
     "scan_tables",
     "select_kth",
+    "settings_from_array",
     "small_step",
     "step_sums",
     "trim",
@@ -411,9 +412,11 @@ def _min_eigenvalue(
 
 
 class PlicpSettings(NamedTuple):
-    """:class:`~slamkit.scanmatch.plicp.PlIcpConfig`'s numbers as the compiled loop reads
-    them (built by :func:`slamkit.scanmatch.plicp.plicp`; the fields are the config's, with
-    ``max_distance`` its ``max_correspondence_distance``)."""
+    """:class:`~slamkit.scanmatch.plicp.PlIcpConfig`'s numbers as the compiled steps read
+    them (the fields are the config's, with ``max_distance`` its
+    ``max_correspondence_distance``). :func:`plicp_loop` takes them as one float array in
+    this order (:func:`settings_from_array`): numba types an array argument in a fraction of
+    the time it takes for a tuple of nine numbers."""
 
     max_iterations: int
     max_distance: float
@@ -453,6 +456,16 @@ class Pairs(NamedTuple):
     err: FloatArray
     work: FloatArray
     nrm: FloatArray
+
+
+@jit
+def settings_from_array(values: FloatArray) -> PlicpSettings:
+    """The :class:`PlicpSettings` of ``values (9,)``, the fields in order (the two counts
+    as whole numbers)."""
+    return PlicpSettings(
+        int(values[0]), values[1], values[2], values[3], values[4], int(values[5]),
+        values[6], values[7], values[8],
+    )  # fmt: skip
 
 
 @jit
@@ -678,17 +691,27 @@ def line_covariance(
 
 @jit
 def plicp_loop(
-    ref: ReferenceArrays, q: FloatArray, initial: FloatArray, settings: PlicpSettings
+    points: FloatArray,
+    segment_normals: FloatArray,
+    joined: np.ndarray,
+    has_normal: np.ndarray,
+    normals: FloatArray,
+    q: FloatArray,
+    initial: FloatArray,
+    settings_values: FloatArray,
 ) -> tuple[int, int, int, FloatArray, FloatArray, float]:
     """The loop of :func:`slamkit.scanmatch.plicp.plicp` after validation, and the covariance,
-    compiled: from ``initial = (x, y, θ)``, each iteration :func:`correspond`, :func:`trim`,
-    the degeneracy check at the start, :func:`repeated`, :func:`closed_form_step`,
-    :func:`small_step`; then the check at the solution and :func:`line_covariance`. Returns
-    ``(status, iterations, n_kept, pose (3,), cov (3, 3), eigenvalue)`` with ``status`` one
-    of the codes of this module, ``n_kept`` the pairs kept at the last iteration and
-    ``eigenvalue`` the smallest normalised eigenvalue behind a ``DEGENERATE_*`` status (else
-    0). ``pose`` (θ wrapped) and ``cov`` are the solution when ``status == CONVERGED``
-    (``cov`` is zero otherwise)."""
+    compiled, on the reference's arrays (:class:`ReferenceArrays`) and the settings'
+    numbers (:func:`settings_from_array`): from ``initial = (x, y, θ)``, each iteration
+    :func:`correspond`, :func:`trim`, the degeneracy check at the start, :func:`repeated`,
+    :func:`closed_form_step`, :func:`small_step`; then the check at the solution and
+    :func:`line_covariance`. Returns ``(status, iterations, n_kept, pose (3,), cov (3, 3),
+    eigenvalue)`` with ``status`` one of the codes of this module, ``n_kept`` the pairs kept
+    at the last iteration and ``eigenvalue`` the smallest normalised eigenvalue behind a
+    ``DEGENERATE_*`` status (else 0). ``pose`` (θ wrapped) and ``cov`` are the solution
+    when ``status == CONVERGED`` (``cov`` is zero otherwise)."""
+    ref = ReferenceArrays(points, segment_normals, joined, has_normal, normals)
+    settings = settings_from_array(settings_values)
     n = q.shape[0]
     index = _bearing_index(ref.points)
     pairs = new_pairs(n, ref.points.shape[0])

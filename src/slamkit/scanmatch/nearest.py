@@ -43,7 +43,6 @@ oracle).
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -84,26 +83,16 @@ def kdtree_nearest(tree: cKDTree, x: FloatArray, bound: float) -> NDArray[np.int
     return np.asarray(j, dtype=np.intp)
 
 
-class CellIndex(NamedTuple):
-    """The grid's points sorted by cell: ``xs``, ``ys (M,)`` their coordinates, ``order
-    (M,)`` each one's reference index, ``start (cells + 1,)`` where each cell's run starts
-    (row-major cells)."""
+CellIndex = tuple[FloatArray, FloatArray, NDArray[np.intp], NDArray[np.intp]]
+"""The grid's points sorted by cell, as :func:`grid_nearest` takes them: ``(xs, ys, order,
+start)``, ``xs``, ``ys (M,)`` their coordinates, ``order (M,)`` each one's reference
+index, ``start (cells + 1,)`` where each cell's run starts (row-major cells). A plain tuple,
+not a named one: numba types a named tuple argument about 1 µs slower per call, and the
+grid is queried once per ICP iteration."""
 
-    xs: FloatArray
-    ys: FloatArray
-    order: NDArray[np.intp]
-    start: NDArray[np.intp]
-
-
-class GridShape(NamedTuple):
-    """The grid's geometry: the lower-left corner ``(ox, oy)`` [m], the cell side [m] and
-    the cells per axis."""
-
-    ox: float
-    oy: float
-    cell: float
-    n_rows: int
-    n_cols: int
+GridShape = tuple[tuple[float, float, float], tuple[int, int]]
+"""The grid's geometry, as :func:`grid_nearest` takes it: ``((ox, oy, cell), (n_rows,
+n_cols))``, the lower-left corner and the cell side [m], the cells per axis."""
 
 
 class NearestGrid:
@@ -138,6 +127,11 @@ class NearestGrid:
         counts = np.bincount(key, minlength=self.shape[0] * self.shape[1])
         self.start = np.zeros(counts.size + 1, dtype=np.intp)
         np.cumsum(counts, out=self.start[1:])
+        self.cells: CellIndex = (self.xs, self.ys, self.index, self.start)
+        self.geometry: GridShape = (
+            (float(self.origin[0]), float(self.origin[1]), self.cell),
+            self.shape,
+        )
 
     def kdtree(self) -> cKDTree:
         """The KD-tree over the points (built on first use), as
@@ -166,11 +160,7 @@ def grid_query(grid: NearestGrid, x: FloatArray, bound: float) -> NDArray[np.int
     if grid.n_points == 0:
         return kdtree_query(grid, x, bound)
     out = np.empty(x.shape[0], dtype=np.intp)
-    cells = CellIndex(grid.xs, grid.ys, grid.index, grid.start)
-    shape = GridShape(
-        float(grid.origin[0]), float(grid.origin[1]), grid.cell, grid.shape[0], grid.shape[1]
-    )
-    tied = grid_nearest(cells, shape, writable(x), bound, out)
+    tied = grid_nearest(grid.cells, grid.geometry, writable(x), bound, out)
     if tied:  # equal least distances: the KD-tree's choice among them
         rows = np.flatnonzero(out < 0)
         out[rows] = kdtree_nearest(grid.kdtree(), x[rows], bound)
@@ -185,7 +175,7 @@ def grid_nearest(
     ``len(index)`` when none is strictly within ``bound``, ``-1`` when two or more are at
     the same least distance (returns whether any is)."""
     xs, ys, index, start = cells
-    ox, oy, cell, n_rows, n_cols = shape
+    (ox, oy, cell), (n_rows, n_cols) = shape
     m = index.shape[0]
     limit = bound * bound  # squared, as the KD-tree compares
     scale = cell + abs(ox) + abs(oy)

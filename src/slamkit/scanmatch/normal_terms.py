@@ -38,7 +38,6 @@ from slamkit.scanmatch.covariance import line_jacobian, median
 __all__ = [
     "PairTerms",
     "TermBuffers",
-    "TermSettings",
     "normal_terms_kernel",
     "pair_terms",
     "pair_terms_numpy",
@@ -60,25 +59,11 @@ class PairTerms(NamedTuple):
     sigma: float
 
 
-class TermSettings(NamedTuple):
-    """The numbers :func:`normal_terms_kernel` reads besides the arrays."""
-
-    huber_k: float
-    noise_floor: float
-    min_pairs: int
-
-
-class TermBuffers(NamedTuple):
-    """The outputs :func:`normal_terms_kernel` fills, ``K`` rows each (the first ``n``
-    used): ``stamp (K,)``, ``cur (K, 2)``, ``e (K,)``, ``jac (K, 3)``, ``w (K,)``, ``jw (K,
-    3)`` (:class:`PairTerms`)."""
-
-    stamp: NDArray[np.intp]
-    cur: FloatArray
-    e: FloatArray
-    jac: FloatArray
-    w: FloatArray
-    jw: FloatArray
+TermBuffers = tuple[NDArray[np.intp], FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
+"""The outputs :func:`normal_terms_kernel` fills, ``K`` rows each (the first ``n`` used):
+``(stamp (K,), cur (K, 2), e (K,), jac (K, 3), w (K,), jw (K, 3))`` (:class:`PairTerms`).
+A plain tuple, not a named one: numba types a named tuple argument about 1 µs slower per
+call, and the kernel runs once per ICP iteration."""
 
 
 def pair_terms(
@@ -114,19 +99,19 @@ def _pair_terms_compiled(
     """:func:`pair_terms` through :func:`normal_terms_kernel`."""
     c, s = np.cos(theta), np.sin(theta)  # as line_jacobian takes them
     k = q.shape[0]
-    out = TermBuffers(
+    out: TermBuffers = (
         np.empty(k, dtype=np.intp), np.empty((k, 2)), np.empty(k), np.empty((k, 3)),
         np.empty(k), np.empty((k, 3)),
     )  # fmt: skip
     n, sigma = normal_terms_kernel(
         writable(moved), writable(q), writable(j), writable(points), writable(normals),
-        (float(c), float(s)), TermSettings(float(huber_k), float(noise_floor), int(min_pairs)),
-        out,
+        (float(c), float(s), float(huber_k), float(noise_floor)), int(min_pairs), out,
     )  # fmt: skip
-    stamp = out.stamp.tobytes()
-    if n < min_pairs:
-        return PairTerms(n, stamp, out.cur[:0], out.e[:0], out.jac[:0], out.w[:0], out.jw[:0], 0.0)
-    return PairTerms(n, stamp, out.cur[:n], out.e[:n], out.jac[:n], out.w[:n], out.jw[:n], sigma)
+    stamp, cur, e, jac, w, jw = out
+    m = n if n >= min_pairs else 0
+    return PairTerms(
+        n, stamp.tobytes(), cur[:m], e[:m], jac[:m], w[:m], jw[:m], sigma if m else 0.0
+    )
 
 
 def pair_terms_numpy(
@@ -164,15 +149,15 @@ def normal_terms_kernel(
     j: NDArray[np.intp],
     points: FloatArray,
     normals: FloatArray,
-    rotation: tuple[float, float],
-    settings: TermSettings,
+    numbers: tuple[float, float, float, float],
+    min_pairs: int,
     out: TermBuffers,
 ) -> tuple[int, float]:
-    """The kernel of :func:`pair_terms` (``rotation = (cos θ, sin θ)``): fills the first
-    ``n`` rows of ``out`` (``n`` the pairs) and returns ``(n, σ̂)`` (σ̂ = 0 and only
-    ``out.stamp`` filled when ``n < settings.min_pairs``). ``out.w`` holds ``|e|`` for the
-    median until the weights replace it."""
-    c, s = rotation
+    """The kernel of :func:`pair_terms` (``numbers = (cos θ, sin θ, huber_k,
+    noise_floor)``): fills the first ``n`` rows of ``out`` (``n`` the pairs) and returns
+    ``(n, σ̂)`` (σ̂ = 0 and only the stamp filled when ``n < min_pairs``). The weights'
+    buffer holds ``|e|`` for the median until the weights replace it."""
+    c, s, huber_k, noise_floor = numbers
     stamp, cur, e, jac, w, jw = out
     m = points.shape[0]
     n = 0
@@ -182,7 +167,7 @@ def normal_terms_kernel(
             n += 1
         else:
             stamp[i] = -1
-    if n < settings.min_pairs:
+    if n < min_pairs:
         return n, 0.0
     u = 0
     for i in range(j.shape[0]):
@@ -201,8 +186,8 @@ def normal_terms_kernel(
         jac[u, 2] = nx * (-s * qx - c * qy) + ny * (c * qx - s * qy)
         w[u] = abs(ek)
         u += 1
-    sigma = max(1.4826 * median_in_place(w[:n]), settings.noise_floor)
-    hs = settings.huber_k * sigma
+    sigma = max(1.4826 * median_in_place(w[:n]), noise_floor)
+    hs = huber_k * sigma
     for u in range(n):
         wk = min(1.0, hs / max(abs(e[u]), 1e-300))
         w[u] = wk

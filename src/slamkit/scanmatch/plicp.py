@@ -50,6 +50,7 @@ stops on a step below both tolerances.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -340,25 +341,30 @@ def _min_eigenvalue_numpy(
 def _loop_compiled(
     ref: PreparedScan, q: FloatArray, pose: FloatArray, cfg: PlIcpConfig, joined: NDArray[np.bool_]
 ) -> _LoopOutput:
-    """:func:`plicp_loop_numpy`'s arguments packed for :func:`slamkit.scanmatch.kernels.
-    plicp_loop`."""
-    arrays = kernels.ReferenceArrays(
-        ref.points, ref.segment_normals, joined, ref.has_normal, ref.normals
-    )
-    settings = kernels.PlicpSettings(
-        int(cfg.max_iterations),
-        float(cfg.max_correspondence_distance),
-        float(cfg.outlier_multiplier),
-        float(cfg.outlier_floor),
-        float(cfg.trim_fraction),
-        int(cfg.min_correspondences),
-        float(cfg.translation_tolerance),
-        float(cfg.rotation_tolerance),
-        float(cfg.min_eigenvalue),
-    )
+    """:func:`plicp_loop_numpy`'s arguments as :func:`slamkit.scanmatch.kernels.plicp_loop`
+    takes them."""
     initial = np.array([float(pose[0]), float(pose[1]), float(pose[2])])
-    out: _LoopOutput = kernels.plicp_loop(arrays, writable(q), initial, settings)
+    out: _LoopOutput = kernels.plicp_loop(
+        ref.points, ref.segment_normals, joined, ref.has_normal, ref.normals, writable(q),
+        initial, _settings_values(cfg),
+    )  # fmt: skip
     return out
+
+
+@functools.lru_cache(maxsize=64)
+def _settings_values(cfg: PlIcpConfig) -> FloatArray:
+    """``cfg``'s numbers in the order of :class:`slamkit.scanmatch.kernels.PlicpSettings`
+    (read-only; one array per config)."""
+    values = np.array(
+        [
+            cfg.max_iterations, cfg.max_correspondence_distance, cfg.outlier_multiplier,
+            cfg.outlier_floor, cfg.trim_fraction, cfg.min_correspondences,
+            cfg.translation_tolerance, cfg.rotation_tolerance, cfg.min_eigenvalue,
+        ],
+        dtype=np.float64,
+    )  # fmt: skip
+    values.flags.writeable = False
+    return values
 
 
 _plicp_loop = SEAM.pair(compiled=_loop_compiled, oracle=plicp_loop_numpy)
