@@ -20,8 +20,8 @@ are timed):
 * ``plicp``, ``icp``: :func:`slamkit.scanmatch.plicp`, :func:`slamkit.scanmatch.icp` with
   their default configs (1 m correspondence distance); ``plicp`` runs the compiled kernels of
   :mod:`slamkit.scanmatch.kernels` when numba is installed;
-* ``plicp-numpy``: the same PLICP with the kernels switched off
-  (:func:`slamkit.scanmatch.kernels.use_numpy`): the NumPy path, cKDTree queries, the same
+* ``plicp-numpy``: the same PLICP on the NumPy backend
+  (``slamkit.backend.SEAM.use(Backend.NUMPY)``): the NumPy path, cKDTree queries, the same
   answers to rounding;
 * ``numpy-icp``: point-to-point ICP written here in plain NumPy, brute-force nearest
   neighbours (a full distance matrix per iteration), the same trimming (best 90% within 1 m)
@@ -65,12 +65,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from _common import Record, write_results
+from slamkit.backend import AVAILABLE, SEAM, Backend
 from slamkit.datasets import find_data_root, load_dataset
 from slamkit.datasets.stream import LaserScan
 from slamkit.errors import DataNotFoundError, MatchError
 from slamkit.geometry.pose2 import between, compose
 from slamkit.runtime import blas_thread_counts
-from slamkit.scanmatch import correlative_match, icp, kernels, plicp, scan_points
+from slamkit.scanmatch import correlative_match, icp, plicp, scan_points
 from slamkit.scanmatch.normal_icp import normal_icp
 from slamkit.scanmatch.point_map import PointMap
 from slamkit.sim import random_scan_pairs, rooms_world
@@ -194,7 +195,7 @@ def open3d_p2plane(ref: np.ndarray, cur: np.ndarray, init: Pose) -> Pose:
 
 
 def plicp_numpy(ref: np.ndarray, cur: np.ndarray, init: Pose) -> Pose:
-    with kernels.use_numpy():
+    with SEAM.use(Backend.NUMPY):
         return plicp(ref, cur, init).pose
 
 
@@ -357,12 +358,13 @@ _COMPILE_SCRIPT = textwrap.dedent(
     """
     import time
     import numpy as np
-    from slamkit.scanmatch import kernels, plicp
+    from slamkit.backend import SEAM
+    from slamkit.scanmatch import plicp
     a = np.linspace(-np.pi / 2, np.pi / 2, 180)
     ref = np.column_stack([4.0 * np.cos(a), 3.0 + 0.5 * np.sin(3 * a)])
     start = time.perf_counter()
     plicp(ref, ref, (0.05, -0.03, 0.02))
-    print(kernels.enabled(), time.perf_counter() - start)
+    print(SEAM.backend.value, time.perf_counter() - start)
     """
 )
 
@@ -381,7 +383,7 @@ def _compile_seconds() -> tuple[float, float]:
                 env=env,
                 check=True,
             ).stdout.split()
-            times.append(float(out[1]) if out[0] == "True" else float("nan"))
+            times.append(float(out[1]) if out[0] == "numba" else float("nan"))
     return times[0], times[1]
 
 
@@ -395,7 +397,7 @@ def _warm_up() -> float:
 
 
 def main(n_sim: int = 50, real_step: int = 2, repeats: int = 7, seed: int = 0) -> str:
-    cold, cached = _compile_seconds() if kernels.AVAILABLE else (float("nan"), float("nan"))
+    cold, cached = _compile_seconds() if AVAILABLE else (float("nan"), float("nan"))
     warm_up = _warm_up()
     load_before = os.getloadavg()[0]
     header = [
@@ -425,7 +427,7 @@ def main(n_sim: int = 50, real_step: int = 2, repeats: int = 7, seed: int = 0) -
         k: os.environ.get(k, "unset")
         for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")
     }
-    if kernels.AVAILABLE:
+    if AVAILABLE:
         numba_note = (
             f"numba {_version('numba')}: plicp runs the compiled kernels, plicp-numpy the NumPy "
             f"path. Compiling every kernel in a fresh process with an empty cache took "

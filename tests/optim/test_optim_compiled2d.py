@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from slamkit.backend import AVAILABLE
 from slamkit.errors import SlamkitError
 from slamkit.geometry import pose2
 from slamkit.io.posegraph import read_graph
@@ -20,7 +21,7 @@ from slamkit.optim import (
     RobustConfig,
     optimize,
 )
-from slamkit.optim.compiled2d import AVAILABLE, compiled_window
+from slamkit.optim.compiled2d import compiled_window
 from slamkit.optim.incremental import (
     IncrementalConfig,
     IncrementalOptimizer,

@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from slamkit.backend import AVAILABLE, SEAM, Backend
 from slamkit.errors import ConfigError, InputError, MatchError
 from slamkit.geometry.pose2 import between, inverse_transform_points
 from slamkit.maps import SegmentMap
@@ -267,7 +268,7 @@ def test_max_tables_bound_every_block() -> None:
         np.testing.assert_array_equal(lk.tables[h], expect)
 
 
-@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba is not installed")
+@pytest.mark.skipif(not AVAILABLE, reason="numba is not installed")
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_compiled_scores_equal_numpy_to_the_last_bit(seed: int) -> None:
     # Quantised tables make every score an exact sum: the compiled loop (sequential) and
@@ -281,13 +282,13 @@ def test_compiled_scores_equal_numpy_to_the_last_bit(seed: int) -> None:
     cfg = CorrelativeConfig(window_xy=0.6, window_theta=math.radians(10), max_flatness=None)
     reference = CorrelativeReference.from_points(ref, cfg)
     fast = correlative_match(reference, cur, initial, cfg)
-    with compiled.use_numpy():
+    with SEAM.use(Backend.NUMPY):
         slow = correlative_match(reference, cur, initial, cfg)
     assert np.array_equal(fast.pose, slow.pose) and fast.score == slow.score
     assert np.array_equal(fast.cov, slow.cov)
 
 
-@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba is not installed")
+@pytest.mark.skipif(not AVAILABLE, reason="numba is not installed")
 @pytest.mark.parametrize("seed", [3, 4, 5])
 def test_depth_first_search_equals_the_rounds_in_a_loop_closure_window(seed: int) -> None:
     # A loop closure's window (metres, tens of degrees, five levels): the compiled search
@@ -302,13 +303,13 @@ def test_depth_first_search_equals_the_rounds_in_a_loop_closure_window(seed: int
     cfg = CorrelativeConfig(window_xy=1.5, window_theta=math.radians(25), levels=5)
     reference = CorrelativeReference.from_points(ref, cfg)
     fast = correlative_match(reference, cur, np.zeros(3), cfg)
-    with compiled.use_numpy():
+    with SEAM.use(Backend.NUMPY):
         slow = correlative_match(reference, cur, np.zeros(3), cfg)
     assert np.array_equal(fast.pose, slow.pose) and fast.score == slow.score
     assert np.abs(fast.pose - between(pose, moved)).max() < 0.1  # it found the motion
 
 
-@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba is not installed")
+@pytest.mark.skipif(not AVAILABLE, reason="numba is not installed")
 def test_integer_scores_equal_float_scores_to_the_last_bit() -> None:
     # The tables in quanta (int16) summed as integers give the float sums exactly, with the
     # same -inf below a threshold, inside and outside the table.
@@ -370,7 +371,7 @@ def test_dilated_counts_are_the_window_max() -> None:
         assert dilated[0, 0] == counts[0, 0] and lk.dilated_counts(level, spread) is dilated
 
 
-@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba is not installed")
+@pytest.mark.skipif(not AVAILABLE, reason="numba is not installed")
 def test_rotation_group_bounds_hold_for_every_member() -> None:
     rng = np.random.default_rng(5)
     world = rooms_world()
@@ -416,7 +417,7 @@ def test_rotation_group_bounds_hold_for_every_member() -> None:
     assert (bound == compiled.BELOW).any() and (np.abs(bound) < compiled.NO_BOUND).any()
 
 
-@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba is not installed")
+@pytest.mark.skipif(not AVAILABLE, reason="numba is not installed")
 @pytest.mark.parametrize(("resolution", "sigma"), [(0.05, 0.05), (0.03, 0.05), (0.05, 0.02)])
 def test_stamped_tables_equal_the_distance_transforms(resolution: float, sigma: float) -> None:
     # Compiled, the table is stamped around each marked cell from the quantised values by
@@ -425,7 +426,7 @@ def test_stamped_tables_equal_the_distance_transforms(resolution: float, sigma: 
     pts = _points(rooms_world(), np.array([*SPOTS[3], 1.0]), rng)
     cfg = CorrelativeConfig(resolution=resolution, sigma=sigma)
     fast = CorrelativeReference.from_points(pts, cfg).lookup
-    with compiled.use_numpy():
+    with SEAM.use(Backend.NUMPY):
         slow = CorrelativeReference.from_points(pts, cfg).lookup
     assert fast.counts is not None and slow.counts is not None
     for a, b in zip(fast.counts, slow.counts, strict=True):

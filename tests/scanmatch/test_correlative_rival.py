@@ -9,12 +9,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from slamkit.backend import SEAM, Backend
 from slamkit.geometry.pose2 import between
 from slamkit.models.laser import LaserScanner
 from slamkit.scanmatch import (
     CorrelativeConfig,
     CorrelativeReference,
-    compiled,
     correlative_match,
     scan_points,
 )
@@ -75,7 +75,7 @@ def test_the_rival_is_the_same_from_every_search(seed: int) -> None:
     best = correlative_match(reference, cur, np.zeros(3), small)
     args = (reference, cur, np.zeros(3), best, 0.2, 0.8)
     fast = correlative_rival(*args, small)
-    with compiled.use_numpy():
+    with SEAM.use(Backend.NUMPY):
         slow = correlative_rival(*args, small)
     exhaustive = correlative_rival(*args, replace(small, search="exhaustive"))
     assert fast is not None and fast == slow == exhaustive

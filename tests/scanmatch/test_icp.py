@@ -6,10 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from slamkit.backend import SEAM, Backend
 from slamkit.errors import ConfigError, MatchError, NonFiniteError, ShapeError
 from slamkit.geometry.angles import wrap_angle
 from slamkit.geometry.pose2 import between, compose, inverse_transform_points
-from slamkit.scanmatch import IcpConfig, icp, kernels, prepare_scan
+from slamkit.scanmatch import IcpConfig, icp, prepare_scan
 from slamkit.scanmatch.covariance import estimate_normals, neighbour_table
 from slamkit.scanmatch.icp import point_to_point_step
 from slamkit.sim import corridor_world, random_scan_pairs, rooms_world, simulated_scan_pair
@@ -114,7 +115,7 @@ def test_the_kd_tree_of_a_prepared_scan_is_built_once_and_finds_the_nearest_poin
 def test_prepared_scan_tables_are_the_same_with_and_without_the_kernels():
     pair = _pairs(1, seed=6)[0]
     a = prepare_scan(pair.reference)
-    with kernels.use_numpy():
+    with SEAM.use(Backend.NUMPY):
         b = prepare_scan(pair.reference)
     np.testing.assert_array_equal(a.has_normal, b.has_normal)
     for field in ("normals", "gaps", "segment_normals"):

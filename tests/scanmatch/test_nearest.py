@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from slamkit.backend import AVAILABLE, SEAM, Backend
 from slamkit.errors import MatchError
-from slamkit.scanmatch import compiled
 from slamkit.scanmatch.nearest import NearestGrid, grid_nearest
 from slamkit.scanmatch.normal_icp import NormalCloud, normal_icp
 from slamkit.scanmatch.normal_terms import pair_terms, pair_terms_numpy
@@ -17,7 +17,7 @@ from slamkit.sim import rooms_world
 from slamkit.sim.scans import random_scan_pairs
 
 BEAMS = np.deg2rad(np.arange(-90.0, 90.5, 1.0))
-needs_numba = pytest.mark.skipif(not compiled.AVAILABLE, reason="numba is not installed")
+needs_numba = pytest.mark.skipif(not AVAILABLE, reason="numba is not installed")
 
 
 def _kdtree(points: np.ndarray, x: np.ndarray, bound: float) -> np.ndarray:
@@ -61,12 +61,9 @@ def test_ties_are_left_to_the_kdtree() -> None:
     ring = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0], [3.0, 3.0]])
     x = np.array([[0.0, 0.0], [2.9, 3.0], [0.5, 0.0]])
     grid = _grid(ring, 0.7)
-    if compiled.enabled():
+    if AVAILABLE:
         out = np.empty(3, dtype=np.intp)
-        tied = grid_nearest(
-            grid.xs, grid.ys, grid.index, grid.start, grid.origin[0], grid.origin[1],
-            grid.cell, grid.shape[0], grid.shape[1], x, 2.0, out,
-        )  # fmt: skip
+        tied = grid_nearest(grid.cells, grid.geometry, x, 2.0, out)
         assert tied and list(out) == [-1, 4, 0]
     np.testing.assert_array_equal(grid.query(x, 2.0), _kdtree(ring, x, 2.0))
 
@@ -93,7 +90,7 @@ def test_the_numpy_path_is_the_kdtree() -> None:
     x = rng.uniform(0.0, 5.0, (300, 2))
     grid = _grid(points, 0.5)
     fast = grid.query(x, 0.3)
-    with compiled.use_numpy():
+    with SEAM.use(Backend.NUMPY):
         slow = grid.query(x, 0.3)
     np.testing.assert_array_equal(fast, slow)
     np.testing.assert_array_equal(slow, _kdtree(points, x, 0.3))
@@ -144,7 +141,7 @@ def test_normal_icp_is_the_same_with_and_without_the_kernels() -> None:
                 cloud = NormalCloud.build(points, normals)  # no grid carried over
                 try:
                     if numpy_only:
-                        with compiled.use_numpy():
+                        with SEAM.use(Backend.NUMPY):
                             r = normal_icp(cloud, pair.current, start, prior_information=lam)
                     else:
                         r = normal_icp(cloud, pair.current, start, prior_information=lam)

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from slamkit.backend import AVAILABLE, SEAM, Backend
 from slamkit.errors import ConfigError, MatchError, NonFiniteError, ShapeError
 from slamkit.geometry.angles import wrap_angle
 from slamkit.geometry.pose2 import between, compose, inverse_transform_points
@@ -241,15 +242,15 @@ def test_covariance_matches_monte_carlo_scatter():
 
 # --- the compiled kernels (numba) against the NumPy path ---------------------------------------
 
-needs_numba = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
+needs_numba = pytest.mark.skipif(not AVAILABLE, reason="numba is not installed")
 
 
 def _both_paths(reference, current, init, config=None):
     """``plicp`` through the kernels and through NumPy: per path the result or the reason."""
     out = []
     for numpy_only in (False, True):
-        with kernels.use_numpy() if numpy_only else contextlib.nullcontext():
-            assert kernels.enabled() is not numpy_only
+        with SEAM.use(Backend.NUMPY) if numpy_only else contextlib.nullcontext():
+            assert (SEAM.backend is Backend.NUMPY) is numpy_only
             try:
                 out.append(plicp(reference, current, init, config))
             except MatchError as exc:
@@ -363,20 +364,47 @@ def test_nearest_points_hand_computed_ties_and_bound():
 
 
 @needs_numba
-def test_scan_tables_equal_the_numpy_tables():
-    from slamkit.scanmatch.covariance import scan_order_normals
+def test_scan_tables_equal_the_numpy_oracle():
+    from slamkit.scanmatch.icp import scan_tables_numpy
 
     for pair in _pairs(5, seed=16):
         pts = pair.reference
         normals, ok, gaps, seg = kernels.scan_tables(pts, 7, 0.5)
-        normals_np, ok_np = scan_order_normals(pts, 7, 0.5)
+        normals_np, ok_np, gaps_np, seg_np = scan_tables_numpy(pts, 7, 0.5)
         np.testing.assert_array_equal(ok, ok_np)
+        assert ok.sum() > 150  # most of the 180 beams have a normal
         np.testing.assert_allclose(normals, normals_np, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(gaps, gaps_np, rtol=1e-15)
+        np.testing.assert_allclose(seg, seg_np, rtol=0, atol=1e-15)
         tangent = np.diff(pts, axis=0)
-        np.testing.assert_allclose(gaps, np.hypot(tangent[:, 0], tangent[:, 1]), rtol=1e-15)
         np.testing.assert_allclose(
             seg, np.column_stack([-tangent[:, 1], tangent[:, 0]]) / gaps[:, None], atol=1e-15
         )
+
+
+@needs_numba
+def test_compiled_covariance_equals_the_numpy_oracle():
+    """The compiled covariance against :func:`point_to_line_covariance_numpy` on the pairs
+    of a solved match (each current point with its nearest reference point and the next),
+    some dropped from H: to 1e-9 of the largest entry (BLAS sums in another order)."""
+    from slamkit.scanmatch.covariance import point_to_line_covariance_numpy
+    from slamkit.scanmatch.kernel_covariance import point_to_line_cov
+
+    rng = np.random.default_rng(22)
+    for pair in _pairs(5, seed=23):
+        ref = pair.reference
+        pose = plicp(ref, pair.current, pair.T_ref_cur).pose
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        moved = pair.current @ np.array([[c, s], [-s, c]]) + pose[:2]
+        _, j1 = cKDTree(ref).query(moved)
+        j2 = np.where(j1 + 1 < len(ref), j1 + 1, j1 - 1)
+        kept = rng.random(len(j1)) < 0.9
+        args = (pair.current, ref[j1], ref[j2], j1, j2, len(ref), pose, kept)
+        compiled_cov = point_to_line_cov(*args)
+        numpy_cov = point_to_line_covariance_numpy(*args)
+        scale = np.abs(numpy_cov).max()
+        assert 0.0 < scale < 0.1  # a confident match: metres² and radians² well below 1
+        np.testing.assert_allclose(compiled_cov, numpy_cov, rtol=0, atol=1e-9 * scale)
 
 
 @needs_numba
@@ -438,13 +466,13 @@ def test_root_of_multiplier_is_largest_real_root():
         )
 
 
-def test_use_numpy_switches_the_path_and_restores_it():
-    before = kernels.enabled()
-    assert before is kernels.AVAILABLE
-    with pytest.raises(RuntimeError), kernels.use_numpy():
-        assert kernels.enabled() is False
+def test_the_seam_switches_the_path_and_restores_it():
+    before = SEAM.backend
+    assert before is SEAM.default is (Backend.NUMBA if AVAILABLE else Backend.NUMPY)
+    with pytest.raises(RuntimeError), SEAM.use(Backend.NUMPY):
+        assert SEAM.backend is Backend.NUMPY
         raise RuntimeError
-    assert kernels.enabled() is before
+    assert SEAM.backend is before
 
 
 def test_without_numba_the_numpy_path_gives_the_same_numbers():
@@ -458,11 +486,12 @@ def test_without_numba_the_numpy_path_gives_the_same_numbers():
         import json, sys
         import numpy as np
         sys.modules["numba"] = None  # import numba now raises ImportError
-        from slamkit.scanmatch import kernels, plicp
+        from slamkit.backend import AVAILABLE, SEAM
+        from slamkit.scanmatch import plicp
         ref = np.array({pair.reference.tolist()!r})
         cur = np.array({pair.current.tolist()!r})
         r = plicp(ref, cur, {init.tolist()!r})
-        print(json.dumps([kernels.AVAILABLE, kernels.enabled(), r.pose.tolist(),
+        print(json.dumps([AVAILABLE, SEAM.backend.value, r.pose.tolist(),
                           r.cov.tolist(), r.iterations]))
         """
     )
@@ -471,7 +500,7 @@ def test_without_numba_the_numpy_path_gives_the_same_numbers():
         [sys.executable, "-c", script], capture_output=True, text=True, env=env, check=True
     )
     available, enabled, pose, cov, iterations = json.loads(done.stdout)
-    assert available is False and enabled is False
+    assert available is False and enabled == "numpy"
     assert iterations == here.iterations
     np.testing.assert_allclose(pose, here.pose, rtol=0, atol=1e-9)
     np.testing.assert_allclose(cov, here.cov, rtol=0, atol=1e-9 * np.abs(here.cov).max())

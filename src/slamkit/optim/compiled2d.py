@@ -39,13 +39,13 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from slamkit.backend import SEAM, jit
 from slamkit.geometry.angles import wrap_angle_float
 from slamkit.optim.data import FloatArray, IntArray
 from slamkit.optim.linearization import Linearization
 from slamkit.optim.sparse import NormalPattern
-from slamkit.scanmatch.compiled import AVAILABLE, jit
 
-__all__ = ["AVAILABLE", "CompiledSe2", "CompiledWindow", "compiled_se2", "compiled_window"]
+__all__ = ["CompiledSe2", "CompiledWindow", "compiled_se2", "compiled_window"]
 
 
 class GraphProblem(Protocol):
@@ -73,7 +73,8 @@ class GraphProblem(Protocol):
 
 
 _jit = jit
-"""The scan matchers' ``numba.njit(cache=True)`` (a plain function without numba)."""
+"""slamkit's ``numba.njit(cache=True)`` (:func:`slamkit.backend.jit`; a plain function
+without numba)."""
 
 
 _SMALL_ANGLE = 1e-3  # below it the SE(2) exponential takes its Taylor series (as geometry)
@@ -355,8 +356,14 @@ class CompiledSe2:
 
 
 def compiled_se2(problem: GraphProblem) -> CompiledSe2 | None:
-    """The compiled pass for ``problem`` when it applies (module docstring), else ``None``."""
-    if not AVAILABLE or problem.dim != 2 or problem.objective != "g2o":
+    """The compiled pass for ``problem`` when it applies (module docstring), else ``None``
+    (always ``None`` on the NumPy backend, :mod:`slamkit.backend`)."""
+    return _se2_pass(problem)
+
+
+def _se2_pass_compiled(problem: GraphProblem) -> CompiledSe2 | None:
+    """The compiled pass when the graph is one it covers (module docstring)."""
+    if problem.dim != 2 or problem.objective != "g2o":
         return None
     if problem.landmark_ids.shape[0] or len(problem.blocks) != 1:
         return None
@@ -366,6 +373,11 @@ def compiled_se2(problem: GraphProblem) -> CompiledSe2 | None:
     if blk.kind != "se2" or blk.b is None or blk.sqrt_info is None or blk.batch_first:
         return None
     return CompiledSe2(problem)
+
+
+def _numpy_path(problem: GraphProblem) -> CompiledSe2 | None:
+    """No compiled pass: the problem's own NumPy linearisation runs."""
+    return None
 
 
 @_jit
@@ -551,5 +563,15 @@ class CompiledWindow:
 
 
 def compiled_window() -> CompiledWindow | None:
-    """The compiled window step, or ``None`` without numba."""
-    return CompiledWindow() if AVAILABLE else None
+    """The compiled window step, or ``None`` on the NumPy backend (without numba;
+    :mod:`slamkit.backend`)."""
+    return _window_step()
+
+
+def _no_window() -> CompiledWindow | None:
+    """No compiled window step: the optimiser's NumPy step runs."""
+    return None
+
+
+_se2_pass = SEAM.pair(compiled=_se2_pass_compiled, oracle=_numpy_path)
+_window_step = SEAM.pair(compiled=CompiledWindow, oracle=_no_window)

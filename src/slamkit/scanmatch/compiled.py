@@ -1,93 +1,34 @@
-"""numba on or off for the compiled scan-matching kernels, and the small compiled numeric
-helpers they share (:mod:`slamkit.scanmatch.kernels`, :mod:`~slamkit.scanmatch.
-kernel_covariance`).
+"""The small compiled numeric helpers of the scan matchers (order statistics, the IEEE
+remainder, a 3×3 eigenvalue) and the correlative search's bounded gather-sums and
+depth-first branch and bound (:mod:`slamkit.scanmatch.correlative`, its NumPy forms there).
 
-numba is optional (``pip install slamkit[fast]``): :data:`AVAILABLE` says whether it could
-be imported; :func:`jit` compiles with ``numba.njit(cache=True)`` when it is there and leaves
-a function as it is otherwise; :func:`use_numpy` turns the compiled path off inside a block.
+Compiled with :func:`slamkit.backend.jit` (numba when it is installed); the matchers reach
+them through the kernel pairs declared on :data:`slamkit.backend.SEAM`, never directly
+choosing between them and NumPy.
 """
 
 from __future__ import annotations
 
-import importlib
 import math
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
-from typing import Any, TypeVar, cast
 
 import numpy as np
 
 from slamkit._validation import FloatArray
+from slamkit.backend import jit
 
 __all__ = [
-    "AVAILABLE",
     "BELOW",
     "NO_BOUND",
     "bounded_counts",
     "bounded_sums",
     "depth_first",
-    "enabled",
     "group_bounds",
     "ieee_remainder",
-    "jit",
     "median_in_place",
     "min_eigenvalue_sym3",
     "select_kth",
     "stamp_max",
-    "use_numpy",
-    "writable",
 ]
-
-F = TypeVar("F", bound=Callable[..., Any])
-
-
-def _import_numba() -> Any:
-    try:  # numba is optional: without it the NumPy twins run
-        return importlib.import_module("numba")
-    except ImportError:  # pragma: no cover - depends on the environment
-        return None
-
-
-_NUMBA = _import_numba()
-AVAILABLE: bool = _NUMBA is not None
-"""numba could be imported: the matchers use the compiled kernels (unless :func:`use_numpy`)."""
-
-
-def jit(fn: F) -> F:
-    """``numba.njit(cache=True)`` when numba is installed, else ``fn`` itself (the matchers
-    never call it then, but the module stays importable)."""
-    if _NUMBA is None:  # pragma: no cover - depends on the environment
-        return fn
-    return cast(F, _NUMBA.njit(cache=True)(fn))
-
-
-_STATE = {"enabled": AVAILABLE}
-
-
-def enabled() -> bool:
-    """True when the matchers use these compiled kernels: numba is installed and no
-    :func:`use_numpy` block is active."""
-    return _STATE["enabled"]
-
-
-@contextmanager
-def use_numpy() -> Iterator[None]:
-    """Run the NumPy twins instead of the kernels inside the block (for tests and benchmarks
-    comparing the two; not thread-safe)."""
-    before = _STATE["enabled"]
-    _STATE["enabled"] = False
-    try:
-        yield
-    finally:
-        _STATE["enabled"] = before
-
-
-def writable(a: np.ndarray) -> np.ndarray:
-    """``a`` itself when C-contiguous and writable, else a copy that is: the kernels are
-    compiled once per array type, and a read-only or strided array is another type."""
-    if a.flags.c_contiguous and a.flags.writeable:
-        return a
-    return np.array(a, order="C")
 
 
 @jit
@@ -275,26 +216,21 @@ def depth_first(
     m = bounds.shape[0]
     # A pop pushes at most `size` (a group) or four (a node) entries, a level lower.
     cap = m + size + 4 * levels
-    s_level = np.empty(cap, np.int64)
-    s_k = np.empty(cap, np.int64)
-    s_i = np.empty(cap, np.int64)
-    s_j = np.empty(cap, np.int64)
-    s_bound = np.empty(cap, np.int64)
+    stack = (np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap, np.int64),
+             np.empty(cap, np.int64), np.empty(cap, np.int64))  # fmt: skip
+    s_level, s_k, s_i, s_j, s_bound = stack
     top = 0
     for u in np.argsort(bounds, kind="mergesort"):  # ascending: the best ends on top
         if bounds[u] < best[0]:
             continue
         g, offset = divmod(u, n_s * n_s)
-        s_level[top] = levels  # a group: one above the top level
-        s_k[top] = g
-        s_i[top] = starts[offset // n_s]
-        s_j[top] = starts[offset % n_s]
-        s_bound[top] = bounds[u]
-        top += 1
+        # a group: one above the top level
+        top = _push(stack, top, (levels, g, starts[offset // n_s], starts[offset % n_s]), bounds[u])
     c_k = np.empty(size, np.int64)
     c_i = np.empty(size, np.int64)
     c_j = np.empty(size, np.int64)
     c_bound = np.empty(size, np.int64)
+    children = (c_k, c_i, c_j, c_bound)
     while top > 0:
         top -= 1
         level, k, i, j, bound = s_level[top], s_k[top], s_i[top], s_j[top], s_bound[top]
@@ -324,21 +260,37 @@ def depth_first(
             total = _bounded_total(flat, n_rows, n_cols, rows, cols, ck, ci, cj, best[0])
             if total < best[0]:
                 continue
-            # insertion into the children sorted by bound, ascending
-            p = found
-            while p > 0 and c_bound[p - 1] > total:
-                c_k[p], c_i[p], c_j[p] = c_k[p - 1], c_i[p - 1], c_j[p - 1]
-                c_bound[p] = c_bound[p - 1]
-                p -= 1
-            c_k[p], c_i[p], c_j[p], c_bound[p] = ck, ci, cj, total
+            _insert_sorted(children, found, ck, ci, cj, total)
             found += 1
         for a in range(found):
-            s_level[top] = level - 1
-            s_k[top] = c_k[a]
-            s_i[top] = c_i[a]
-            s_j[top] = c_j[a]
-            s_bound[top] = c_bound[a]
-            top += 1
+            top = _push(stack, top, (level - 1, c_k[a], c_i[a], c_j[a]), c_bound[a])
+
+
+@jit
+def _push(
+    stack: tuple[np.ndarray, ...], top: int, entry: tuple[int, int, int, int], bound: int
+) -> int:
+    """Put ``entry = (level, k, i, j)`` with its ``bound`` on :func:`depth_first`'s stack
+    (five arrays: level, k, i, j, bound) at ``top``; return the new top."""
+    s_level, s_k, s_i, s_j, s_bound = stack
+    s_level[top], s_k[top], s_i[top], s_j[top] = entry
+    s_bound[top] = bound
+    return top + 1
+
+
+@jit
+def _insert_sorted(
+    children: tuple[np.ndarray, ...], found: int, k: int, i: int, j: int, total: np.int64
+) -> None:
+    """Insert child ``(k, i, j)`` of bound ``total`` into the first ``found`` entries of
+    ``children = (k, i, j, bound)``, kept sorted by bound, ascending (after its equals)."""
+    c_k, c_i, c_j, c_bound = children
+    p = found
+    while p > 0 and c_bound[p - 1] > total:
+        c_k[p], c_i[p], c_j[p] = c_k[p - 1], c_i[p - 1], c_j[p - 1]
+        c_bound[p] = c_bound[p - 1]
+        p -= 1
+    c_k[p], c_i[p], c_j[p], c_bound[p] = k, i, j, total
 
 
 @jit

@@ -65,6 +65,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray, as_array
+from slamkit.backend import SEAM
 from slamkit.errors import ConfigError, InputError, MatchError
 from slamkit.geometry.angles import wrap_angle_float
 from slamkit.maps import FREE_THRESHOLD, OCCUPIED_THRESHOLD, OccupancyGrid
@@ -77,15 +78,12 @@ from slamkit.scanmatch.lookup import (
     lookup_from_log_table,
     lookup_from_points,
 )
+from slamkit.scanmatch.node_scores import Cells, level_values, node_scores, quanta_below
 from slamkit.scanmatch.result import MatchResult, require_points
 
 __all__ = ["CorrelativeConfig", "CorrelativeReference", "correlative_match", "correlative_rival"]
 
 IntArray = NDArray[np.int64]
-
-# Gathers run in chunks of at most this many (node, point) pairs: 2^18 int64 indices and
-# float64 values are 2 MB each, small enough to stay in cache-friendly temporaries.
-_CHUNK_ELEMENTS = 1 << 18
 
 # The NumPy branch and bound searches the top nodes in rounds of at most these many (best
 # bounds first), then all that are left: on loop-closure searches of Intel, 1.3x faster
@@ -312,10 +310,6 @@ def _prepare(
     return CorrelativeReference.from_points(reference, cfg), cfg
 
 
-Cells = tuple[IntArray, IntArray]
-"""Row and column indices ``(K, N)`` of every point at every rotation."""
-
-
 def _rotated_cells(
     lookup: LookupGrid, points: FloatArray, xy: FloatArray, thetas: FloatArray
 ) -> Cells:
@@ -340,46 +334,10 @@ def _score(
     """``sum_p T[row_p + i_u, col_p + j_u]`` at rotation ``k_u`` for every node ``u``, with
     ``T = lookup.tables[level]`` and reads outside it ``lookup.floor``; ``-inf`` for a node
     whose sum is below ``threshold`` (which needs every table value ``<= 0``: the compiled
-    sum stops early). Gathered in chunks."""
+    sum stops early): :func:`~slamkit.scanmatch.node_scores.node_scores`."""
     table = lookup.tables[level]
     assert table[0, 0] == lookup.floor  # the padding's corner: compiled reads outside
-    rows, cols = cells
-    out = np.empty(k.size)
-    if compiled.enabled():
-        if lookup.counts is not None:  # the same sums in integer quanta (exact)
-            compiled.bounded_counts(
-                lookup.counts[level], rows, cols, k, i, j, _quanta_below(threshold),
-                QUANTUM, out,
-            )  # fmt: skip
-        else:
-            compiled.bounded_sums(table, rows, cols, k, i, j, threshold, out)
-        return out
-    step = max(1, _CHUNK_ELEMENTS // max(rows.shape[1], 1))
-    for a in range(0, k.size, step):
-        b = min(a + step, k.size)
-        values = _level_values(
-            table, lookup.floor, rows[k[a:b]] + i[a:b, None], cols[k[a:b]] + j[a:b, None]
-        )
-        np.sum(values, axis=1, out=out[a:b])
-    out[out < threshold] = -np.inf
-    return out
-
-
-def _quanta_below(threshold: float) -> int:
-    """The integer ``c`` with ``n < c ⇔ n · QUANTUM < threshold`` for every integer ``n``:
-    ``ceil(threshold / QUANTUM)``, clamped far beyond any sum for infinite thresholds."""
-    if math.isinf(threshold):
-        return -(2**62) if threshold < 0 else 2**62
-    return math.ceil(threshold / QUANTUM)
-
-
-def _level_values(table: FloatArray, floor: float, rows: IntArray, cols: IntArray) -> FloatArray:
-    """``table`` at cells ``(rows, cols)`` (any shape), ``floor`` outside it."""
-    inside = (rows >= 0) & (rows < table.shape[0]) & (cols >= 0) & (cols < table.shape[1])
-    out: FloatArray = np.where(
-        inside, table[np.where(inside, rows, 0), np.where(inside, cols, 0)], floor
-    )
-    return out
+    return node_scores(lookup, level, cells, k, i, j, threshold)
 
 
 def _first_best(scores: FloatArray, k: IntArray, i: IntArray, j: IntArray) -> int:
@@ -472,8 +430,29 @@ def _branch_and_bound(
     best = start or _Optimum(
         mid, 0, 0, float(_score(lookup, 0, cells, zero + mid, zero, zero)[0]), 0
     )
-    if cut and compiled.enabled() and lookup.counts is not None:
+    return _top_search(lookup, cells, n, starts, best, cut, box)
+
+
+def _search_compiled(
+    lookup: LookupGrid, cells: Cells, n: int, starts: IntArray, best: _Optimum, cut: bool,
+    box: Box,
+) -> _Optimum:  # fmt: skip
+    """The search below the top level: :func:`_depth_first` on integer tables when the sums
+    may be cut short, else :func:`_search_rounds`."""
+    if cut and lookup.counts is not None:
         return _depth_first(lookup, cells, n, starts, best, box)
+    return _search_rounds(lookup, cells, n, starts, best, cut, box)
+
+
+def _search_rounds(
+    lookup: LookupGrid, cells: Cells, n: int, starts: IntArray, best: _Optimum, cut: bool,
+    box: Box,
+) -> _Optimum:  # fmt: skip
+    """The search below the top level in NumPy: the top nodes in rounds, best bounds first,
+    each round's blocks searched down to the leaves (the path without numba and the oracle
+    of :func:`_search_compiled`: the same optimum)."""
+    level = lookup.levels - 1
+    n_k = cells[0].shape[0]
     ks, ii, jj = np.meshgrid(np.arange(n_k), starts, starts, indexing="ij")
     k, i, j = ks.ravel(), ii.ravel(), jj.ravel()
     bound = _score(lookup, level, cells, k, i, j, best.score if cut else -np.inf)
@@ -496,6 +475,11 @@ def _branch_and_bound(
     return _Optimum(best.k, best.i, best.j, best.score, lookup.levels)
 
 
+_top_search = SEAM.pair(compiled=_search_compiled, oracle=_search_rounds)
+"""The search from the top level, depth first compiled under numba, else in rounds
+(:mod:`slamkit.backend`)."""
+
+
 def _depth_first(
     lookup: LookupGrid, cells: Cells, n: int, starts: IntArray, start: _Optimum, box: Box
 ) -> _Optimum:
@@ -507,7 +491,7 @@ def _depth_first(
     assert lookup.counts is not None
     level = lookup.levels - 1
     near = _near_groups(cells)
-    threshold = _quanta_below(start.score)  # the score's own count: a multiple of QUANTUM
+    threshold = quanta_below(start.score)  # the score's own count: a multiple of QUANTUM
     bounds = np.empty(near.size * starts.size**2, dtype=np.int64)
     compiled.group_bounds(
         lookup.dilated_counts(level, _SPREAD), _SPREAD, near, rows, cols, starts, starts,
@@ -743,7 +727,7 @@ def correlative_match(
             wrap_angle_float(float(thetas[opt.k])),
         ]
     )
-    values = _level_values(
+    values = level_values(
         lookup.tables[0], lookup.floor, cells[0][opt.k] + opt.i, cells[1][opt.k] + opt.j
     )
     n_pts = pts.shape[0]

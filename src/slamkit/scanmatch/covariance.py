@@ -44,8 +44,9 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from slamkit._validation import FloatArray
+from slamkit.backend import SEAM
 from slamkit.errors import MatchError
-from slamkit.scanmatch import kernels
+from slamkit.scanmatch.kernel_covariance import point_to_line_cov
 
 __all__ = [
     "degenerate_error",
@@ -56,6 +57,7 @@ __all__ = [
     "normal_distance_covariance",
     "normalised_min_eigenvalue",
     "point_to_line_covariance",
+    "point_to_line_covariance_numpy",
     "require_constrained",
     "scan_order_normals",
 ]
@@ -244,12 +246,25 @@ def point_to_line_covariance(
     of ``|N(0, 1)|`` is 1/1.4826): robust to the outliers, and not shrunk by the trimming,
     which removes the largest residuals. ``H`` and ``∂g/∂z`` sum over the kept ones only.
     The correspondences are taken as fixed. With numba installed this runs compiled
-    (:func:`slamkit.scanmatch.kernels.point_to_line_cov`, the same numbers to rounding).
+    (:func:`slamkit.scanmatch.kernel_covariance.point_to_line_cov`), else
+    :func:`point_to_line_covariance_numpy`: the same numbers to rounding.
     """
-    if kernels.enabled():
-        return kernels.point_to_line_cov(
-            current, ref_a, ref_b, index_a, index_b, n_reference, pose, kept
-        )
+    return _covariance(current, ref_a, ref_b, index_a, index_b, n_reference, pose, kept)
+
+
+def point_to_line_covariance_numpy(
+    current: FloatArray,
+    ref_a: FloatArray,
+    ref_b: FloatArray,
+    index_a: NDArray[np.intp],
+    index_b: NDArray[np.intp],
+    n_reference: int,
+    pose: FloatArray,
+    kept: NDArray[np.bool_],
+) -> FloatArray:
+    """:func:`point_to_line_covariance` in NumPy: the path without numba and the oracle of
+    the compiled :func:`~slamkit.scanmatch.kernel_covariance.point_to_line_cov` (to 1e-9 of
+    the largest entry: BLAS sums the products in another order)."""
     tx, ty, th = float(pose[0]), float(pose[1]), float(pose[2])
     rot_t, drot_t = _rotations(th)
     both_rot = np.hstack([rot_t, drot_t])  # one product gives R q and R' q
@@ -293,6 +308,10 @@ def point_to_line_covariance(
         [np.bincount(index, flat[:, c], minlength=n_reference) for c in range(3)]
     )  # Σ over the correspondences that share a reference point
     return _sandwich(h, g_cur.T @ g_cur + g_ref.T @ g_ref, sigma * sigma)
+
+
+_covariance = SEAM.pair(compiled=point_to_line_cov, oracle=point_to_line_covariance_numpy)
+"""The covariance, compiled under numba, else in NumPy (:mod:`slamkit.backend`)."""
 
 
 def normal_distance_covariance(

@@ -31,6 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from slamkit._validation import FloatArray, as_array
+from slamkit.backend import SEAM
 from slamkit.errors import ConfigError, MatchError
 from slamkit.scanmatch import kernels
 from slamkit.scanmatch.covariance import (
@@ -49,6 +50,7 @@ __all__ = [
     "icp",
     "point_to_point_step",
     "prepare_scan",
+    "scan_tables_numpy",
     "validate_common",
 ]
 
@@ -87,6 +89,33 @@ class PreparedScan:
         return cKDTree(self.points, leafsize=8)
 
 
+def scan_tables_numpy(
+    points: FloatArray, window: int, max_spacing: float
+) -> tuple[FloatArray, NDArray[np.bool_], FloatArray, FloatArray]:
+    """``(normals (M, 2), has_normal (M,), gaps (M - 1,), segment_normals (M - 1, 2))`` of a
+    scan in beam order (:func:`prepare_scan`): the normals of
+    :func:`~slamkit.scanmatch.covariance.scan_order_normals`, the spacings and the unit
+    normals of the segments between consecutive points (``(0, 0)`` for coincident ones).
+    The path without numba and the oracle of :func:`slamkit.scanmatch.kernels.scan_tables`
+    (the same ``has_normal``, the rest to 1e-9)."""
+    normals, ok = scan_order_normals(points, window, max_spacing)
+    gaps, seg_normals = _segments(points)
+    return normals, ok, gaps, seg_normals
+
+
+def _segments(points: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The spacings ``(M - 1,)`` of consecutive points and the unit normals ``(M - 1, 2)`` of
+    the segments between them (the tangent turned by +90°; ``(0, 0)`` for coincident ones)."""
+    tangent = np.diff(points, axis=0)
+    gaps = np.hypot(tangent[:, 0], tangent[:, 1])
+    inv = np.divide(1.0, gaps, out=np.zeros_like(gaps), where=gaps > 0.0)
+    return gaps, np.column_stack([-tangent[:, 1] * inv, tangent[:, 0] * inv])
+
+
+_scan_tables = SEAM.pair(compiled=kernels.scan_tables, oracle=scan_tables_numpy)
+"""A scan's tables, compiled under numba, else in NumPy (:mod:`slamkit.backend`)."""
+
+
 def prepare_scan(
     points: ArrayLike,
     *,
@@ -101,7 +130,8 @@ def prepare_scan(
     its nearest neighbours within ``normal_radius`` (found with the KD-tree, which is then
     kept; for a scan it is built on first use). Fewer than 3 points raise
     ``MatchError("too_few_points")``. With numba the tables of a scan are computed by
-    :func:`slamkit.scanmatch.kernels.scan_tables`, the same numbers to rounding."""
+    :func:`slamkit.scanmatch.kernels.scan_tables`, else by :func:`scan_tables_numpy`, the
+    same numbers to rounding."""
     pts = require_points(
         as_array(points, "reference points", (None, 2)), MIN_REFERENCE_POINTS, "reference"
     ).copy()
@@ -111,21 +141,15 @@ def prepare_scan(
         raise ConfigError(f"normal_radius: expected a finite number > 0 [m], got {normal_radius!r}")
     pts.flags.writeable = False
     tree = None
-    if ordered and kernels.enabled():
-        normals, ok, gaps, seg_normals = kernels.scan_tables(
+    if ordered:
+        normals, ok, gaps, seg_normals = _scan_tables(
             pts, int(normal_neighbours), float(normal_radius)
         )
     else:
-        if ordered:
-            normals, ok = scan_order_normals(pts, int(normal_neighbours), float(normal_radius))
-        else:
-            tree = cKDTree(pts, leafsize=8)
-            table = neighbour_table(pts, tree, int(normal_neighbours))
-            normals, ok = estimate_normals(pts, table, float(normal_radius))
-        tangent = np.diff(pts, axis=0)
-        gaps = np.hypot(tangent[:, 0], tangent[:, 1])
-        inv = np.divide(1.0, gaps, out=np.zeros_like(gaps), where=gaps > 0.0)
-        seg_normals = np.column_stack([-tangent[:, 1] * inv, tangent[:, 0] * inv])
+        tree = cKDTree(pts, leafsize=8)
+        table = neighbour_table(pts, tree, int(normal_neighbours))
+        normals, ok = estimate_normals(pts, table, float(normal_radius))
+        gaps, seg_normals = _segments(pts)
     for arr in (normals, ok, gaps, seg_normals):
         arr.flags.writeable = False
     scan = PreparedScan(pts, normals, ok, gaps, seg_normals)

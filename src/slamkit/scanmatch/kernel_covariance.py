@@ -1,5 +1,6 @@
-"""The compiled covariance of point-to-line ICP: the twin of
-:func:`slamkit.scanmatch.covariance.point_to_line_covariance` (see there for the maths)."""
+"""The compiled covariance of point-to-line ICP; its NumPy oracle is
+:func:`slamkit.scanmatch.covariance.point_to_line_covariance_numpy` (see there for the
+maths)."""
 
 from __future__ import annotations
 
@@ -8,9 +9,10 @@ import math
 import numpy as np
 
 from slamkit._validation import FloatArray
-from slamkit.scanmatch.compiled import jit, median_in_place
+from slamkit.backend import jit
+from slamkit.scanmatch.compiled import median_in_place
 
-__all__ = ["point_to_line_cov"]
+__all__ = ["add_outer", "point_to_line_cov", "sandwich"]
 
 
 @jit
@@ -24,7 +26,7 @@ def point_to_line_cov(
     pose: FloatArray,
     kept: np.ndarray,
 ) -> FloatArray:
-    """Compiled twin of :func:`slamkit.scanmatch.covariance.point_to_line_covariance` (same
+    """Compiled form of :func:`slamkit.scanmatch.covariance.point_to_line_covariance` (same
     arguments, same formulas; see there)."""
     m = current.shape[0]
     tx, ty, th = pose[0], pose[1], pose[2]
@@ -61,21 +63,11 @@ def point_to_line_cov(
         if not kept[i]:
             continue
         jac0, jac1, jac2 = nx, ny, n_drq
-        h[0, 0] += jac0 * jac0
-        h[0, 1] += jac0 * jac1
-        h[0, 2] += jac0 * jac2
-        h[1, 1] += jac1 * jac1
-        h[1, 2] += jac1 * jac2
-        h[2, 2] += jac2 * jac2
+        add_outer(h, jac0, jac1, jac2)
         e2_nrq += e * (nx * rqx + ny * rqy)
         g0, g1 = 2.0 * n_ru * jac0, 2.0 * n_ru * jac1
         g2 = 2.0 * n_ru * jac2 + 2.0 * e * n_dru
-        gram[0, 0] += g0 * g0
-        gram[0, 1] += g0 * g1
-        gram[0, 2] += g0 * g2
-        gram[1, 1] += g1 * g1
-        gram[1, 2] += g1 * g2
-        gram[2, 2] += g2 * g2
+        add_outer(gram, g0, g1, g2)
         for end in range(2):
             de, dn, idx = (de_a, dn_a, index_a[i]) if end == 0 else (de_b, dn_b, index_b[i])
             e_dn = 2.0 * e * dn
@@ -84,15 +76,27 @@ def point_to_line_cov(
             g_ref[idx, 2] += -2.0 * de * jac2 + e_dn * tau_drq
     sigma = 1.4826 * median_in_place(ratio)
     for j in range(n_reference):
-        g0, g1, g2 = g_ref[j, 0], g_ref[j, 1], g_ref[j, 2]
-        gram[0, 0] += g0 * g0
-        gram[0, 1] += g0 * g1
-        gram[0, 2] += g0 * g2
-        gram[1, 1] += g1 * g1
-        gram[1, 2] += g1 * g2
-        gram[2, 2] += g2 * g2
+        add_outer(gram, g_ref[j, 0], g_ref[j, 1], g_ref[j, 2])
     h *= 2.0
     h[2, 2] -= 2.0 * e2_nrq  # ∂²e/∂θ² = -nᵀ R q
+    return sandwich(h, gram, sigma)
+
+
+@jit
+def add_outer(m: FloatArray, g0: float, g1: float, g2: float) -> None:
+    """``m += g gᵀ`` on the upper triangle of ``m (3, 3)``, entry by entry."""
+    m[0, 0] += g0 * g0
+    m[0, 1] += g0 * g1
+    m[0, 2] += g0 * g2
+    m[1, 1] += g1 * g1
+    m[1, 2] += g1 * g2
+    m[2, 2] += g2 * g2
+
+
+@jit
+def sandwich(h: FloatArray, gram: FloatArray, sigma: float) -> FloatArray:
+    """``σ² H⁻¹ G H⁻ᵀ`` from the upper triangles of ``h`` and ``gram (3, 3)`` (both made
+    symmetric here)."""
     for a in range(3):
         for b in range(a):
             h[a, b] = h[b, a]

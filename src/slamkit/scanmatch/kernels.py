@@ -2,21 +2,22 @@
 :mod:`slamkit.scanmatch.plicp`, :mod:`~slamkit.scanmatch.icp` and
 :mod:`~slamkit.scanmatch.covariance` that gives the same numbers to rounding.
 
-numba is an optional dependency (``pip install slamkit[fast]``). Whether it is used is decided
-once, at import: :data:`AVAILABLE` is true when ``import numba`` succeeds, and then the
-matchers call these kernels; without numba they run the NumPy twins. :func:`use_numpy` turns
-the kernels off inside a ``with`` block, so tests and benchmarks can run both paths in one
-process and compare them. The kernels are compiled on their first call (about 10 s of CPU
-for all of them) and cached on disk (``cache=True``, next to this file), so later processes
-only load them (a fraction of a second).
+Which runs is decided at one seam, :data:`slamkit.backend.SEAM`: :mod:`~slamkit.scanmatch.
+plicp`, :mod:`~slamkit.scanmatch.icp` and :mod:`~slamkit.scanmatch.covariance` declare each
+kernel and its NumPy oracle as a pair there, and the pair runs the kernel when numba is
+installed (``pip install slamkit[fast]``), the oracle otherwise or inside ``with
+SEAM.use(Backend.NUMPY)`` (how tests and benchmarks run both paths in one process). The
+kernels are compiled on their first call (about 10 s of CPU for all of them) and cached on
+disk (``cache=True``, next to this file), so later processes only load them.
 
-**What is compiled.** One call runs the whole PLICP loop (correspondences, trimming, the
-closed-form step, the stopping rules and both degeneracy checks), one call prepares a
-reference scan (segment normals, gaps, point normals) and one computes the covariance
-(:mod:`slamkit.scanmatch.kernel_covariance`; the switch and the small numeric helpers are in
-:mod:`slamkit.scanmatch.compiled`, re-exported here). The
-arithmetic of each line is that of the NumPy twin, written as scalar loops over the points,
-so there are no temporaries and no per-call Python overhead per iteration.
+**What is compiled.** One call runs the whole PLICP loop (:func:`plicp_loop`, in the steps
+its docstring names: correspondences, trimming, the closed-form step, the stopping rules,
+both degeneracy checks and the covariance), one call prepares a reference scan (segment
+normals, gaps, point normals) and one computes the covariance
+(:mod:`slamkit.scanmatch.kernel_covariance`; the small numeric helpers are in
+:mod:`slamkit.scanmatch.compiled`, re-exported here). The arithmetic of each line is that of
+the NumPy oracle, written as scalar loops over the points, so there are no temporaries and
+no per-call Python overhead per iteration.
 
 **Nearest reference point without a KD-tree.** A reference point ``p`` at bearing ``φ``
 (seen from the reference sensor, the origin) lies on the ray from the origin at that angle,
@@ -43,41 +44,42 @@ evaluations per query on a 180-beam scan instead of a tree descent.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from slamkit._validation import FloatArray
-from slamkit.scanmatch.compiled import (
-    AVAILABLE,
-    enabled,
-    ieee_remainder,
-    jit,
-    min_eigenvalue_sym3,
-    select_kth,
-    use_numpy,
-    writable,
-)
+from slamkit.backend import jit
+from slamkit.scanmatch.compiled import ieee_remainder, min_eigenvalue_sym3, select_kth
 from slamkit.scanmatch.kernel_covariance import point_to_line_cov
 
 __all__ = [
-    "AVAILABLE",
     "CONVERGED",
     "DEGENERATE_END",
     "DEGENERATE_START",
     "DEGENERATE_STEP",
     "NO_CONVERGENCE",
     "TOO_FEW",
-    "enabled",
+    "Pairs",
+    "PlicpSettings",
+    "ReferenceArrays",
+    "closed_form_step",
+    "correspond",
     "ieee_remainder",
+    "line_covariance",
     "min_eigenvalue_sym3",
     "nearest_points",
+    "new_pairs",
     "plicp_loop",
     "point_to_line_cov",
+    "repeated",
     "root_of_multiplier",
     "scan_tables",
     "select_kth",
-    "use_numpy",
-    "writable",
+    "settings_from_array",
+    "small_step",
+    "step_sums",
+    "trim",
 ]
 
 # Status codes of plicp_loop.
@@ -409,6 +411,284 @@ def _min_eigenvalue(
     return min_eigenvalue_sym3(h)
 
 
+class PlicpSettings(NamedTuple):
+    """:class:`~slamkit.scanmatch.plicp.PlIcpConfig`'s numbers as the compiled steps read
+    them (the fields are the config's, with ``max_distance`` its
+    ``max_correspondence_distance``). :func:`plicp_loop` takes them as one float array in
+    this order (:func:`settings_from_array`): numba types an array argument in a fraction of
+    the time it takes for a tuple of nine numbers."""
+
+    max_iterations: int
+    max_distance: float
+    outlier_multiplier: float
+    outlier_floor: float
+    trim_fraction: float
+    min_correspondences: int
+    translation_tolerance: float
+    rotation_tolerance: float
+    min_eigenvalue: float
+
+
+class ReferenceArrays(NamedTuple):
+    """A :class:`~slamkit.scanmatch.icp.PreparedScan`'s arrays as the compiled loop reads
+    them: ``joined (M - 1,)`` marks the segments no longer than ``max_gap`` and not of zero
+    length."""
+
+    points: FloatArray
+    segment_normals: FloatArray
+    joined: np.ndarray
+    has_normal: np.ndarray
+    normals: FloatArray
+
+
+class Pairs(NamedTuple):
+    """One iteration's correspondences, one entry per current point (buffers the steps of
+    :func:`plicp_loop` fill): ``j1`` the nearest reference point (``M``: none), ``use_next``
+    whether the segment goes to ``j1 + 1`` (else ``j1 - 1``), ``valid`` whether ``j1`` has a
+    segment, ``keep`` whether the pair survived the trimming, ``err`` its line distance
+    (``inf`` when not valid), ``work`` scratch for the order statistics, ``nrm (n, 2)`` the
+    segment's normal."""
+
+    j1: np.ndarray
+    use_next: np.ndarray
+    valid: np.ndarray
+    keep: np.ndarray
+    err: FloatArray
+    work: FloatArray
+    nrm: FloatArray
+
+
+@jit
+def settings_from_array(values: FloatArray) -> PlicpSettings:
+    """The :class:`PlicpSettings` of ``values (9,)``, the fields in order (the two counts
+    as whole numbers)."""
+    return PlicpSettings(
+        int(values[0]), values[1], values[2], values[3], values[4], int(values[5]),
+        values[6], values[7], values[8],
+    )  # fmt: skip
+
+
+@jit
+def new_pairs(n: int, m: int) -> Pairs:
+    """Empty :class:`Pairs` for ``n`` current points and ``m`` reference points."""
+    return Pairs(
+        np.full(n, m, dtype=np.int64),
+        np.zeros(n, dtype=np.bool_),
+        np.zeros(n, dtype=np.bool_),
+        np.zeros(n, dtype=np.bool_),
+        np.empty(n),
+        np.empty(n),
+        np.zeros((n, 2)),
+    )
+
+
+@jit
+def correspond(
+    ref: ReferenceArrays,
+    index: tuple[np.ndarray, FloatArray, FloatArray],
+    q: FloatArray,
+    pose: tuple[float, float, float],
+    max_d2: float,
+    pairs: Pairs,
+) -> int:
+    """Pair every current point of ``q`` moved by ``pose = (x, y, θ)`` with its nearest
+    reference point within ``√max_d2`` (the bearing walk over ``index``, the reference's
+    :func:`_bearing_index`, each search started at the point's previous match, else the
+    previous point's) and the closer of its joined neighbours; fill ``pairs`` and return
+    the count of valid pairs."""
+    points = ref.points
+    m = points.shape[0]
+    order, key, table = index
+    tx, ty, th = pose
+    c, s = math.cos(th), math.sin(th)
+    guess = m
+    n_valid = 0
+    for i in range(q.shape[0]):
+        qx, qy = q[i, 0], q[i, 1]
+        mx = (qx * c + qy * -s) + tx
+        my = (qx * s + qy * c) + ty
+        start = pairs.j1[i] if pairs.j1[i] < m else guess
+        j = _nearest(order, key, table, points, mx, my, start, max_d2)
+        pairs.j1[i] = j
+        if j < m:
+            guess = j
+        has_prev = j < m and j >= 1 and ref.joined[j - 1]
+        has_next = j < m - 1 and ref.joined[j]
+        nxt = False
+        if has_next and has_prev:
+            dx = points[j - 1, 0] - mx
+            dy = points[j - 1, 1] - my
+            d_prev = dx * dx + dy * dy
+            dx = points[j + 1, 0] - mx
+            dy = points[j + 1, 1] - my
+            nxt = dx * dx + dy * dy < d_prev
+        elif has_next:
+            nxt = True
+        pairs.use_next[i] = nxt
+        pairs.valid[i] = has_prev or has_next
+        if has_prev or has_next:
+            n_valid += 1
+            seg = j if nxt else j - 1
+            nx, ny = ref.segment_normals[seg, 0], ref.segment_normals[seg, 1]
+            pairs.nrm[i, 0], pairs.nrm[i, 1] = nx, ny
+            pairs.err[i] = abs(nx * (mx - points[j, 0]) + ny * (my - points[j, 1]))
+        else:
+            pairs.nrm[i, 0], pairs.nrm[i, 1] = 0.0, 0.0
+            pairs.err[i] = np.inf
+    return n_valid
+
+
+@jit
+def trim(pairs: Pairs, n_valid: int, settings: PlicpSettings) -> int:
+    """Keep the pairs whose line distance is within ``outlier_multiplier`` times the
+    median of the valid ones (at least ``outlier_floor``), then the ``trim_fraction`` of
+    those with the smallest; return how many are kept. By order statistics (the NumPy
+    oracle reads them from a sorted copy): the invalid errors are ``+inf``, above all."""
+    err, work = pairs.err, pairs.work
+    n = err.shape[0]
+    thr = -1.0
+    if n_valid:
+        for i in range(n):
+            work[i] = err[i]
+        median = select_kth(work, (n_valid - 1) // 2)
+        limit = max(settings.outlier_multiplier * median, settings.outlier_floor)
+        n_lim = 0
+        for i in range(n):
+            n_lim += err[i] <= limit
+        n_t = math.ceil(settings.trim_fraction * n_lim)
+        if n_t:
+            thr = select_kth(work, n_t - 1)
+    n_keep = 0
+    for i in range(n):
+        pairs.keep[i] = err[i] <= thr
+        n_keep += pairs.keep[i]
+    return n_keep
+
+
+@jit
+def repeated(history: np.ndarray, it: int, pairs: Pairs) -> bool:
+    """Record iteration ``it``'s correspondences (``j1``, the side, kept) in row ``it - 1``
+    of ``history`` and say whether an earlier iteration had the same set: the steps would
+    then repeat (a cycle), so the loop stops."""
+    row = history[it - 1]
+    n = row.shape[0]
+    for i in range(n):
+        row[i] = 4 * pairs.j1[i] + 2 * pairs.use_next[i] + pairs.keep[i]
+    for past in range(it - 1):
+        same = True
+        for i in range(n):
+            if history[past, i] != row[i]:
+                same = False
+                break
+        if same:
+            return True
+    return False
+
+
+@jit
+def step_sums(points: FloatArray, q: FloatArray, pairs: Pairs) -> tuple[float, ...]:
+    """The closed-form step's sums over the kept pairs: the upper triangle of ``M = Σ φ
+    φᵀ`` row by row, then ``v = Σ φ b`` (:mod:`slamkit.scanmatch.plicp`'s docstring)."""
+    m00 = m01 = m02 = m03 = m11 = m12 = m13 = m22 = m23 = m33 = 0.0
+    vt0 = vt1 = vc0 = vc1 = 0.0
+    for i in range(q.shape[0]):
+        if not pairs.keep[i]:
+            continue
+        nx, ny = pairs.nrm[i, 0], pairs.nrm[i, 1]
+        qx, qy = q[i, 0], q[i, 1]
+        p2 = nx * qx + ny * qy
+        p3 = ny * qx - nx * qy
+        b = nx * points[pairs.j1[i], 0] + ny * points[pairs.j1[i], 1]
+        m00 += nx * nx
+        m01 += nx * ny
+        m02 += nx * p2
+        m03 += nx * p3
+        m11 += ny * ny
+        m12 += ny * p2
+        m13 += ny * p3
+        m22 += p2 * p2
+        m23 += p2 * p3
+        m33 += p3 * p3
+        vt0 += nx * b
+        vt1 += ny * b
+        vc0 += p2 * b
+        vc1 += p3 * b
+    return (m00, m01, m02, m03, m11, m12, m13, m22, m23, m33, vt0, vt1, vc0, vc1)
+
+
+@jit
+def closed_form_step(
+    points: FloatArray, q: FloatArray, pairs: Pairs
+) -> tuple[bool, float, float, float]:
+    """Censi's closed-form step over the kept pairs, operation for operation
+    :func:`slamkit.scanmatch.plicp.point_to_line_step`: ``(ok, x, y, θ)``, ``ok`` false
+    when the normals do not span the plane (``A`` singular)."""
+    m00, m01, m02, m03, m11, m12, m13, m22, m23, m33, vt0, vt1, vc0, vc1 = step_sums(
+        points, q, pairs
+    )
+    det_a = m00 * m11 - m01 * m01
+    if not det_a > 1e-12 * (m00 + m11) ** 2:
+        return False, 0.0, 0.0, 0.0
+    i00, i01, i11 = m11 / det_a, -m01 / det_a, m00 / det_a
+    k00, k01 = i00 * m02 + i01 * m12, i00 * m03 + i01 * m13
+    k10, k11 = i01 * m02 + i11 * m12, i01 * m03 + i11 * m13
+    s11 = m22 - (m02 * k00 + m12 * k10)
+    s12 = m23 - (m02 * k01 + m12 * k11)
+    s22 = m33 - (m03 * k01 + m13 * k11)
+    h1 = vc0 - (k00 * vt0 + k10 * vt1)
+    h2 = vc1 - (k01 * vt0 + k11 * vt1)
+    lam = root_of_multiplier(s11, s12, s22, h1, h2)
+    c0 = (s22 + lam) * h1 - s12 * h2
+    c1 = -s12 * h1 + (s11 + lam) * h2
+    if c0 == 0.0 and c1 == 0.0:
+        c0 = 1.0
+    theta = math.atan2(c1, c0)
+    cos_t, sin_t = math.cos(theta), math.sin(theta)
+    r0 = vt0 - (m02 * cos_t + m03 * sin_t)
+    r1 = vt1 - (m12 * cos_t + m13 * sin_t)
+    return True, i00 * r0 + i01 * r1, i01 * r0 + i11 * r1, theta
+
+
+@jit
+def small_step(dx: float, dy: float, dth: float, settings: PlicpSettings) -> bool:
+    """The stopping rule on the step ``(dx, dy, dθ)``: below both tolerances."""
+    return (
+        math.hypot(dx, dy) < settings.translation_tolerance
+        and abs(dth) < settings.rotation_tolerance
+    )
+
+
+@jit
+def line_covariance(
+    points: FloatArray, q: FloatArray, pairs: Pairs, pose: FloatArray
+) -> FloatArray:
+    """The covariance at ``pose`` over the pairs with a segment (its ends ``j1`` and ``j1 ±
+    1``), the kept ones in ``H``: :func:`~slamkit.scanmatch.kernel_covariance.
+    point_to_line_cov` of them."""
+    m = points.shape[0]
+    n_valid = 0
+    for i in range(q.shape[0]):
+        n_valid += pairs.valid[i]
+    cur = np.empty((n_valid, 2))
+    end_a = np.empty((n_valid, 2))
+    end_b = np.empty((n_valid, 2))
+    index_a = np.empty(n_valid, dtype=np.int64)
+    index_b = np.empty(n_valid, dtype=np.int64)
+    kept = np.empty(n_valid, dtype=np.bool_)
+    v = 0
+    for i in range(q.shape[0]):
+        if not pairs.valid[i]:
+            continue
+        ja = pairs.j1[i]
+        jb = ja + 1 if pairs.use_next[i] else ja - 1
+        cur[v, 0], cur[v, 1] = q[i, 0], q[i, 1]
+        end_a[v, 0], end_a[v, 1] = points[ja, 0], points[ja, 1]
+        end_b[v, 0], end_b[v, 1] = points[jb, 0], points[jb, 1]
+        index_a[v], index_b[v], kept[v] = ja, jb, pairs.keep[i]
+        v += 1
+    return point_to_line_cov(cur, end_a, end_b, index_a, index_b, m, pose, kept)
+
+
 @jit
 def plicp_loop(
     points: FloatArray,
@@ -417,208 +697,58 @@ def plicp_loop(
     has_normal: np.ndarray,
     normals: FloatArray,
     q: FloatArray,
-    tx: float,
-    ty: float,
-    th: float,
-    max_iterations: int,
-    max_distance: float,
-    outlier_multiplier: float,
-    outlier_floor: float,
-    trim_fraction: float,
-    min_correspondences: int,
-    translation_tolerance: float,
-    rotation_tolerance: float,
-    min_eigenvalue: float,
+    initial: FloatArray,
+    settings_values: FloatArray,
 ) -> tuple[int, int, int, FloatArray, FloatArray, float]:
     """The loop of :func:`slamkit.scanmatch.plicp.plicp` after validation, and the covariance,
-    compiled: returns ``(status, iterations, n_kept, pose (3,), cov (3, 3), eigenvalue)``
-    with ``status`` one of the codes of this module, ``n_kept`` the pairs kept at the last
-    iteration and ``eigenvalue`` the smallest normalised eigenvalue behind a ``DEGENERATE_*``
-    status (else 0). ``pose`` (θ wrapped) and ``cov`` are the solution when ``status ==
-    CONVERGED`` (``cov`` is zero otherwise). ``joined (M - 1,)`` marks the segments no longer
-    than ``max_gap`` and not of zero length."""
-    m = points.shape[0]
+    compiled, on the reference's arrays (:class:`ReferenceArrays`) and the settings'
+    numbers (:func:`settings_from_array`): from ``initial = (x, y, θ)``, each iteration
+    :func:`correspond`, :func:`trim`, the degeneracy check at the start, :func:`repeated`,
+    :func:`closed_form_step`, :func:`small_step`; then the check at the solution and
+    :func:`line_covariance`. Returns ``(status, iterations, n_kept, pose (3,), cov (3, 3),
+    eigenvalue)`` with ``status`` one of the codes of this module, ``n_kept`` the pairs kept
+    at the last iteration and ``eigenvalue`` the smallest normalised eigenvalue behind a
+    ``DEGENERATE_*`` status (else 0). ``pose`` (θ wrapped) and ``cov`` are the solution
+    when ``status == CONVERGED`` (``cov`` is zero otherwise)."""
+    ref = ReferenceArrays(points, segment_normals, joined, has_normal, normals)
+    settings = settings_from_array(settings_values)
     n = q.shape[0]
-    order, key, table = _bearing_index(points)
-    max_d2 = max_distance * max_distance
-    j1 = np.full(n, m, dtype=np.int64)
-    use_next = np.zeros(n, dtype=np.bool_)
-    valid = np.zeros(n, dtype=np.bool_)
-    keep = np.zeros(n, dtype=np.bool_)
-    err = np.empty(n)
-    work = np.empty(n)
-    nrm = np.zeros((n, 2))
-    n_keep = 0
-    history = np.empty((max_iterations, n), dtype=np.int64)
+    index = _bearing_index(ref.points)
+    pairs = new_pairs(n, ref.points.shape[0])
+    max_d2 = settings.max_distance * settings.max_distance
+    history = np.empty((settings.max_iterations, n), dtype=np.int64)
     cov = np.zeros((3, 3))
-    status = NO_CONVERGENCE
+    tx, ty, th = initial[0], initial[1], initial[2]
+    n_keep = 0
+    converged = False
     it = 0
-    while it < max_iterations:
+    while it < settings.max_iterations:
         it += 1
-        c, s = math.cos(th), math.sin(th)
-        guess = m
-        n_valid = 0
-        for i in range(n):
-            qx, qy = q[i, 0], q[i, 1]
-            mx = (qx * c + qy * -s) + tx
-            my = (qx * s + qy * c) + ty
-            start = j1[i] if j1[i] < m else guess
-            j = _nearest(order, key, table, points, mx, my, start, max_d2)
-            j1[i] = j
-            if j < m:
-                guess = j
-            has_prev = j < m and j >= 1 and joined[j - 1]
-            has_next = j < m - 1 and joined[j]
-            nxt = False
-            if has_next and has_prev:
-                dx = points[j - 1, 0] - mx
-                dy = points[j - 1, 1] - my
-                d_prev = dx * dx + dy * dy
-                dx = points[j + 1, 0] - mx
-                dy = points[j + 1, 1] - my
-                nxt = dx * dx + dy * dy < d_prev
-            elif has_next:
-                nxt = True
-            use_next[i] = nxt
-            if has_prev or has_next:
-                valid[i] = True
-                n_valid += 1
-                seg = j if nxt else j - 1
-                nrm[i, 0] = segment_normals[seg, 0]
-                nrm[i, 1] = segment_normals[seg, 1]
-                err[i] = abs(nrm[i, 0] * (mx - points[j, 0]) + nrm[i, 1] * (my - points[j, 1]))
-            else:
-                valid[i] = False
-                nrm[i, 0] = 0.0
-                nrm[i, 1] = 0.0
-                err[i] = np.inf
-        # Trimming by order statistics (the NumPy twin reads them from a sorted copy): the
-        # median of the valid errors (the invalid ones are +inf, above all), the adaptive
-        # limit, then the trim fraction of those within it.
-        thr = -1.0
-        if n_valid:
-            for i in range(n):
-                work[i] = err[i]
-            limit = max(outlier_multiplier * select_kth(work, (n_valid - 1) // 2), outlier_floor)
-            n_lim = 0
-            for i in range(n):
-                n_lim += err[i] <= limit
-            n_t = math.ceil(trim_fraction * n_lim)
-            if n_t:
-                thr = select_kth(work, n_t - 1)
-        n_keep = 0
-        for i in range(n):
-            keep[i] = err[i] <= thr
-            n_keep += keep[i]
-        if n_keep < min_correspondences:
+        n_valid = correspond(ref, index, q, (tx, ty, th), max_d2, pairs)
+        n_keep = trim(pairs, n_valid, settings)
+        if n_keep < settings.min_correspondences:
             return TOO_FEW, it, n_keep, np.array([tx, ty, th]), cov, 0.0
         if it == 1:
-            lam = _min_eigenvalue(q, normals, has_normal, j1, keep, th)
-            if lam < 0.5 * min_eigenvalue:
+            lam = _min_eigenvalue(q, ref.normals, ref.has_normal, pairs.j1, pairs.keep, th)
+            if lam < 0.5 * settings.min_eigenvalue:
                 return DEGENERATE_START, it, n_keep, np.array([tx, ty, th]), cov, lam
-        # A correspondence set met before: the steps would repeat (a cycle).
-        row = history[it - 1]
-        for i in range(n):
-            row[i] = 4 * j1[i] + 2 * use_next[i] + keep[i]
-        repeated = False
-        for past in range(it - 1):
-            same = True
-            for i in range(n):
-                if history[past, i] != row[i]:
-                    same = False
-                    break
-            if same:
-                repeated = True
-                break
-        if repeated:
-            status = CONVERGED
+        if repeated(history, it, pairs):
+            converged = True
             break
-        # The closed-form step over the kept pairs: M = Σ φ φᵀ, v = Σ φ b.
-        m00 = m01 = m02 = m03 = m11 = m12 = m13 = m22 = m23 = m33 = 0.0
-        vt0 = vt1 = vc0 = vc1 = 0.0
-        for i in range(n):
-            if not keep[i]:
-                continue
-            nx, ny = nrm[i, 0], nrm[i, 1]
-            qx, qy = q[i, 0], q[i, 1]
-            p2 = nx * qx + ny * qy
-            p3 = ny * qx - nx * qy
-            b = nx * points[j1[i], 0] + ny * points[j1[i], 1]
-            m00 += nx * nx
-            m01 += nx * ny
-            m02 += nx * p2
-            m03 += nx * p3
-            m11 += ny * ny
-            m12 += ny * p2
-            m13 += ny * p3
-            m22 += p2 * p2
-            m23 += p2 * p3
-            m33 += p3 * p3
-            vt0 += nx * b
-            vt1 += ny * b
-            vc0 += p2 * b
-            vc1 += p3 * b
-        det_a = m00 * m11 - m01 * m01
-        if not det_a > 1e-12 * (m00 + m11) ** 2:
+        ok, new_x, new_y, theta = closed_form_step(ref.points, q, pairs)
+        if not ok:
             return DEGENERATE_STEP, it, n_keep, np.array([tx, ty, th]), cov, 0.0
-        i00, i01, i11 = m11 / det_a, -m01 / det_a, m00 / det_a
-        k00, k01 = i00 * m02 + i01 * m12, i00 * m03 + i01 * m13
-        k10, k11 = i01 * m02 + i11 * m12, i01 * m03 + i11 * m13
-        s11 = m22 - (m02 * k00 + m12 * k10)
-        s12 = m23 - (m02 * k01 + m12 * k11)
-        s22 = m33 - (m03 * k01 + m13 * k11)
-        h1 = vc0 - (k00 * vt0 + k10 * vt1)
-        h2 = vc1 - (k01 * vt0 + k11 * vt1)
-        lam = root_of_multiplier(s11, s12, s22, h1, h2)
-        c0 = (s22 + lam) * h1 - s12 * h2
-        c1 = -s12 * h1 + (s11 + lam) * h2
-        if c0 == 0.0 and c1 == 0.0:
-            c0 = 1.0
-        theta = math.atan2(c1, c0)
-        cos_t, sin_t = math.cos(theta), math.sin(theta)
-        r0 = vt0 - (m02 * cos_t + m03 * sin_t)
-        r1 = vt1 - (m12 * cos_t + m13 * sin_t)
-        new_x = i00 * r0 + i01 * r1
-        new_y = i01 * r0 + i11 * r1
         dth = ieee_remainder(theta - th, _TWO_PI)
-        small = (
-            math.hypot(new_x - tx, new_y - ty) < translation_tolerance
-            and abs(dth) < rotation_tolerance
-        )
+        small = small_step(new_x - tx, new_y - ty, dth, settings)
         tx, ty, th = new_x, new_y, th + dth
         if small:
-            status = CONVERGED
+            converged = True
             break
-    if status != CONVERGED:
+    if not converged:
         return NO_CONVERGENCE, it, n_keep, np.array([tx, ty, th]), cov, 0.0
     th = ieee_remainder(th, _TWO_PI)
     pose = np.array([tx, ty, th])
-    lam = _min_eigenvalue(q, normals, has_normal, j1, keep, th)
-    if lam < min_eigenvalue:
+    lam = _min_eigenvalue(q, ref.normals, ref.has_normal, pairs.j1, pairs.keep, th)
+    if lam < settings.min_eigenvalue:
         return DEGENERATE_END, it, n_keep, pose, cov, lam
-    # The covariance over the pairs with a segment (the segment ends j1 and j2 = j1 ± 1).
-    n_valid = 0
-    for i in range(n):
-        n_valid += valid[i]
-    cur = np.empty((n_valid, 2))
-    end_a = np.empty((n_valid, 2))
-    end_b = np.empty((n_valid, 2))
-    index_a = np.empty(n_valid, dtype=np.int64)
-    index_b = np.empty(n_valid, dtype=np.int64)
-    kept = np.empty(n_valid, dtype=np.bool_)
-    v = 0
-    for i in range(n):
-        if not valid[i]:
-            continue
-        ja = j1[i]
-        jb = ja + 1 if use_next[i] else ja - 1
-        cur[v, 0], cur[v, 1] = q[i, 0], q[i, 1]
-        end_a[v, 0], end_a[v, 1] = points[ja, 0], points[ja, 1]
-        end_b[v, 0], end_b[v, 1] = points[jb, 0], points[jb, 1]
-        index_a[v], index_b[v], kept[v] = ja, jb, keep[i]
-        v += 1
-    cov = point_to_line_cov(cur, end_a, end_b, index_a, index_b, m, pose, kept)
-    return CONVERGED, it, n_keep, pose, cov, 0.0
-
-
-# --- the covariance --------------------------------------------------------------------------
+    return CONVERGED, it, n_keep, pose, line_covariance(ref.points, q, pairs, pose), 0.0

@@ -54,8 +54,9 @@ from numpy.typing import NDArray
 from scipy.ndimage import distance_transform_edt
 
 from slamkit._validation import FloatArray, as_array, as_positive
+from slamkit.backend import SEAM
 from slamkit.errors import InputError, MatchError
-from slamkit.scanmatch import compiled
+from slamkit.scanmatch.compiled import stamp_max
 
 __all__ = [
     "QUANTUM",
@@ -64,6 +65,8 @@ __all__ = [
     "log_likelihood_of_distance",
     "lookup_from_log_table",
     "lookup_from_points",
+    "marked_lookup_edt",
+    "marked_lookup_stamped",
 ]
 
 IntArray = NDArray[np.int64]
@@ -361,26 +364,67 @@ def lookup_from_points(
     cols, rows = (cells.max(axis=0) + margin + 1).tolist()
     free = np.ones((rows, cols), dtype=bool)
     free[cells[:, 1], cells[:, 0]] = False
+    return _marked_lookup(free, lo * res, res, sigma, floor_likelihood, levels=levels, pad=pad)
+
+
+def marked_lookup_edt(
+    free: NDArray[np.bool_],
+    origin_xy: FloatArray,
+    resolution: float,
+    sigma: float,
+    floor_likelihood: float,
+    *,
+    levels: int,
+    pad: int,
+) -> LookupGrid:
+    """The lookup grid of the cells marked ``False`` in ``free (rows, cols)`` (its corner
+    cell's corner at ``origin_xy``) by the distance transform: the path without numba and
+    the oracle of :func:`marked_lookup_stamped` (bit for bit)."""
     floor = float(np.log(floor_likelihood))
     inlier = float(log_likelihood_of_distance(np.array(3.0 * sigma), sigma, floor_likelihood))
-    stamp = _stamp(res, float(sigma), float(floor_likelihood)) if compiled.enabled() else None
-    if stamp is not None:
-        # The quantised table is a function of the squared cell distance alone, the floor
-        # beyond a few cells: stamped around each marked cell (the same counts as the
-        # distance transform's table, quantised).
-        low = round(float(quantize(np.array(floor))) / QUANTUM)
-        counts = np.full((rows, cols), low, dtype=stamp[2].dtype)
-        marked_rows, marked_cols = np.nonzero(~free)
-        compiled.stamp_max(counts, marked_rows, marked_cols, *stamp)
-        return _lookup_from_counts(
-            counts, lo * res, res, floor=floor, inlier_log=inlier, levels=levels, pad=pad
-        )
     # EDT: for every non-zero (free) cell, the distance to the nearest zero (marked) cell.
-    dist = np.asarray(distance_transform_edt(free, sampling=res), dtype=np.float64)
+    dist = np.asarray(distance_transform_edt(free, sampling=resolution), dtype=np.float64)
     table = log_likelihood_of_distance(dist, sigma, floor_likelihood)
     return lookup_from_log_table(
-        table, lo * res, res, floor=floor, inlier_log=inlier, levels=levels, pad=pad
+        table, origin_xy, resolution, floor=floor, inlier_log=inlier, levels=levels, pad=pad
     )
+
+
+def marked_lookup_stamped(
+    free: NDArray[np.bool_],
+    origin_xy: FloatArray,
+    resolution: float,
+    sigma: float,
+    floor_likelihood: float,
+    *,
+    levels: int,
+    pad: int,
+) -> LookupGrid:
+    """:func:`marked_lookup_edt` by stamping the quantised table around each marked cell
+    (compiled :func:`~slamkit.scanmatch.compiled.stamp_max`; module docstring); by the
+    transform where the table is not a function of the squared cell distance alone."""
+    stamp = _stamp(resolution, float(sigma), float(floor_likelihood))
+    if stamp is None:
+        return marked_lookup_edt(
+            free, origin_xy, resolution, sigma, floor_likelihood, levels=levels, pad=pad
+        )
+    floor = float(np.log(floor_likelihood))
+    inlier = float(log_likelihood_of_distance(np.array(3.0 * sigma), sigma, floor_likelihood))
+    # The quantised table is a function of the squared cell distance alone, the floor
+    # beyond a few cells: stamped around each marked cell (the same counts as the
+    # distance transform's table, quantised).
+    low = round(float(quantize(np.array(floor))) / QUANTUM)
+    counts = np.full(free.shape, low, dtype=stamp[2].dtype)
+    marked_rows, marked_cols = np.nonzero(~free)
+    stamp_max(counts, marked_rows, marked_cols, *stamp)
+    return _lookup_from_counts(
+        counts, origin_xy, resolution, floor=floor, inlier_log=inlier, levels=levels, pad=pad
+    )
+
+
+_marked_lookup = SEAM.pair(compiled=marked_lookup_stamped, oracle=marked_lookup_edt)
+"""The lookup grid of marked cells, stamped under numba, else by the distance transform
+(:mod:`slamkit.backend`)."""
 
 
 @functools.lru_cache(maxsize=16)

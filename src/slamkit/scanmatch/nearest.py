@@ -35,8 +35,9 @@ Cells are only an index: a query scans every cell that its ``d``-box touches, wi
 margin far above rounding, and the cell-box test that skips a cell is likewise loosened, so
 neither can drop a point the exact comparison would keep.
 
-numba is optional (:mod:`slamkit.scanmatch.compiled`): without it, or inside
-:func:`~slamkit.scanmatch.compiled.use_numpy`, queries go to the KD-tree.
+numba is optional: without it, or inside ``SEAM.use(Backend.NUMPY)``
+(:mod:`slamkit.backend`), queries go to the KD-tree (:func:`kdtree_query`, the grid's
+oracle).
 """
 
 from __future__ import annotations
@@ -48,9 +49,18 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from slamkit._validation import FloatArray
-from slamkit.scanmatch import compiled
+from slamkit.backend import SEAM, jit, writable
 
-__all__ = ["CELL_SIDE", "NearestGrid", "kdtree_nearest"]
+__all__ = [
+    "CELL_SIDE",
+    "CellIndex",
+    "GridShape",
+    "NearestGrid",
+    "grid_nearest",
+    "grid_query",
+    "kdtree_nearest",
+    "kdtree_query",
+]
 
 #: A grid cell's side in correspondence distances ``d``. Larger cells mean fewer cells to
 #: visit and more points per cell to scan; on the Intel log's queries (``d`` = 0.5 m, maps
@@ -71,6 +81,18 @@ def kdtree_nearest(tree: cKDTree, x: FloatArray, bound: float) -> NDArray[np.int
     """``tree.query(x, k=1, distance_upper_bound=bound)``'s indices (``tree.n``: none)."""
     _, j = tree.query(x, k=1, distance_upper_bound=bound)
     return np.asarray(j, dtype=np.intp)
+
+
+CellIndex = tuple[FloatArray, FloatArray, NDArray[np.intp], NDArray[np.intp]]
+"""The grid's points sorted by cell, as :func:`grid_nearest` takes them: ``(xs, ys, order,
+start)``, ``xs``, ``ys (M,)`` their coordinates, ``order (M,)`` each one's reference
+index, ``start (cells + 1,)`` where each cell's run starts (row-major cells). A plain tuple,
+not a named one: numba types a named tuple argument about 1 µs slower per call, and the
+grid is queried once per ICP iteration."""
+
+GridShape = tuple[tuple[float, float, float], tuple[int, int]]
+"""The grid's geometry, as :func:`grid_nearest` takes it: ``((ox, oy, cell), (n_rows,
+n_cols))``, the lower-left corner and the cell side [m], the cells per axis."""
 
 
 class NearestGrid:
@@ -105,6 +127,11 @@ class NearestGrid:
         counts = np.bincount(key, minlength=self.shape[0] * self.shape[1])
         self.start = np.zeros(counts.size + 1, dtype=np.intp)
         np.cumsum(counts, out=self.start[1:])
+        self.cells: CellIndex = (self.xs, self.ys, self.index, self.start)
+        self.geometry: GridShape = (
+            (float(self.origin[0]), float(self.origin[1]), self.cell),
+            self.shape,
+        )
 
     def kdtree(self) -> cKDTree:
         """The KD-tree over the points (built on first use), as
@@ -118,37 +145,37 @@ class NearestGrid:
         """The index of the nearest reference point strictly within ``bound`` [m] of each
         query point ``x (K, 2)``, ``M`` where there is none: ``cKDTree.query(x, k=1,
         distance_upper_bound=bound)[1]`` exactly (see the module docstring). ``x`` finite."""
-        if not compiled.enabled() or self.n_points == 0:
-            return kdtree_nearest(self.kdtree(), x, bound)
-        out = np.empty(x.shape[0], dtype=np.intp)
-        tied = grid_nearest(
-            self.xs, self.ys, self.index, self.start, self.origin[0], self.origin[1],
-            self.cell, self.shape[0], self.shape[1], compiled.writable(x), bound, out,
-        )  # fmt: skip
-        if tied:  # equal least distances: the KD-tree's choice among them
-            rows = np.flatnonzero(out < 0)
-            out[rows] = kdtree_nearest(self.kdtree(), x[rows], bound)
-        return out
+        return _query(self, x, bound)
 
 
-@compiled.jit
+def kdtree_query(grid: NearestGrid, x: FloatArray, bound: float) -> NDArray[np.intp]:
+    """:meth:`NearestGrid.query` by the grid's KD-tree: the path without numba and the
+    oracle of :func:`grid_query` (index for index)."""
+    return kdtree_nearest(grid.kdtree(), x, bound)
+
+
+def grid_query(grid: NearestGrid, x: FloatArray, bound: float) -> NDArray[np.intp]:
+    """:meth:`NearestGrid.query` by the compiled grid (:func:`grid_nearest`), ties and an
+    empty grid by the KD-tree."""
+    if grid.n_points == 0:
+        return kdtree_query(grid, x, bound)
+    out = np.empty(x.shape[0], dtype=np.intp)
+    tied = grid_nearest(grid.cells, grid.geometry, writable(x), bound, out)
+    if tied:  # equal least distances: the KD-tree's choice among them
+        rows = np.flatnonzero(out < 0)
+        out[rows] = kdtree_nearest(grid.kdtree(), x[rows], bound)
+    return out
+
+
+@jit
 def grid_nearest(
-    xs: FloatArray,
-    ys: FloatArray,
-    index: NDArray[np.intp],
-    start: NDArray[np.intp],
-    ox: float,
-    oy: float,
-    cell: float,
-    n_rows: int,
-    n_cols: int,
-    x: FloatArray,
-    bound: float,
-    out: NDArray[np.intp],
+    cells: CellIndex, shape: GridShape, x: FloatArray, bound: float, out: NDArray[np.intp]
 ) -> bool:
     """The kernel of :meth:`NearestGrid.query`: ``out[i]`` the index of the nearest point,
     ``len(index)`` when none is strictly within ``bound``, ``-1`` when two or more are at
     the same least distance (returns whether any is)."""
+    xs, ys, index, start = cells
+    (ox, oy, cell), (n_rows, n_cols) = shape
     m = index.shape[0]
     limit = bound * bound  # squared, as the KD-tree compares
     scale = cell + abs(ox) + abs(oy)
@@ -205,3 +232,8 @@ def grid_nearest(
         else:
             out[i] = index[found]
     return any_tie
+
+
+_query = SEAM.pair(compiled=grid_query, oracle=kdtree_query)
+"""The nearest points by the compiled grid under numba, else by the KD-tree
+(:mod:`slamkit.backend`)."""

@@ -36,9 +36,9 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from slamkit._validation import FloatArray, as_array
+from slamkit.backend import writable
 from slamkit.errors import ConfigError, CovarianceError, MatchError
 from slamkit.geometry.pose2 import transform_points
-from slamkit.scanmatch import compiled
 from slamkit.scanmatch.covariance import require_constrained
 from slamkit.scanmatch.nearest import CELL_SIDE, NearestGrid
 from slamkit.scanmatch.normal_terms import pair_terms
@@ -169,8 +169,8 @@ def normal_icp(
         _require_prior(lam)
     # The arrays as the kernels take them (C-ordered, writable): converted once, not per
     # step; the rotation below keeps ``q`` itself (the BLAS product of its own layout).
-    P, normals = compiled.writable(reference.points), compiled.writable(reference.normals)
-    qc = compiled.writable(q)
+    P, normals = writable(reference.points), writable(reference.normals)
+    qc = writable(q)
     tx, ty, th = float(x0[0]), float(x0[1]), float(x0[2])
     converged = False
     seen: set[bytes] = set()  # every correspondence set met so far

@@ -15,12 +15,12 @@ and sine of the pose's angle):
   max(|e_k|, 1e-300))``, with the rows weighted, ``J_k w_k``.
 
 Bit for bit the NumPy expressions' results (:func:`pair_terms_numpy`, the path without
-numba): each is a sequence of IEEE operations, rounded one by one, in the same order and
-grouping as NumPy evaluates them (numba compiles without fast-math, so nothing is fused
-or reassociated; ``einsum`` over two terms is the same multiply, multiply, add), and a
-median is an order statistic (the mean of two for an even count), whatever the selection
-algorithm. The products that go through BLAS (``Jᵀ W J``) stay with the caller, in NumPy,
-on arrays of the same layout.
+numba and the kernel's oracle; :mod:`slamkit.backend` chooses): each is a sequence of IEEE
+operations, rounded one by one, in the same order and grouping as NumPy evaluates them
+(numba compiles without fast-math, so nothing is fused or reassociated; ``einsum`` over two
+terms is the same multiply, multiply, add), and a median is an order statistic (the mean
+of two for an even count), whatever the selection algorithm. The products that go through
+BLAS (``Jᵀ W J``) stay with the caller, in NumPy, on arrays of the same layout.
 """
 
 from __future__ import annotations
@@ -31,10 +31,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray
-from slamkit.scanmatch import compiled
+from slamkit.backend import SEAM, jit, writable
+from slamkit.scanmatch.compiled import median_in_place
 from slamkit.scanmatch.covariance import line_jacobian, median
 
-__all__ = ["PairTerms", "pair_terms", "pair_terms_numpy"]
+__all__ = [
+    "PairTerms",
+    "TermBuffers",
+    "normal_terms_kernel",
+    "pair_terms",
+    "pair_terms_numpy",
+]
 
 
 class PairTerms(NamedTuple):
@@ -52,6 +59,13 @@ class PairTerms(NamedTuple):
     sigma: float
 
 
+TermBuffers = tuple[NDArray[np.intp], FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
+"""The outputs :func:`normal_terms_kernel` fills, ``K`` rows each (the first ``n`` used):
+``(stamp (K,), cur (K, 2), e (K,), jac (K, 3), w (K,), jw (K, 3))`` (:class:`PairTerms`).
+A plain tuple, not a named one: numba types a named tuple argument about 1 µs slower per
+call, and the kernel runs once per ICP iteration."""
+
+
 def pair_terms(
     moved: FloatArray,
     q: FloatArray,
@@ -65,30 +79,39 @@ def pair_terms(
 ) -> PairTerms:
     """The terms for current points ``q (K, 2)`` moved to ``moved (K, 2)`` by a pose of angle
     ``theta``, paired by ``j (K,)`` (``M = len(points)``: unpaired) with map ``points (M,
-    2)`` and ``normals (M, 2)``; only the stamp when fewer than ``min_pairs`` pair up. The
-    compiled kernel when :func:`~slamkit.scanmatch.compiled.enabled`, else
-    :func:`pair_terms_numpy` (the same numbers to the bit)."""
-    if not compiled.enabled():
-        return pair_terms_numpy(
-            moved, q, j, points, normals, theta, huber_k, noise_floor, min_pairs
-        )
+    2)`` and ``normals (M, 2)``; only the stamp when fewer than ``min_pairs`` pair up.
+    Compiled (:func:`normal_terms_kernel`) under numba, else :func:`pair_terms_numpy` (the
+    same numbers to the bit)."""
+    return _pair_terms(moved, q, j, points, normals, theta, huber_k, noise_floor, min_pairs)
+
+
+def _pair_terms_compiled(
+    moved: FloatArray,
+    q: FloatArray,
+    j: NDArray[np.intp],
+    points: FloatArray,
+    normals: FloatArray,
+    theta: float,
+    huber_k: float,
+    noise_floor: float,
+    min_pairs: int,
+) -> PairTerms:
+    """:func:`pair_terms` through :func:`normal_terms_kernel`."""
     c, s = np.cos(theta), np.sin(theta)  # as line_jacobian takes them
     k = q.shape[0]
-    stamp = np.empty(k, dtype=np.intp)
-    cur = np.empty((k, 2))
-    e = np.empty(k)
-    jac = np.empty((k, 3))
-    w = np.empty(k)
-    jw = np.empty((k, 3))
-    n, sigma = normal_terms_kernel(
-        compiled.writable(moved), compiled.writable(q), compiled.writable(j),
-        compiled.writable(points), compiled.writable(normals), float(c), float(s),
-        float(huber_k), float(noise_floor), int(min_pairs),
-        stamp, cur, e, jac, w, jw,
+    out: TermBuffers = (
+        np.empty(k, dtype=np.intp), np.empty((k, 2)), np.empty(k), np.empty((k, 3)),
+        np.empty(k), np.empty((k, 3)),
     )  # fmt: skip
-    if n < min_pairs:
-        return PairTerms(n, stamp.tobytes(), cur[:0], e[:0], jac[:0], w[:0], jw[:0], 0.0)
-    return PairTerms(n, stamp.tobytes(), cur[:n], e[:n], jac[:n], w[:n], jw[:n], sigma)
+    n, sigma = normal_terms_kernel(
+        writable(moved), writable(q), writable(j), writable(points), writable(normals),
+        (float(c), float(s), float(huber_k), float(noise_floor)), int(min_pairs), out,
+    )  # fmt: skip
+    stamp, cur, e, jac, w, jw = out
+    m = n if n >= min_pairs else 0
+    return PairTerms(
+        n, stamp.tobytes(), cur[:m], e[:m], jac[:m], w[:m], jw[:m], sigma if m else 0.0
+    )
 
 
 def pair_terms_numpy(
@@ -102,7 +125,8 @@ def pair_terms_numpy(
     noise_floor: float,
     min_pairs: int,
 ) -> PairTerms:
-    """:func:`pair_terms` in NumPy (without numba, and the reference of the kernel)."""
+    """:func:`pair_terms` in NumPy: the path without numba and the oracle of
+    :func:`normal_terms_kernel` (bit for bit)."""
     ok = j < points.shape[0]
     n = int(np.count_nonzero(ok))
     stamp = np.where(ok, j, -1).tobytes()
@@ -118,28 +142,23 @@ def pair_terms_numpy(
     return PairTerms(n, stamp, qk, e, jac, w, jac * w[:, None], sigma)
 
 
-@compiled.jit
+@jit
 def normal_terms_kernel(
     moved: FloatArray,
     q: FloatArray,
     j: NDArray[np.intp],
     points: FloatArray,
     normals: FloatArray,
-    c: float,
-    s: float,
-    huber_k: float,
-    noise_floor: float,
+    numbers: tuple[float, float, float, float],
     min_pairs: int,
-    stamp: NDArray[np.intp],
-    cur: FloatArray,
-    e: FloatArray,
-    jac: FloatArray,
-    w: FloatArray,
-    jw: FloatArray,
+    out: TermBuffers,
 ) -> tuple[int, float]:
-    """The kernel of :func:`pair_terms`: fills the first ``n`` rows of the outputs (``n``
-    the pairs) and returns ``(n, σ̂)`` (σ̂ = 0 and only ``stamp`` filled when ``n <
-    min_pairs``). ``w`` holds ``|e|`` for the median until the weights replace it."""
+    """The kernel of :func:`pair_terms` (``numbers = (cos θ, sin θ, huber_k,
+    noise_floor)``): fills the first ``n`` rows of ``out`` (``n`` the pairs) and returns
+    ``(n, σ̂)`` (σ̂ = 0 and only the stamp filled when ``n < min_pairs``). The weights'
+    buffer holds ``|e|`` for the median until the weights replace it."""
+    c, s, huber_k, noise_floor = numbers
+    stamp, cur, e, jac, w, jw = out
     m = points.shape[0]
     n = 0
     for i in range(j.shape[0]):
@@ -167,7 +186,7 @@ def normal_terms_kernel(
         jac[u, 2] = nx * (-s * qx - c * qy) + ny * (c * qx - s * qy)
         w[u] = abs(ek)
         u += 1
-    sigma = max(1.4826 * compiled.median_in_place(w[:n]), noise_floor)
+    sigma = max(1.4826 * median_in_place(w[:n]), noise_floor)
     hs = huber_k * sigma
     for u in range(n):
         wk = min(1.0, hs / max(abs(e[u]), 1e-300))
@@ -176,3 +195,7 @@ def normal_terms_kernel(
         jw[u, 1] = jac[u, 1] * wk
         jw[u, 2] = jac[u, 2] * wk
     return n, sigma
+
+
+_pair_terms = SEAM.pair(compiled=_pair_terms_compiled, oracle=pair_terms_numpy)
+"""The terms, compiled under numba, else in NumPy (:mod:`slamkit.backend`)."""

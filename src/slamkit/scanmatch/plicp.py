@@ -50,6 +50,7 @@ stops on a step below both tolerances.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -57,6 +58,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from slamkit._validation import FloatArray, as_array
+from slamkit.backend import SEAM, writable
 from slamkit.errors import ConfigError, MatchError
 from slamkit.scanmatch import kernels
 from slamkit.scanmatch.covariance import (
@@ -73,6 +75,7 @@ __all__ = [
     "lagrange_quartic",
     "largest_real_root",
     "plicp",
+    "plicp_loop_numpy",
     "point_to_line_step",
 ]
 
@@ -224,12 +227,15 @@ def point_to_line_step(
 _LoopOutput = tuple[int, int, int, FloatArray, FloatArray, float]
 
 
-def _loop_numpy(
+def plicp_loop_numpy(
     ref: PreparedScan, q: FloatArray, pose: FloatArray, cfg: PlIcpConfig, joined: NDArray[np.bool_]
 ) -> _LoopOutput:
-    """The correspondence loop and the covariance in NumPy: the twin of
-    :func:`slamkit.scanmatch.kernels.plicp_loop` (the same arguments in other packaging, the
-    same outputs; see there)."""
+    """The correspondence loop and the covariance in NumPy, from ``pose = (x, y, θ)``: the
+    path without numba and the oracle of :func:`slamkit.scanmatch.kernels.plicp_loop` (the
+    same arguments in other packaging, the same outputs, the pose to 1e-9 m/rad and the
+    covariance to 1e-9 of its largest entry: BLAS sums the step's products in another
+    order; see there). ``joined (M - 1,)``: the segments no longer than ``max_gap`` and not
+    of zero length."""
     P = ref.points
     m_ref = P.shape[0]
     n_cur = q.shape[0]
@@ -332,6 +338,39 @@ def _min_eigenvalue_numpy(
     return normalised_min_eigenvalue(line_jacobian(q[has], ref.normals[j[has]], th), q[has])
 
 
+def _loop_compiled(
+    ref: PreparedScan, q: FloatArray, pose: FloatArray, cfg: PlIcpConfig, joined: NDArray[np.bool_]
+) -> _LoopOutput:
+    """:func:`plicp_loop_numpy`'s arguments as :func:`slamkit.scanmatch.kernels.plicp_loop`
+    takes them."""
+    initial = np.array([float(pose[0]), float(pose[1]), float(pose[2])])
+    out: _LoopOutput = kernels.plicp_loop(
+        ref.points, ref.segment_normals, joined, ref.has_normal, ref.normals, writable(q),
+        initial, _settings_values(cfg),
+    )  # fmt: skip
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def _settings_values(cfg: PlIcpConfig) -> FloatArray:
+    """``cfg``'s numbers in the order of :class:`slamkit.scanmatch.kernels.PlicpSettings`
+    (read-only; one array per config)."""
+    values = np.array(
+        [
+            cfg.max_iterations, cfg.max_correspondence_distance, cfg.outlier_multiplier,
+            cfg.outlier_floor, cfg.trim_fraction, cfg.min_correspondences,
+            cfg.translation_tolerance, cfg.rotation_tolerance, cfg.min_eigenvalue,
+        ],
+        dtype=np.float64,
+    )  # fmt: skip
+    values.flags.writeable = False
+    return values
+
+
+_plicp_loop = SEAM.pair(compiled=_loop_compiled, oracle=plicp_loop_numpy)
+"""The loop, compiled under numba, else in NumPy (:mod:`slamkit.backend`)."""
+
+
 def plicp(
     reference: ArrayLike | PreparedScan,
     current: ArrayLike,
@@ -350,25 +389,15 @@ def plicp(
     ``"degenerate"`` or ``"no_convergence"``; ``ShapeError``/``NonFiniteError`` for
     malformed arrays.
 
-    With numba installed the loop runs compiled (:mod:`slamkit.scanmatch.kernels`), with the
-    same results to rounding.
+    With numba installed the loop runs compiled (:mod:`slamkit.scanmatch.kernels`), else
+    :func:`plicp_loop_numpy`, with the same results to rounding (:mod:`slamkit.backend`).
     """
     cfg = _DEFAULT if config is None else config
     ref = reference if isinstance(reference, PreparedScan) else prepare_scan(reference)
     q = require_points(as_array(current, "current points", (None, 2)), cfg.min_points, "current")
     x0 = as_array(initial, "initial pose", (3,))
     joined = (ref.gaps <= cfg.max_gap) & (ref.gaps > 0.0)
-    if kernels.enabled():
-        status, it, n_keep, pose, cov, lam = kernels.plicp_loop(
-            ref.points, ref.segment_normals, joined, ref.has_normal, ref.normals,
-            kernels.writable(q), float(x0[0]), float(x0[1]), float(x0[2]),
-            cfg.max_iterations, float(cfg.max_correspondence_distance),
-            float(cfg.outlier_multiplier), float(cfg.outlier_floor), float(cfg.trim_fraction),
-            cfg.min_correspondences, float(cfg.translation_tolerance),
-            float(cfg.rotation_tolerance), float(cfg.min_eigenvalue),
-        )  # fmt: skip
-    else:
-        status, it, n_keep, pose, cov, lam = _loop_numpy(ref, q, x0, cfg, joined)
+    status, it, n_keep, pose, cov, lam = _plicp_loop(ref, q, x0, cfg, joined)
     if status == kernels.TOO_FEW:
         raise MatchError(
             f"plicp: {n_keep} correspondences after trimming at iteration {it}; at least "
