@@ -10,12 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from slamkit.datasets import Dataset, GpsFix, GpsSpec, load_dataset
-from slamkit.datasets.assemble import assemble_events
+from slamkit.datasets import Dataset, GpsFix, load_dataset
 from slamkit.errors import ConfigError, InputError
 from slamkit.eval.gps_holdout import holdout_gps_error
 from slamkit.geometry.alignment import align_points_2d
 from slamkit.pipeline import run
+from slamkit.sim.gps import with_simulated_gps
 from slamkit.sim.scenarios import build_landmark_loop
 from slamkit.slam.ekf_slam import EkfSlamConfig
 from slamkit.slam.ekf_slam.gps import (
@@ -119,19 +119,12 @@ def _drive_with_gps(seed: int) -> Dataset:
     """The landmark loop (two laps, short range, noisy turn rate: EKF-SLAM alone drifts)
     with a fix every fifth step of the antenna at ``LEVER``, in a GPS frame turned and
     shifted from the world's, σ = ``SIGMA``, and ``N_OUT`` fixes moved 15-30 m."""
-    rng = np.random.default_rng(seed)
     opts = {"max_range": 4.0, "laps": 2, "sigma_omega_deg": 8.0, "sigma_bearing_deg": 3.0}
     ds = build_landmark_loop(opts, seed=seed)
-    times, poses = ds.truth.times, ds.truth.poses
-    assert times is not None and poses is not None
-    take = np.arange(1, times.shape[0], 5)
-    xy = _to_gps(_antenna(poses[take], LEVER)) + rng.normal(0.0, SIGMA, (take.size, 2))
-    out = rng.choice(np.arange(take.size // 4, take.size), N_OUT, replace=False)
-    ang = rng.uniform(0, 2 * np.pi, N_OUT)
-    xy[out] += rng.uniform(15.0, 30.0, N_OUT)[:, None] * np.stack([np.cos(ang), np.sin(ang)], 1)
-    fixes = [GpsFix(float(t), p) for t, p in zip(times[take], xy, strict=True)]
-    events = assemble_events(ds.events, fixes)
-    return replace(ds, events=events, gps=GpsSpec(np.eye(2) * SIGMA**2))
+    sim = with_simulated_gps(ds, np.random.default_rng(seed), lever_arm=(1.5, -0.4),
+                             sigma=SIGMA, n_outliers=N_OUT, frame_angle=GPS_ANGLE,
+                             frame_shift=(120.0, -45.0))  # fmt: skip
+    return sim.dataset
 
 
 @pytest.mark.parametrize("seed", [1, 2])
