@@ -1,6 +1,7 @@
-"""Victoria Park's GPS fused by the online filters — FastSLAM 1.0 and 2.0 without and with the
-fixes, and EKF-SLAM and UKF-SLAM with them — every estimate scored on the same held-out fixes
-(the companion of :mod:`bench_gps_ekf`, which has the landmark graph and EKF-SLAM's rows).
+"""Victoria Park's GPS fused by the online filters — FastSLAM 1.0 and 2.0 and SEIF without and
+with the fixes, and EKF-SLAM and UKF-SLAM with them — every estimate scored on the same
+held-out fixes (the companion of :mod:`bench_gps_ekf`, which has the landmark graph and
+EKF-SLAM's rows).
 
 The loader's ``gps_fuse`` puts every fix but each tenth (the 10th, 20th, …) into the stream;
 scores (:func:`slamkit.eval.gps_holdout.holdout_gps_error`) on the held-out fixes that the
@@ -32,6 +33,7 @@ from slamkit.eval.gps_holdout import holdout_gps_error
 from slamkit.pipeline import run
 from slamkit.slam.ekf_slam import EkfSlamConfig
 from slamkit.slam.fastslam import FastSlamConfig
+from slamkit.slam.seif import SeifConfig
 from slamkit.slam.ukf_slam import UkfSlamConfig
 
 HOLDOUT = 10
@@ -46,6 +48,8 @@ CASES: tuple[tuple[str, str, Any, bool], ...] = (
     ("FastSLAM 2.0 + GPS", "fastslam2", FastSlamConfig(**FASTSLAM, gps_lever_arm=ARM), True),
     ("EKF-SLAM + GPS", "ekf-slam", EkfSlamConfig(gps_lever_arm=ARM), True),
     ("UKF-SLAM + GPS", "ukf-slam", UkfSlamConfig(gps_lever_arm=ARM), True),
+    ("SEIF without GPS", "seif", SeifConfig(), False),
+    ("SEIF + GPS", "seif", SeifConfig(gps_lever_arm=ARM), True),
 )
 
 
@@ -78,8 +82,8 @@ def main() -> str:
         rows.append(f"| {label} | {sec:.1f} | {s.rmse:.2f} | {s.median:.2f} | {direct} | "
                     f"{n_lm} | {gps} | {len(res.output.warnings)} |")  # fmt: skip
         assert np.isfinite(s.rmse)
-    for v in ("1.0", "2.0"):
-        with_gps, without = f"FastSLAM {v} + GPS", f"FastSLAM {v} without GPS"
+    for v in ("FastSLAM 1.0", "FastSLAM 2.0", "SEIF"):
+        with_gps, without = f"{v} + GPS", f"{v} without GPS"
         records.append(Record(f"{with_gps}: whole run", times[with_gps], without, times[without]))
     records.append(Record("FastSLAM 2.0 + GPS: whole run", times["FastSLAM 2.0 + GPS"],
                           "EKF-SLAM + GPS", times["EKF-SLAM + GPS"]))  # fmt: skip

@@ -15,7 +15,7 @@ from slamkit.errors import ConfigError, InputError
 from slamkit.eval.gps_holdout import holdout_gps_error
 from slamkit.geometry.alignment import align_points_2d
 from slamkit.pipeline import run
-from slamkit.sim.gps import with_simulated_gps
+from slamkit.sim.gps import landmark_loop_with_gps
 from slamkit.sim.scenarios import build_landmark_loop
 from slamkit.slam.ekf_slam import EkfSlamConfig
 from slamkit.slam.ekf_slam.gps import (
@@ -118,13 +118,9 @@ def test_move_state_keeps_the_geometry(rng: np.random.Generator) -> None:
 def _drive_with_gps(seed: int) -> Dataset:
     """The landmark loop (two laps, short range, noisy turn rate: EKF-SLAM alone drifts)
     with a fix every fifth step of the antenna at ``LEVER``, in a GPS frame turned and
-    shifted from the world's, σ = ``SIGMA``, and ``N_OUT`` fixes moved 15-30 m."""
-    opts = {"max_range": 4.0, "laps": 2, "sigma_omega_deg": 8.0, "sigma_bearing_deg": 3.0}
-    ds = build_landmark_loop(opts, seed=seed)
-    sim = with_simulated_gps(ds, np.random.default_rng(seed), lever_arm=(1.5, -0.4),
-                             sigma=SIGMA, n_outliers=N_OUT, frame_angle=GPS_ANGLE,
-                             frame_shift=(120.0, -45.0))  # fmt: skip
-    return sim.dataset
+    shifted from the world's, σ = ``SIGMA``, and ``N_OUT`` fixes moved 15-30 m
+    (:func:`~slamkit.sim.gps.landmark_loop_with_gps`)."""
+    return landmark_loop_with_gps(seed).dataset
 
 
 @pytest.mark.parametrize("seed", [1, 2])

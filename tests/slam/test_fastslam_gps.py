@@ -20,8 +20,13 @@ from slamkit.estimation.gps import FrameFit, antenna_measurement, antenna_measur
 from slamkit.eval.gps_holdout import holdout_gps_error
 from slamkit.geometry.alignment import align_points_2d
 from slamkit.pipeline import run
-from slamkit.sim.gps import SimulatedGps, with_simulated_gps
-from slamkit.sim.scenarios import build_landmark_loop
+from slamkit.sim.gps import (
+    LOOP_GPS_SIGMA,
+    LOOP_LEVER_ARM,
+    LOOP_OUTLIERS,
+    SimulatedGps,
+    landmark_loop_with_gps,
+)
 from slamkit.slam.fastslam import FastSlamConfig, FastSlamParticles
 from slamkit.slam.fastslam.gps import (
     fix_distance,
@@ -32,9 +37,9 @@ from slamkit.slam.fastslam.gps import (
 )
 from slamkit.slam.fastslam.store import Work
 
-LEVER = (1.5, -0.4)  # the true antenna position in the robot frame [m]
-SIGMA = 0.5  # GPS noise per axis [m]
-N_OUT = 8  # multipath: fixes moved 15-30 m
+LEVER = LOOP_LEVER_ARM  # the true antenna position in the robot frame [m]
+SIGMA = LOOP_GPS_SIGMA  # GPS noise per axis [m]
+N_OUT = LOOP_OUTLIERS  # multipath: fixes moved 15-30 m
 
 
 def _pose_gaussians(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -159,17 +164,6 @@ def test_a_fix_at_a_known_lever_arm_is_recovered(rng: np.random.Generator) -> No
     assert np.linalg.norm(wrong[0, :2] - truth[:2]) == pytest.approx(np.hypot(*lever), abs=0.1)
 
 
-def _drive(seed: int, holdout_every: int = 0) -> SimulatedGps:
-    """EKF-SLAM's GPS test drive (``tests/slam/test_ekf_slam_gps.py``): two laps of the
-    landmark loop with a 4 m range and a noisy turn rate, a fix every fifth step at
-    ``LEVER`` in a GPS frame turned 0.7 rad and shifted, σ ``SIGMA``, ``N_OUT`` outliers."""
-    opts = {"max_range": 4.0, "laps": 2, "sigma_omega_deg": 8.0, "sigma_bearing_deg": 3.0}
-    ds = build_landmark_loop(opts, seed=seed)
-    return with_simulated_gps(ds, np.random.default_rng(seed), lever_arm=LEVER, sigma=SIGMA,
-                              n_outliers=N_OUT, frame_angle=0.7, frame_shift=(120.0, -45.0),
-                              holdout_every=holdout_every)  # fmt: skip
-
-
 def _path_error(sim: SimulatedGps, times: np.ndarray, poses: np.ndarray) -> np.ndarray:
     """Distance of each pose from the true one in the GPS frame."""
     tt, tp = sim.dataset.truth.times, sim.dataset.truth.poses
@@ -189,7 +183,7 @@ def test_fusion_beats_no_gps_within_the_fixes_noise(key: str, seed: int) -> None
     particle spread is optimistic, ``docs/estimators/fastslam.md``; measured 12, 17, 17 of
     ~400). Seeds 1-6 of both versions: ``docs/estimators/gps.md`` (1.0 loses the GPS on
     seed 1)."""
-    sim = _drive(seed)
+    sim = landmark_loop_with_gps(seed)
     cfg = FastSlamConfig(gps_lever_arm=LEVER)
     fused = run(key, sim.dataset, config=cfg, seed=seed)
     d = fused.output.diagnostics
@@ -223,7 +217,7 @@ def test_held_out_fixes_are_predicted_at_the_lever_arm() -> None:
     the held-out fixes (direct, no alignment) within ``2σ`` RMS — a fix's own noise and an
     estimate as good as one fix (measured 0.79 m); scored at the reference point instead
     (the arm ignored) the error is larger (measured 1.73 m)."""
-    sim = _drive(1, holdout_every=10)
+    sim = landmark_loop_with_gps(1, holdout_every=10)
     res = run("fastslam2", sim.dataset, config=FastSlamConfig(gps_lever_arm=LEVER), seed=1)
     t, xy = sim.dataset.truth.position_times, sim.dataset.truth.positions
     assert t is not None and xy is not None
