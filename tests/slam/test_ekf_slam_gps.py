@@ -4,6 +4,7 @@ drive with a known lever arm and multipath outliers, and Victoria Park (real dat
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -41,14 +42,6 @@ def _to_gps(xy: np.ndarray) -> np.ndarray:
     return xy @ np.array([[c, -s], [s, c]]).T + GPS_SHIFT
 
 
-def _rand_state(rng: np.random.Generator, n_landmarks: int) -> tuple[np.ndarray, np.ndarray]:
-    n = 3 + 2 * n_landmarks
-    mean = rng.normal(0.0, 5.0, n)
-    mean[2] = rng.uniform(-np.pi, np.pi)
-    A = rng.normal(size=(n, n))
-    return mean, A @ A.T / n + 0.1 * np.eye(n)
-
-
 def test_antenna_jacobian_matches_finite_differences(rng: np.random.Generator) -> None:
     """∂(t + R(θ) o)/∂(x, y, θ) against central differences at random poses and arms."""
     for _ in range(20):
@@ -66,10 +59,12 @@ def test_antenna_jacobian_matches_finite_differences(rng: np.random.Generator) -
         np.testing.assert_allclose(H, num, atol=1e-8)
 
 
-def test_update_matches_a_dense_joseph_update(rng: np.random.Generator) -> None:
+def test_update_matches_a_dense_joseph_update(
+    slam_gaussian: Callable[[int], tuple[np.ndarray, np.ndarray]],
+) -> None:
     """The in-place update (three rows of Σ) equals the textbook EKF with the full ``H`` —
     the pose block, zeros for the map — in the Joseph form, to 1e-10."""
-    mean, cov = _rand_state(rng, 4)
+    mean, cov = slam_gaussian(4)
     lever, R = np.array([2.0, 0.3]), np.diag([0.5, 0.8])
     z = _antenna(mean[None, :3], lever)[0] + np.array([0.4, -0.3])
     h, Hr = antenna_measurement(mean[:3], lever)
@@ -94,10 +89,12 @@ def test_update_matches_a_dense_joseph_update(rng: np.random.Generator) -> None:
     np.testing.assert_array_equal(c2, cov)
 
 
-def test_move_state_keeps_the_geometry(rng: np.random.Generator) -> None:
+def test_move_state_keeps_the_geometry(
+    slam_gaussian: Callable[[int], tuple[np.ndarray, np.ndarray]],
+) -> None:
     """Moving the state into another frame keeps every robot-to-landmark vector in the robot
     frame and the covariance's eigenvalues; moving back restores it (1e-10)."""
-    mean, cov = _rand_state(rng, 3)
+    mean, cov = slam_gaussian(3)
     m, c = mean.copy(), cov.copy()
     move_state_inplace(m, c, 0.9, np.array([10.0, -3.0]))
 

@@ -4,6 +4,7 @@ EKF's move of ``(μ, Σ)``, and the filters' simulated GPS drive."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -22,20 +23,14 @@ from slamkit.slam.ekf_slam.gps import gps_update_inplace, move_state_inplace
 from slamkit.slam.seif import SeifConfig
 from slamkit.slam.seif.gps import fix_distance, gps_information_update, move_information
 
-
-def _gaussian(rng: np.random.Generator, n_landmarks: int) -> tuple[np.ndarray, np.ndarray]:
-    n = 3 + 2 * n_landmarks
-    mean = rng.normal(0.0, 5.0, n)
-    mean[2] = rng.uniform(-np.pi, np.pi)
-    A = rng.normal(size=(n, n))
-    return mean, A @ A.T / n + 0.1 * np.eye(n)
+Gaussian = Callable[[int], tuple[np.ndarray, np.ndarray]]
 
 
-def test_information_update_is_the_ekf_update(rng: np.random.Generator) -> None:
+def test_information_update_is_the_ekf_update(slam_gaussian: Gaussian) -> None:
     """Linearised at the mean, the information update of a fix gives the same Gaussian as
     EKF-SLAM's covariance-form update (mean and covariance to 1e-9), and the gate's ``d²``
     is the EKF's."""
-    mean, cov = _gaussian(rng, 4)
+    mean, cov = slam_gaussian(4)
     lever, R = np.array([2.0, 0.3]), np.diag([0.5, 0.8])
     z = antenna_measurement(mean[:3], lever)[0] + np.array([0.6, -0.2])
     Om = np.linalg.inv(cov)
@@ -50,10 +45,10 @@ def test_information_update_is_the_ekf_update(rng: np.random.Generator) -> None:
     assert fix_distance(mean[:3], cov[:3, :3], z, lever, R) == pytest.approx(d2, rel=1e-12)
 
 
-def test_moving_the_information_is_the_ekf_move(rng: np.random.Generator) -> None:
+def test_moving_the_information_is_the_ekf_move(slam_gaussian: Gaussian) -> None:
     """``(Ω, ξ, μ)`` moved into another frame describe the Gaussian that EKF-SLAM's move of
     ``(μ, Σ)`` gives (1e-9); entries of ``Ω`` that were zero stay exactly zero."""
-    mean, cov = _gaussian(rng, 3)
+    mean, cov = slam_gaussian(3)
     Om = np.linalg.inv(cov)
     Om[3:5, 7:9] = Om[7:9, 3:5] = 0.0  # two landmarks not linked
     cov = np.linalg.inv(Om)
