@@ -6,6 +6,7 @@ import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from slamkit.datasets import load_dataset
@@ -31,3 +32,18 @@ def raw_log(data_root: Path) -> Callable[..., Dataset]:
         return dataclasses.replace(data, events=kept)
 
     return cut
+
+
+@pytest.fixture
+def slam_gaussian(rng: np.random.Generator) -> Callable[[int], tuple[np.ndarray, np.ndarray]]:
+    """``slam_gaussian(L)``: a random SLAM state ``(3 + 2L,)`` (positions ~ N(0, 5²), a
+    heading in ``[-π, π)``) and a random positive definite covariance over it."""
+
+    def draw(n_landmarks: int) -> tuple[np.ndarray, np.ndarray]:
+        n = 3 + 2 * n_landmarks
+        mean = rng.normal(0.0, 5.0, n)
+        mean[2] = rng.uniform(-np.pi, np.pi)
+        A = rng.normal(size=(n, n))
+        return mean, A @ A.T / n + 0.1 * np.eye(n)
+
+    return draw

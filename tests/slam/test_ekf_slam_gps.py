@@ -4,18 +4,19 @@ drive with a known lever arm and multipath outliers, and Victoria Park (real dat
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from slamkit.datasets import Dataset, GpsFix, GpsSpec, load_dataset
-from slamkit.datasets.assemble import assemble_events
+from slamkit.datasets import Dataset, GpsFix, load_dataset
 from slamkit.errors import ConfigError, InputError
 from slamkit.eval.gps_holdout import holdout_gps_error
 from slamkit.geometry.alignment import align_points_2d
 from slamkit.pipeline import run
+from slamkit.sim.gps import landmark_loop_with_gps
 from slamkit.sim.scenarios import build_landmark_loop
 from slamkit.slam.ekf_slam import EkfSlamConfig
 from slamkit.slam.ekf_slam.gps import (
@@ -41,14 +42,6 @@ def _to_gps(xy: np.ndarray) -> np.ndarray:
     return xy @ np.array([[c, -s], [s, c]]).T + GPS_SHIFT
 
 
-def _rand_state(rng: np.random.Generator, n_landmarks: int) -> tuple[np.ndarray, np.ndarray]:
-    n = 3 + 2 * n_landmarks
-    mean = rng.normal(0.0, 5.0, n)
-    mean[2] = rng.uniform(-np.pi, np.pi)
-    A = rng.normal(size=(n, n))
-    return mean, A @ A.T / n + 0.1 * np.eye(n)
-
-
 def test_antenna_jacobian_matches_finite_differences(rng: np.random.Generator) -> None:
     """∂(t + R(θ) o)/∂(x, y, θ) against central differences at random poses and arms."""
     for _ in range(20):
@@ -66,10 +59,12 @@ def test_antenna_jacobian_matches_finite_differences(rng: np.random.Generator) -
         np.testing.assert_allclose(H, num, atol=1e-8)
 
 
-def test_update_matches_a_dense_joseph_update(rng: np.random.Generator) -> None:
+def test_update_matches_a_dense_joseph_update(
+    slam_gaussian: Callable[[int], tuple[np.ndarray, np.ndarray]],
+) -> None:
     """The in-place update (three rows of Σ) equals the textbook EKF with the full ``H`` —
     the pose block, zeros for the map — in the Joseph form, to 1e-10."""
-    mean, cov = _rand_state(rng, 4)
+    mean, cov = slam_gaussian(4)
     lever, R = np.array([2.0, 0.3]), np.diag([0.5, 0.8])
     z = _antenna(mean[None, :3], lever)[0] + np.array([0.4, -0.3])
     h, Hr = antenna_measurement(mean[:3], lever)
@@ -94,10 +89,12 @@ def test_update_matches_a_dense_joseph_update(rng: np.random.Generator) -> None:
     np.testing.assert_array_equal(c2, cov)
 
 
-def test_move_state_keeps_the_geometry(rng: np.random.Generator) -> None:
+def test_move_state_keeps_the_geometry(
+    slam_gaussian: Callable[[int], tuple[np.ndarray, np.ndarray]],
+) -> None:
     """Moving the state into another frame keeps every robot-to-landmark vector in the robot
     frame and the covariance's eigenvalues; moving back restores it (1e-10)."""
-    mean, cov = _rand_state(rng, 3)
+    mean, cov = slam_gaussian(3)
     m, c = mean.copy(), cov.copy()
     move_state_inplace(m, c, 0.9, np.array([10.0, -3.0]))
 
@@ -118,20 +115,9 @@ def test_move_state_keeps_the_geometry(rng: np.random.Generator) -> None:
 def _drive_with_gps(seed: int) -> Dataset:
     """The landmark loop (two laps, short range, noisy turn rate: EKF-SLAM alone drifts)
     with a fix every fifth step of the antenna at ``LEVER``, in a GPS frame turned and
-    shifted from the world's, σ = ``SIGMA``, and ``N_OUT`` fixes moved 15-30 m."""
-    rng = np.random.default_rng(seed)
-    opts = {"max_range": 4.0, "laps": 2, "sigma_omega_deg": 8.0, "sigma_bearing_deg": 3.0}
-    ds = build_landmark_loop(opts, seed=seed)
-    times, poses = ds.truth.times, ds.truth.poses
-    assert times is not None and poses is not None
-    take = np.arange(1, times.shape[0], 5)
-    xy = _to_gps(_antenna(poses[take], LEVER)) + rng.normal(0.0, SIGMA, (take.size, 2))
-    out = rng.choice(np.arange(take.size // 4, take.size), N_OUT, replace=False)
-    ang = rng.uniform(0, 2 * np.pi, N_OUT)
-    xy[out] += rng.uniform(15.0, 30.0, N_OUT)[:, None] * np.stack([np.cos(ang), np.sin(ang)], 1)
-    fixes = [GpsFix(float(t), p) for t, p in zip(times[take], xy, strict=True)]
-    events = assemble_events(ds.events, fixes)
-    return replace(ds, events=events, gps=GpsSpec(np.eye(2) * SIGMA**2))
+    shifted from the world's, σ = ``SIGMA``, and ``N_OUT`` fixes moved 15-30 m
+    (:func:`~slamkit.sim.gps.landmark_loop_with_gps`)."""
+    return landmark_loop_with_gps(seed).dataset
 
 
 @pytest.mark.parametrize("seed", [1, 2])

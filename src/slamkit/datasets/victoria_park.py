@@ -140,6 +140,7 @@ from slamkit.datasets.assemble import (
     reading_events,
     time_groups,
 )
+from slamkit.datasets.gps_split import holdout_mask
 from slamkit.datasets.paths import data_root as resolve_data_root
 from slamkit.datasets.plaza import cut_intervals
 from slamkit.datasets.provenance import Provenance
@@ -480,9 +481,7 @@ def _gps_stream(
     scoring, and the held-out fixes never reach the estimator."""
     if not opts.gps_fuse:
         return [], None
-    k = opts.gps_holdout_every
-    idx = np.arange(t.shape[0])
-    fused = ~(idx % k == k - 1) if k else np.ones(t.shape[0], dtype=bool)
+    fused = ~holdout_mask(t.shape[0], opts.gps_holdout_every)
     fixes = [GpsFix(float(ti), p.copy()) for ti, p in zip(t[fused], xy[fused], strict=True)]
     return fixes, GpsSpec(np.eye(2) * opts.gps_sigma**2)
 

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from slamkit.errors import ConfigError
+from slamkit.estimation.gps import check_gps_settings
 from slamkit.mapping.ekf_mapping import association_probabilities
 
 __all__ = ["EkfSlamConfig"]
@@ -135,19 +136,8 @@ class EkfSlamConfig:
             raise ConfigError(f"miss_probability: expected 0 < p < 1 or None, got {v}")
         if not (math.isfinite(self.min_range) and self.min_range >= 0):
             raise ConfigError(f"min_range: expected a number >= 0, got {self.min_range}")
-        try:
-            arm = tuple(float(v) for v in self.gps_lever_arm)
-        except (TypeError, ValueError):
-            arm = ()
-        if len(arm) != 2 or not all(math.isfinite(v) for v in arm):
-            raise ConfigError(
-                f"gps_lever_arm: expected two finite numbers [m], got {self.gps_lever_arm!r}"
-            )
+        arm = check_gps_settings(self.gps_lever_arm, self.gps_gate_probability)
         object.__setattr__(self, "gps_lever_arm", arm)
-        if not 0.0 < self.gps_gate_probability < 1.0:
-            raise ConfigError(
-                f"gps_gate_probability: expected 0 < p < 1, got {self.gps_gate_probability}"
-            )
         for name in ("jcbb_max_nodes", "initial_capacity"):
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 1):

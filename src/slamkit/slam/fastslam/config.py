@@ -10,6 +10,7 @@ from typing import Literal
 from slamkit._validation import FloatArray
 from slamkit.datasets.stream import Dataset, LandmarkSensorSpec, MotionSpec
 from slamkit.errors import ConfigError, InputError
+from slamkit.estimation.gps import check_gps_settings
 from slamkit.models import Ackermann, MotionModel
 from slamkit.models.measurement import InvertibleLandmarkModel
 from slamkit.slam.common import OWN_ID_BASE
@@ -100,6 +101,15 @@ class FastSlamConfig:
     initial set (as :class:`~slamkit.localization.mcl.MclConfig`)."""
     snapshot_times: tuple[float, ...] = ()
     """Keep a snapshot at the first measurement update at or after each of these times [s]."""
+    gps_lever_arm: tuple[float, float] = (0.0, 0.0)
+    """Where the GPS antenna sits in the robot frame [m] (ahead, left): a fix measures
+    ``t + R(θ) o`` of each particle's pose and enters its weight (and 2.0's proposal;
+    :mod:`slamkit.slam.fastslam.gps`). Used only when the data set's stream carries GPS
+    fixes (its loader asked to fuse them); the same setting as EKF-SLAM's."""
+    gps_gate_probability: float = 0.99
+    """A fix whose ``d²`` against the particles' predicted fix exceeds ``χ²₂(p)`` (9.21) is
+    refused as an outlier (multipath) and counted in ``gps_refused`` — EKF-SLAM's gate
+    (``docs/estimators/gps.md``)."""
 
     def __post_init__(self) -> None:
         if not self.n_particles >= 1:
@@ -149,6 +159,8 @@ class FastSlamConfig:
                 "n_snapshots and snapshot_every: expected integers >= 0, got "
                 f"{self.n_snapshots} and {self.snapshot_every}"
             )
+        arm = check_gps_settings(self.gps_lever_arm, self.gps_gate_probability)
+        object.__setattr__(self, "gps_lever_arm", arm)
         if not all(math.isfinite(t) for t in self.snapshot_times):
             raise ConfigError(f"snapshot_times: expected finite times, got {self.snapshot_times}")
 

@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray, as_covariance
-from slamkit.datasets.stream import Dataset, Event, LandmarkReadings
+from slamkit.datasets.stream import Dataset, Event, GpsFix, LandmarkReadings
 from slamkit.errors import ConfigError, ConvergenceError
 from slamkit.estimation.contract import (
     EstimatorOutput,
@@ -19,6 +19,7 @@ from slamkit.estimation.contract import (
     SnapshotSchedule,
     SpreadSnapshots,
 )
+from slamkit.estimation.gps import GpsFrontEnd, gps_warnings
 from slamkit.estimation.particles import (
     low_variance_resample_unchecked,
 )
@@ -39,6 +40,13 @@ from slamkit.slam.fastslam.config import (
     check_dataset,
     steering_limit,
     update_settings,
+)
+from slamkit.slam.fastslam.gps import (
+    fix_distance,
+    fix_update,
+    frame_draws,
+    move_gaussians,
+    move_poses,
 )
 from slamkit.slam.fastslam.history import (
     AssociationHistory,
@@ -120,6 +128,10 @@ class _FastSlam(EstimatorShell):
         if config.snapshot_every > 0:
             self._snapshot(dataset.start_time)
         self._spread.offer(0, lambda: self._copy(dataset.start_time))
+        self._gps = None if dataset.gps is None else GpsFrontEnd(
+            dataset.gps.noise_cov, config.gps_lever_arm, config.gps_gate_probability,
+            dataset.start_time, self.estimate().pose,
+        )  # fmt: skip
 
     # -- the Estimator protocol -------------------------------------------------------------
 
@@ -133,6 +145,14 @@ class _FastSlam(EstimatorShell):
     def on_landmarks(self, event: LandmarkReadings) -> None:
         if event.ids.size:
             self._update(event)
+
+    def on_gps(self, event: GpsFix) -> None:
+        if self._gps is not None:  # the Dataset refuses fixes without a GpsSpec
+            self._fix(float(event.t), np.asarray(event.position, dtype=float))
+
+    def after_event(self, step: int) -> None:
+        if self._gps is not None:
+            self._gps.record(self._t, self.estimate().pose)
 
     def estimate(self) -> PoseEstimate:
         # 2.0 between a control and its scan: each particle's motion since the scan as a
@@ -160,7 +180,11 @@ class _FastSlam(EstimatorShell):
         _, chosen, status = self.reading_log()
         diagnostics["readings"] = int(chosen.size)
         diagnostics["readings_new_landmark"] = int(np.count_nonzero(status == INITIALISED))
+        if self._gps is not None:
+            diagnostics.update(self._gps.counts)
         return EstimatorOutput(
+            trajectory=None if self._gps is None else self._gps.trajectory(),
+            warnings=() if self._gps is None else gps_warnings(self._gps.counts),
             landmarks=ps.landmarks_of(best),
             diagnostics=diagnostics,
             particle_snapshots=tuple(self._snapshots),
@@ -271,6 +295,48 @@ class _FastSlam(EstimatorShell):
             x0, cov0 = self._moved if self._moved is not None else (self._poses, None)
             self._after = fold_motion(self._motion, x0, cov0, u, dt, self._Q)
         return self._after
+
+    def _fix(self, t: float, z: FloatArray) -> None:
+        """A GPS fix (:mod:`~slamkit.slam.fastslam.gps`): collected for the move into the GPS
+        frame, then weighed (and, for 2.0's Gaussians, folded into the proposal)."""
+        gps = self._gps
+        assert gps is not None
+        means, covs = self._pose_gaussians()
+        if not gps.aligned:
+            fit = gps.collect(t, z, self.estimate().pose)
+            if fit is not None:
+                angles, shifts = frame_draws(fit, self._poses.shape[0], self._rng)
+                self._poses = move_poses(self._poses, angles, shifts)
+                self._w.move(angles, shifts)
+                if covs is not None:
+                    self._hold(*move_gaussians(means, covs, angles, shifts))
+            return
+        used = fix_distance(means, covs, self._weights, z, gps.lever, gps.noise_cov) <= gps.gate
+        gps.judged(used)
+        if not used:  # a refused fix changes nothing, draws nothing
+            return
+        if self._resample_pending:  # as before a scan
+            self._resample_if_due()
+            means, covs = self._pose_gaussians()
+        loglik, means, covs = fix_update(means, covs, z, gps.lever, gps.noise_cov)
+        if covs is not None:
+            self._hold(means, covs)
+        self._log_weights, self._weights = normalised_with_weights(self._log_weights + loglik)
+        ess = 1.0 / float((self._weights * self._weights).sum())
+        if ess < self._cfg.resample_threshold * self._weights.size:
+            self._resample_pending = True
+
+    def _pose_gaussians(self) -> tuple[FloatArray, FloatArray | None]:
+        """Each particle's pose now: 2.0 with motion since the scan, a Gaussian (means,
+        covariances); else exact (poses, None)."""
+        return self._pending_gaussian() if self._pending is not None else (self._poses, None)
+
+    def _hold(self, means: FloatArray, covs: FloatArray) -> None:
+        """2.0: the particles' pose Gaussians after a fix, held as the motion since the scan
+        with a control of zero length pending (``g(x, 0, 0) = x``, no noise), so the next
+        control and the next scan's proposal start from them."""
+        self._moved = self._after = (means, covs)
+        self._pending = (np.zeros(self._Q.shape[0]), 0.0)
 
     def _scan(self, z: FloatArray, rid: IntArray) -> FloatArray:
         """The scan on the state (in place); returns the new log-weights (not normalised)."""

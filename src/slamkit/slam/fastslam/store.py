@@ -133,6 +133,24 @@ class Work:
         w.slot_of = self.slot_of  # the same slots: resampling keeps a common layout common
         return w
 
+    def move(self, angles: FloatArray, shifts: FloatArray) -> None:
+        """Move every particle's map rigidly into another frame, particle ``p`` by
+        ``m ← R(angles[p]) m + shifts[p]`` (``(P,)``, ``(P, 2)``), ``Σ ← R Σ Rᵀ`` (in place;
+        unused slots are moved too, harmlessly). With ``Σ = [[a, b], [b, d]]``::
+
+            a' = c²a − 2cs b + s²d,  b' = cs (a − d) + (c² − s²) b,  d' = s²a + 2cs b + c²d
+        """
+        c, s = np.cos(angles), np.sin(angles)
+        lm = self.lm
+        x, y = lm[MX].copy(), lm[MY]
+        lm[MX] = c * x - s * y + shifts[:, 0]
+        lm[MY] = s * x + c * y + shifts[:, 1]
+        a, b, d = lm[_S00].copy(), lm[_S01].copy(), lm[_S11].copy()
+        cc, ss, cs = c * c, s * s, c * s
+        lm[_S00] = cc * a - 2.0 * cs * b + ss * d
+        lm[_S11] = ss * a + 2.0 * cs * b + cc * d
+        lm[_S01] = cs * (a - d) + (cc - ss) * b
+
     def begin_scan(self) -> None:
         self.seen.fill(False)
         self.updated.fill(False)

@@ -43,6 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slamkit._validation import FloatArray, as_covariance
+from slamkit.datasets.gps_split import holdout_mask
 from slamkit.datasets.stream import Control, Dataset, LandmarkReadings
 from slamkit.errors import ConfigError, InputError
 from slamkit.geometry.angles import wrap_angle
@@ -104,9 +105,7 @@ class GpsFixes:
     @property
     def held_out(self) -> NDArray[np.bool_]:
         """Mask of the fixes kept out of the graph."""
-        k = self.holdout_every
-        idx = np.arange(self.times.shape[0])
-        return (idx % k == k - 1) if k else np.zeros(idx.shape[0], dtype=bool)
+        return holdout_mask(self.times.shape[0], self.holdout_every)
 
 
 @dataclass(frozen=True)

@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 
 from slamkit.errors import ConfigError
+from slamkit.estimation.gps import check_gps_settings
 from slamkit.mapping.ekf_mapping import association_probabilities
 
 __all__ = ["SeifConfig"]
@@ -66,6 +67,15 @@ class SeifConfig:
     """Most landmarks in the blanket (candidates and the active ones first, then the rings
     in order, cut at this size): bounds the Cholesky factorisation per scan, a
     ``(3 + 2 · max_blanket)²`` matrix."""
+    gps_lever_arm: tuple[float, float] = (0.0, 0.0)
+    """Where the GPS antenna sits in the robot frame [m] (ahead, left): a fix measures
+    ``t + R(θ) o`` and is an information update on the pose block
+    (:mod:`slamkit.slam.seif.gps`). Used only when the data set's stream carries GPS fixes
+    (its loader asked to fuse them); the same setting as EKF-SLAM's."""
+    gps_gate_probability: float = 0.99
+    """A fix whose ``d²`` (the pose's covariance from its blanket) exceeds ``χ²₂(p)`` (9.21)
+    is refused as an outlier (multipath) and counted in ``gps_refused`` — EKF-SLAM's gate
+    (``docs/estimators/gps.md``)."""
 
     def __post_init__(self) -> None:
         for name in ("max_active", "initial_capacity", "max_candidates", "max_blanket"):
@@ -88,6 +98,8 @@ class SeifConfig:
         if not (math.isfinite(self.prior_information) and self.prior_information > 0):
             raise ConfigError(f"prior_information: expected > 0, got {self.prior_information}")
         association_probabilities(self.gate_probability, self.new_landmark_probability)
+        arm = check_gps_settings(self.gps_lever_arm, self.gps_gate_probability)
+        object.__setattr__(self, "gps_lever_arm", arm)
         r = self.candidate_radius
         if not (math.isfinite(r) and r > 0):
             raise ConfigError(f"candidate_radius: expected a number > 0, got {r}")

@@ -14,6 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 from slamkit._validation import FloatArray, as_covariance
 from slamkit.datasets.stream import (
     Dataset,
+    GpsFix,
     LandmarkReadings,
     LandmarkSensorSpec,
     MotionSpec,
@@ -26,6 +27,7 @@ from slamkit.estimation.contract import (
     PoseEstimate,
 )
 from slamkit.estimation.gaussian import angular_indices
+from slamkit.estimation.gps import GpsFrontEnd, gps_warnings
 from slamkit.estimation.shell import EstimatorShell
 from slamkit.mapping.ekf_mapping import DISCARDED, INITIALISED, NEW, REJECTED, UPDATED
 from slamkit.maps import LandmarkMap
@@ -40,6 +42,7 @@ from slamkit.slam.seif.association import (
     wrapped_pose,
 )
 from slamkit.slam.seif.config import SeifConfig
+from slamkit.slam.seif.gps import fix_distance, gps_information_update, move_information
 from slamkit.slam.seif.kernels import (
     PendingMotion,
     apply_motion,
@@ -89,6 +92,12 @@ class Seif(EstimatorShell):
     landmarks, and the amortised relaxation of the mean. Without ids the filter numbers
     its landmarks from :data:`~slamkit.slam.common.OWN_ID_BASE`.
 
+    :class:`~slamkit.datasets.GpsFix` events (a stream whose loader was asked to fuse GPS)
+    measure the antenna at ``gps_lever_arm``: the first move ``(Ω, ξ, μ)`` into the GPS
+    frame, the others are information updates on the pose block through a χ² gate
+    (:mod:`slamkit.slam.seif.gps`); :meth:`finish` then returns the path in the GPS frame
+    and the GPS counts.
+
     :meth:`estimate` reports the pose with no covariance (SEIF has none at hand);
     :meth:`finish` solves for the exact mean once and returns the landmarks with their
     marginal covariances, and diagnostics: the counts, ``n_landmarks``, ``association``,
@@ -135,6 +144,10 @@ class Seif(EstimatorShell):
         self._counts = dict.fromkeys(COUNTS, 0)
         self._nis = NisRecord()
         self._log = ReadingLog()
+        self._gps = None if dataset.gps is None else GpsFrontEnd(
+            dataset.gps.noise_cov, config.gps_lever_arm, config.gps_gate_probability,
+            dataset.start_time, wrapped_pose(self._st.mu),
+        )  # fmt: skip
 
     def on_control(self, u: FloatArray, dt: float) -> None:
         self._predict(u, dt)
@@ -150,9 +163,15 @@ class Seif(EstimatorShell):
         self._cursor = relax_step(self._st, cfg.relax_sweeps, cfg.relax_per_step, self._cursor)
         check_pose_block(self._st.Om)
 
+    def on_gps(self, event: GpsFix) -> None:
+        if self._gps is not None:  # the Dataset refuses fixes without a GpsSpec
+            self._fix(float(event.t), np.asarray(event.position, dtype=float))
+
     def after_event(self, step: int) -> None:
         if not math.isfinite(float(self._st.mu[0] + self._st.mu[1] + self._st.mu[2])):
             raise ConvergenceError("the mean became non-finite")
+        if self._gps is not None:
+            self._gps.record(float(self.clock.time or 0.0), wrapped_pose(self._st.mu))
 
     def estimate(self) -> PoseEstimate:
         return PoseEstimate(wrapped_pose(self._st.mu), None)
@@ -233,7 +252,11 @@ class Seif(EstimatorShell):
             mean_nis=float(nis.mean()) if nis.size else None,
             relaxed_vs_exact_max=float(np.abs(self._st.mu[: self._st.n] - mu).max()),
         )
+        if self._gps is not None:
+            diagnostics.update(self._gps.counts)
         return EstimatorOutput(
+            trajectory=None if self._gps is None else self._gps.trajectory(),
+            warnings=() if self._gps is None else gps_warnings(self._gps.counts),
             landmarks=lm,
             diagnostics=diagnostics,
             innovations=self._nis.log(self._m),
@@ -253,6 +276,29 @@ class Seif(EstimatorShell):
         except np.linalg.LinAlgError:
             raise ConvergenceError("the motion update met a singular matrix") from None
         self._max_block = max(self._max_block, idx.size)
+
+    def _fix(self, t: float, z: FloatArray) -> None:
+        """A GPS fix (:mod:`~slamkit.slam.seif.gps`): collected for the move into the GPS
+        frame, then an information update on the pose block through the gate."""
+        gps, st = self._gps, self._st
+        assert gps is not None
+        self.apply_motion()
+        if not gps.aligned:
+            fit = gps.collect(t, z, wrapped_pose(st.mu))
+            if fit is not None:
+                move_information(st.Om, st.xi, st.mu, st.n, fit.angle, fit.shift)
+                self._pending.restart(st.mu[:3])
+            return
+        pose_cov = self.blanket_covariance([])
+        used = fix_distance(st.mu[:3], pose_cov, z, gps.lever, gps.noise_cov) <= gps.gate
+        gps.judged(used)
+        if not used:
+            return
+        R_inv = np.asarray(np.linalg.inv(gps.noise_cov), dtype=np.float64)
+        gps_information_update(st.Om, st.xi, st.mu, z, gps.lever, R_inv)
+        cfg = self._config
+        self._cursor = relax_step(st, cfg.relax_sweeps, cfg.relax_per_step, self._cursor)
+        check_pose_block(st.Om)
 
     def _predict(self, u: FloatArray, dt: float) -> None:
         if not self._pending.steps:  # the relaxation may have moved the mean since
